@@ -1,0 +1,31 @@
+# Two commands for a fresh machine:  make demo   (set up, then run the main job)
+#                                    make test   (set up, then run the test suite)
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: venv demo test lint tox clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml plugins/pyproject.toml hardware/pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[test,dev,bench]" -e ./plugins -e ./hardware
+	touch $(STAMP)
+
+demo: venv
+	$(BIN)/skinkit demo --out demo-output
+
+test: venv
+	$(BIN)/python -m pytest -n 2 -q
+
+lint: venv
+	$(BIN)/ruff check skinkit plugins hardware tests
+
+tox: venv
+	$(BIN)/tox
+
+clean:
+	rm -rf $(VENV) demo-output .tox

@@ -1,0 +1,1 @@
+"""skinkit's microrobot hardware layer: kinematics, drivers, device emulator, wire protocols."""

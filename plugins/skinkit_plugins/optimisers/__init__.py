@@ -1,0 +1,1 @@
+"""Optimiser plugins (``skinkit.optimisers``)."""

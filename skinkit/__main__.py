@@ -1,0 +1,3 @@
+from skinkit.cli import main
+
+main()

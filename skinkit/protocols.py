@@ -1,0 +1,184 @@
+"""The interfaces plugins implement.
+
+A plugin is registered under one of the entry-point groups in :data:`GROUPS` and points at
+a class (or any object) that provides the members its protocol lists. The registry checks
+those members when it loads the plugin and reports what is missing. Protocols are
+structural (``typing.Protocol``): a plugin never needs to import or subclass anything from
+skinkit to satisfy one, although it may use the helpers skinkit offers.
+
+Shapes and units follow the schemas: SI inside, arrays as numpy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from skinkit.schemas import (
+    CameraRig,
+    ImageSequence,
+    Parameter,
+    ParameterSet,
+    RobotRecord,
+    SurfaceProfile,
+)
+from skinkit.schemas.protocol import Protocol as MeasurementProtocol
+
+
+@runtime_checkable
+class Driver(Protocol):
+    """A robot driver (``skinkit.drivers``): talks to a device, real or simulated.
+
+    Lifecycle: ``connect`` -> ``home`` -> ``run`` (any number) -> ``disconnect``.
+    ``emergency_stop`` may be called at any time, from any thread, and must leave the robot
+    de-energised.
+    """
+
+    name: str
+
+    def connect(self, **options: Any) -> None:
+        """Open the link (``options`` are driver specific, e.g. ``port``, ``bitrate``)."""
+
+    def home(self, contact_force_N: float = 0.01) -> None:
+        """Zero positions, then approach until the tip force reaches ``contact_force_N`` [N]."""
+
+    def run(self, protocol: MeasurementProtocol) -> Iterator[RobotRecord]:
+        """Execute ``protocol``; yield its samples block by block as they arrive.
+
+        Refuses, before any motion, a protocol that would exceed a safety limit.
+        """
+
+    def emergency_stop(self) -> None:
+        """De-energise the motors now."""
+
+    def disconnect(self) -> None:
+        """Leave the robot safe and close the link."""
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """A 2D subset tracker (``skinkit.trackers``).
+
+    ``track(reference, current, points, subset_px, mask)`` with ``reference`` and
+    ``current`` ``(H, W)`` grey images, ``points`` ``(N, 2)`` pixel coordinates ``(x, y)`` in
+    the reference (origin at the centre of the top-left pixel), ``subset_px`` the subset
+    side [px] and ``mask`` an optional ``(H, W)`` bool array of usable pixels. Returns a
+    :class:`TrackResult`-like object with ``displacement_px`` ``(N, 2)``, ``quality`` ``(N,)``,
+    ``valid`` ``(N,)`` bool and ``reason`` (list of N strings, empty where valid).
+    """
+
+    name: str
+
+    def track(self, reference: np.ndarray, current: np.ndarray, points: np.ndarray,
+              subset_px: int = 64, mask: np.ndarray | None = None) -> Any:
+        ...
+
+
+@runtime_checkable
+class Profiler(Protocol):
+    """A surface profiler (``skinkit.profilers``): undeformed views -> :class:`SurfaceProfile`."""
+
+    name: str
+
+    def profile(self, images: ImageSequence, rig: CameraRig, frame: int = 0) -> SurfaceProfile:
+        ...
+
+
+@runtime_checkable
+class Law(Protocol):
+    """A constitutive law (``skinkit.laws``).
+
+    A law declares its parameters and its strain-energy density; the finite-element engine
+    derives the second Piola-Kirchhoff stress and the material tangent from the energy when
+    the law does not provide them (optional methods ``stress(C, p)`` -> ``(..., 3, 3)`` [Pa]
+    and ``tangent(C, p)`` -> ``(..., 3, 3, 3, 3)`` [Pa]).
+
+    ``energy(C, p)``: ``C`` is ``(..., 3, 3)`` right Cauchy-Green tensor [1], ``p`` a mapping
+    parameter name -> SI value (arrays broadcastable against ``C[..., 0, 0]`` allowed);
+    returns ``(...)`` strain-energy density [Pa = J/m³].
+    """
+
+    name: str
+
+    def parameters(self) -> Sequence[Parameter]:
+        """Declared parameters with units, default values and admissible bounds."""
+
+    def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        ...
+
+
+@runtime_checkable
+class Optimiser(Protocol):
+    """An optimiser (``skinkit.optimisers``) for bound-constrained least squares or scalar goals.
+
+    ``minimise(fun, x0, lower, upper, jac=None, options=None)``: ``fun(x)`` returns the
+    residual vector ``(m,)`` (least squares) or a scalar; ``jac(x)`` returns ``(m, n)``.
+    Returns an object with ``x`` ``(n,)``, ``fun`` (final objective), ``nfev``, ``success``
+    and ``message``.
+    """
+
+    name: str
+
+    def minimise(self, fun: Callable[[np.ndarray], Any], x0: np.ndarray, lower: np.ndarray,
+                 upper: np.ndarray, jac: Callable[[np.ndarray], np.ndarray] | None = None,
+                 options: Mapping[str, Any] | None = None) -> Any:
+        ...
+
+
+@runtime_checkable
+class Effect(Protocol):
+    """A candidate unmodelled effect (``skinkit.effects``) for the sim-to-real gap diagnosis.
+
+    ``parameters()`` declares what the effect adds to a model; ``apply(model, p)`` returns a
+    copy of a model description (a mapping, as read from a model file) with the effect
+    added and its parameters set from ``p``.
+    """
+
+    name: str
+
+    def parameters(self) -> Sequence[Parameter]:
+        ...
+
+    def apply(self, model: Mapping[str, Any], p: Mapping[str, Any]) -> Mapping[str, Any]:
+        ...
+
+
+#: entry-point group -> protocol class
+GROUPS: dict[str, type] = {
+    "skinkit.drivers": Driver,
+    "skinkit.trackers": Tracker,
+    "skinkit.profilers": Profiler,
+    "skinkit.laws": Law,
+    "skinkit.optimisers": Optimiser,
+    "skinkit.effects": Effect,
+}
+
+
+def required_members(protocol: type) -> list[str]:
+    """Names a plugin must provide to satisfy ``protocol`` (attributes and methods)."""
+    names = set(getattr(protocol, "__annotations__", {}))
+    for name, value in vars(protocol).items():
+        if callable(value) and not name.startswith("_"):
+            names.add(name)
+    return sorted(names)
+
+
+def missing_members(obj: Any, protocol: type) -> list[str]:
+    """Members of ``protocol`` that ``obj`` (a class or an instance) lacks."""
+    return [m for m in required_members(protocol) if not hasattr(obj, m)]
+
+
+__all__ = [
+    "GROUPS",
+    "Driver",
+    "Effect",
+    "Law",
+    "Optimiser",
+    "ParameterSet",
+    "Profiler",
+    "Tracker",
+    "missing_members",
+    "required_members",
+]

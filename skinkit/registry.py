@@ -1,0 +1,131 @@
+"""Plugin discovery over entry points, lazy loading, and a load report.
+
+Listing reads only distribution metadata; a plugin's module is imported the first time it
+is loaded. A plugin that fails to import, or does not provide the members of its group's
+protocol, is reported with its error and never stops the others from loading.
+"""
+
+from __future__ import annotations
+
+import traceback
+from dataclasses import dataclass
+from importlib.metadata import EntryPoint, entry_points
+from typing import Any
+
+from skinkit.errors import PluginError
+from skinkit.protocols import GROUPS, missing_members
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """One entry point: its group, name, target (``module:attr``) and distribution."""
+
+    group: str
+    name: str
+    value: str
+    dist: str | None
+
+
+@dataclass(frozen=True)
+class PluginStatus:
+    """The outcome of loading one plugin: ``status`` is ``"ok"`` or ``"error"``."""
+
+    info: PluginInfo
+    status: str
+    error: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.info.name, "dist": self.info.dist, "value": self.info.value,
+                "status": self.status, "error": self.error}
+
+
+def _group(group: str) -> list[EntryPoint]:
+    if group not in GROUPS:
+        raise PluginError(f"unknown plugin group {group!r}; groups are {sorted(GROUPS)}")
+    return sorted(entry_points(group=group), key=lambda ep: ep.name)
+
+
+def _info(group: str, ep: EntryPoint) -> PluginInfo:
+    dist = getattr(ep, "dist", None)
+    return PluginInfo(group, ep.name, ep.value, dist.name if dist is not None else None)
+
+
+def available(group: str) -> list[PluginInfo]:
+    """Plugins registered under ``group``, without importing them."""
+    return [_info(group, ep) for ep in _group(group)]
+
+
+def names(group: str) -> list[str]:
+    """Names of the plugins registered under ``group``."""
+    return [ep.name for ep in _group(group)]
+
+
+_cache: dict[tuple[str, str], Any] = {}
+
+
+def load(group: str, name: str) -> Any:
+    """Import and return the object registered as ``name`` in ``group``, protocol-checked.
+
+    Raises :class:`PluginError` naming the plugin when it is unknown, fails to import, or
+    lacks members of its protocol.
+    """
+    key = (group, name)
+    if key in _cache:
+        return _cache[key]
+    matches = [ep for ep in _group(group) if ep.name == name]
+    if not matches:
+        raise PluginError(f"no plugin {name!r} in {group}; available: {names(group) or 'none'}")
+    if len(matches) > 1:
+        dists = [_info(group, ep).dist for ep in matches]
+        raise PluginError(f"plugin {name!r} in {group} is registered by several distributions: {dists}")
+    ep = matches[0]
+    info = _info(group, ep)
+    try:
+        obj = ep.load()
+    except Exception as exc:  # a third-party import may raise anything
+        raise PluginError(
+            f"plugin {name!r} in {group} (from {info.dist}, {info.value}) failed to import: "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
+    missing = missing_members(obj, GROUPS[group])
+    if missing:
+        raise PluginError(
+            f"plugin {name!r} in {group} (from {info.dist}, {info.value}) does not satisfy the "
+            f"{GROUPS[group].__name__} protocol: missing {', '.join(missing)}"
+        )
+    _cache[key] = obj
+    return obj
+
+
+def create(group: str, name: str, *args: Any, **kwargs: Any) -> Any:
+    """Load ``name`` from ``group`` and, if it is a class, instantiate it with the arguments."""
+    obj = load(group, name)
+    return obj(*args, **kwargs) if isinstance(obj, type) else obj
+
+
+def report(groups: list[str] | None = None) -> dict[str, list[PluginStatus]]:
+    """Load every plugin of ``groups`` (all by default) and report each one's status."""
+    out: dict[str, list[PluginStatus]] = {}
+    for group in groups or list(GROUPS):
+        statuses = []
+        for ep in _group(group):
+            info = _info(group, ep)
+            try:
+                load(group, ep.name)
+            except PluginError as exc:
+                cause = exc.__cause__
+                detail = str(exc)
+                if cause is not None and getattr(cause, "__traceback__", None) is not None:
+                    # The last frame locates the failing line in the plugin for its author.
+                    frame = traceback.extract_tb(cause.__traceback__)[-1]
+                    detail += f" [at {frame.filename}:{frame.lineno}]"
+                statuses.append(PluginStatus(info, "error", detail))
+            else:
+                statuses.append(PluginStatus(info, "ok"))
+        out[group] = statuses
+    return out
+
+
+def clear_cache() -> None:
+    """Forget loaded plugins (tests, or after installing a distribution at run time)."""
+    _cache.clear()

@@ -1,0 +1,22 @@
+"""Shared fixtures. Tests that need the built-in plugins use the ``needs_plugins`` marker
+(or ``pytest.importorskip("skinkit_plugins")``) so that the ``core`` tox environments,
+which install skinkit alone, skip them with a reason."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import pytest
+
+HAVE_PLUGINS = importlib.util.find_spec("skinkit_plugins") is not None
+HAVE_HARDWARE = importlib.util.find_spec("skinkit_hardware") is not None
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    skip_plugins = pytest.mark.skip(reason="needs skinkit-plugins (not installed: core environment)")
+    skip_hw = pytest.mark.skip(reason="needs skinkit-hardware (not installed: core environment)")
+    for item in items:
+        if "needs_plugins" in item.keywords and not HAVE_PLUGINS:
+            item.add_marker(skip_plugins)
+        if "needs_hardware" in item.keywords and not HAVE_HARDWARE:
+            item.add_marker(skip_hw)
