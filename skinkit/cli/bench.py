@@ -12,6 +12,7 @@ import click
 #: benchmark name -> "module:command"
 _BENCHES: dict[str, str] = {
     "store": "skinkit.bench.store:bench_store",
+    "vision": "skinkit.bench.vision:bench_vision",
 }
 
 

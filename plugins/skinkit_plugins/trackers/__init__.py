@@ -1,0 +1,1 @@
+"""Built-in 2D subset trackers (entry-point group ``skinkit.trackers``)."""

@@ -1,0 +1,26 @@
+"""``skinkit import-csv``: put a plain CSV robot record into an experiment file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from skinkit.store import create_experiment, open_experiment, read_robot_csv
+
+
+@click.command("import-csv")
+@click.argument("csv_file", type=click.Path(path_type=Path))
+@click.argument("experiment", type=click.Path(path_type=Path))
+@click.option("--protocol", default=None, help="Record name (default: the CSV file's stem).")
+@click.option("--axis", type=click.Choice(["x", "y", "z"]), default="z", show_default=True,
+              help="Tip axis of one-axis columns (force_N, position_m, displacement_mm).")
+def import_csv(csv_file: Path, experiment: Path, protocol: str | None, axis: str) -> None:
+    """Import CSV_FILE (header with units, e.g. time_s,tip_force_z_N,tip_position_z_mm) as a
+    robot record into EXPERIMENT (created if it does not exist)."""
+    record = read_robot_csv(csv_file, protocol, axis)
+    exp = open_experiment(experiment, "a") if experiment.exists() else create_experiment(experiment)
+    with exp:
+        exp.write_record(record)
+    click.echo(f"imported {record.n_samples} samples at {record.rate_hz:.6g} Hz "
+               f"({', '.join(record.channels)}) as record {record.protocol.name!r} into {experiment}")

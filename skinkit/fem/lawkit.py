@@ -1,0 +1,186 @@
+"""Law machinery: stress and tangent of any :class:`skinkit.protocols.Law`, from its energy if need be.
+
+Conventions (all batched over leading axes):
+
+* ``C`` ``(..., 3, 3)`` right Cauchy-Green tensor [1];
+* ``S = 2 ∂W/∂C`` ``(..., 3, 3)`` second Piola-Kirchhoff stress [Pa];
+* ``CC = 2 ∂S/∂C = 4 ∂²W/∂C∂C`` ``(..., 3, 3, 3, 3)`` material tangent [Pa] with minor and
+  major symmetries.
+
+A law may give only ``energy``; then the stress is its derivative, taken by the complex step
+when the law declares ``complex_safe = True`` (exact to rounding), otherwise by central
+differences. A missing tangent is the derivative of the stress, by the complex step when the
+law's own ``stress`` is complex safe, otherwise by central differences. Optional extras a law
+may declare, all used only when present:
+
+* ``complex_safe: bool`` — ``energy``/``stress`` accept complex ``C`` and complex parameters
+  and are complex-analytic (no ``abs``, no branches on complex values);
+* ``prony(p) -> (g, tau)`` — the law is quasi-linear viscoelastic (see :mod:`.viscoelastic`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from skinkit.fem.errors import ModelError
+from skinkit.fem.tensors import VOIGT, sym_direction
+
+#: complex-step size: the derivative is Im f(x + ih)/h, free of subtraction error
+_CS_STEP = 1e-30
+#: central-difference step in C [1]: truncation ~h² and rounding ~eps/h balance near 1e-5..1e-6
+_FD_STEP = 1e-6
+
+
+def is_complex_safe(law: Any) -> bool:
+    """True when ``law`` declares its energy/stress complex-analytic."""
+    return bool(getattr(law, "complex_safe", False))
+
+
+def has_own(law: Any, name: str) -> bool:
+    """True when ``law`` provides a callable ``name`` (``stress`` or ``tangent``)."""
+    return callable(getattr(law, name, None))
+
+
+def default_parameters(law: Any) -> dict[str, float]:
+    """name -> SI default value of every declared parameter of ``law``."""
+    return {q.name: q.value for q in law.parameters()}
+
+
+def check_parameters(law: Any, p: Mapping[str, Any], where: str = "law") -> dict[str, Any]:
+    """Validate ``p`` against the law's declared parameters; returns a complete mapping.
+
+    Missing parameters take their defaults only when ``p`` is None; an unknown name, a
+    missing name or a value outside its admissible bounds raise :class:`ModelError` naming it.
+    """
+    declared = {q.name: q for q in law.parameters()}
+    unknown = sorted(set(p) - set(declared))
+    if unknown:
+        raise ModelError(where, f"unknown parameter(s) {unknown} for law {law.name!r}; "
+                         f"it has {sorted(declared)}")
+    missing = sorted(set(declared) - set(p))
+    if missing:
+        raise ModelError(where, f"missing parameter(s) {missing} for law {law.name!r}")
+    out: dict[str, Any] = {}
+    for name, q in declared.items():
+        v = p[name]
+        arr = np.asarray(v, dtype=float)
+        if not np.all(np.isfinite(arr)):
+            raise ModelError(f"{where}.{name}", f"must be finite, got {v!r}")
+        if np.any(arr < q.lower) or np.any(arr > q.upper):
+            raise ModelError(f"{where}.{name}", f"value {v!r} {q.unit} is outside its admissible "
+                             f"range [{q.lower:g}, {q.upper:g}]")
+        out[name] = v
+    return out
+
+
+def _energy_gradient(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    """S = 2 ∂W/∂C from the energy alone."""
+    C = np.asarray(C)
+    S = np.zeros(C.shape, dtype=float)
+    cs = is_complex_safe(law)
+    for K, L in VOIGT:
+        E = sym_direction(K, L)
+        if cs:
+            d = np.imag(law.energy(C + 1j * _CS_STEP * E, p)) / _CS_STEP
+        else:
+            d = (np.asarray(law.energy(C + _FD_STEP * E, p))
+                 - np.asarray(law.energy(C - _FD_STEP * E, p))) / (2 * _FD_STEP)
+        S[..., K, L] = 2 * d
+        S[..., L, K] = 2 * d
+    return S
+
+
+def stress(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    """``(..., 3, 3)`` PK2 stress [Pa] of ``law`` at ``C``: its own, or derived from its energy."""
+    if has_own(law, "stress"):
+        return np.asarray(law.stress(C, p))
+    return _energy_gradient(law, C, p)
+
+
+def _stress_is_complex_safe(law: Any) -> bool:
+    # the derived stress (an Im or a difference) is real: only a law's own stress can be stepped
+    return has_own(law, "stress") and is_complex_safe(law)
+
+
+def tangent_from_stress(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    """``(..., 3, 3, 3, 3)`` tangent 2 ∂S/∂C by differentiating :func:`stress`."""
+    C = np.asarray(C, dtype=float)
+    CC = np.zeros(C.shape + (3, 3), dtype=float)
+    cs = _stress_is_complex_safe(law)
+    for K, L in VOIGT:
+        E = sym_direction(K, L)
+        if cs:
+            dS = np.imag(law.stress(C + 1j * _CS_STEP * E, p)) / _CS_STEP
+        else:
+            dS = (stress(law, C + _FD_STEP * E, p) - stress(law, C - _FD_STEP * E, p)) / (2 * _FD_STEP)
+        CC[..., :, :, K, L] = 2 * dS
+        CC[..., :, :, L, K] = 2 * dS
+    return CC
+
+
+def tangent(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    """``(..., 3, 3, 3, 3)`` material tangent [Pa]: the law's own or derived."""
+    if has_own(law, "tangent"):
+        return np.asarray(law.tangent(C, p))
+    return tangent_from_stress(law, C, p)
+
+
+def response(law: Any, C: np.ndarray, p: Mapping[str, Any], with_tangent: bool = True):
+    """``(S, CC)`` of ``law`` at ``C`` (``CC`` is None when ``with_tangent`` is False).
+
+    A law may provide ``response(C, p, with_tangent)`` itself to share work between the two.
+    """
+    own = getattr(law, "response", None)
+    if callable(own):
+        return own(C, p, with_tangent)
+    S = stress(law, C, p)
+    return S, (tangent(law, C, p) if with_tangent else None)
+
+
+def parameter_step(value: float) -> float:
+    """Central-difference step for a parameter of magnitude ``value``."""
+    return 1e-6 * max(abs(value), 1e-8)
+
+
+def stress_parameter_derivative(law: Any, C: np.ndarray, p: Mapping[str, Any],
+                                name: str) -> np.ndarray:
+    """``∂S/∂p[name]`` ``(..., 3, 3)`` [Pa per parameter unit] at fixed ``C``.
+
+    Complex step when the law's stress is complex safe, otherwise central differences.
+    """
+    v = p[name]
+    if _stress_is_complex_safe(law):
+        q = dict(p)
+        q[name] = v + 1j * _CS_STEP
+        return np.imag(law.stress(np.asarray(C, dtype=complex), q)) / _CS_STEP
+    h = parameter_step(float(np.max(np.abs(v))))
+    qp = dict(p)
+    qm = dict(p)
+    qp[name] = v + h
+    qm[name] = v - h
+    return (stress(law, C, qp) - stress(law, C, qm)) / (2 * h)
+
+
+def parameter_names(law: Any) -> list[str]:
+    """Declared parameter names of ``law``, in order."""
+    return [q.name for q in law.parameters()]
+
+
+def bounds_text(law: Any) -> str:
+    """One line listing the law's parameters with units and bounds (for messages)."""
+    parts = []
+    for q in law.parameters():
+        lo = "-inf" if math.isinf(q.lower) else f"{q.lower:g}"
+        hi = "inf" if math.isinf(q.upper) else f"{q.upper:g}"
+        parts.append(f"{q.name} [{q.unit}] in [{lo}, {hi}]")
+    return "; ".join(parts)
+
+
+def broadcast_param(v: Any, shape: Sequence[int]) -> Any:
+    """A parameter value ready to broadcast against a batch of ``shape``."""
+    a = np.asarray(v)
+    return a if a.ndim == 0 else a.reshape(a.shape + (1,) * (len(shape) - a.ndim))

@@ -1,0 +1,1 @@
+"""The virtual lab: synthetic sessions whose truth is known, for running skinkit with no robot."""

@@ -1,0 +1,1 @@
+"""Small functions that compose the steps; the CLI is a thin layer over them."""

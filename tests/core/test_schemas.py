@@ -1,0 +1,174 @@
+"""Schemas: shapes, units and values are checked on construction; errors name the field."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from skinkit.errors import SchemaError, UnitError
+from skinkit.schemas import (
+    CameraModel,
+    CameraRig,
+    EffectScore,
+    FitResult,
+    GapReport,
+    ImageSequence,
+    Parameter,
+    ParameterSet,
+    Protocol,
+    RobotRecord,
+    SurfaceProfile,
+    SurfaceTrack,
+)
+from skinkit.units import Q, from_si, to_si
+
+
+def _record(n: int = 10, **kw):
+    return RobotRecord(time_s=np.arange(n) * 1e-3, **kw)
+
+
+def test_robot_record_ok_and_rate():
+    r = _record(100, tip_force=np.zeros((100, 3)), tip_position=np.zeros((100, 3)))
+    assert r.channels == ["tip_position", "tip_force"]
+    assert r.rate_hz == pytest.approx(1000.0)
+    assert r.flags.dtype == np.uint32 and r.flags.shape == (100,)
+    assert r.is_uniform()
+
+
+@pytest.mark.parametrize("field,value,needle", [
+    ("tip_force", np.zeros((10, 2)), "RobotRecord.tip_force"),
+    ("tip_position", np.zeros((9, 3)), "RobotRecord.tip_position"),
+    ("motor_current", np.zeros(10), "RobotRecord.motor_current"),
+    ("flags", -np.ones(10), "RobotRecord.flags"),
+    ("flags", np.zeros(10) + 0.5, "RobotRecord.flags"),
+])
+def test_robot_record_wrong_shape_names_field(field, value, needle):
+    with pytest.raises(SchemaError) as e:
+        _record(10, **{field: value})
+    assert needle in str(e.value) and "\n" not in str(e.value)
+    assert e.value.field == needle
+
+
+def test_robot_record_time_must_increase():
+    with pytest.raises(SchemaError, match="time_s.*strictly increasing"):
+        RobotRecord(time_s=[0.0, 1.0, 1.0])
+    with pytest.raises(SchemaError, match="non-finite"):
+        RobotRecord(time_s=[0.0, np.nan])
+
+
+def test_units_convert_and_refuse():
+    r = _record(3, tip_position=Q(np.ones((3, 3)), "mm"), tip_force=Q(np.ones((3, 3)), "mN"))
+    assert np.allclose(r.tip_position, 1e-3) and np.allclose(r.tip_force, 1e-3)
+    with pytest.raises(UnitError, match="RobotRecord.tip_position.*'N' is not a unit of 'm'"):
+        _record(3, tip_position=Q(np.ones((3, 3)), "N"))
+    with pytest.raises(UnitError, match="unknown unit 'furlong'"):
+        _record(3, tip_force=Q(np.ones((3, 3)), "furlong"))
+    assert to_si(2.0, "kPa", "Pa") == pytest.approx(2000.0)
+    assert from_si(0.002, "mm") == pytest.approx(2.0)
+
+
+def test_protocol_validation_and_roundtrip():
+    p = Protocol("normal_indentation", kind="trajectory", parameters={"amplitude": 7.5e-4, "freq": 0.1},
+                 units={"amplitude": "m", "freq": "Hz"}, duration_s=30.0)
+    assert Protocol.from_dict(p.to_dict()) == p
+    with pytest.raises(SchemaError, match="Protocol.kind"):
+        Protocol("x", kind="dance")
+    with pytest.raises(SchemaError, match="Protocol.name"):
+        Protocol("")
+    with pytest.raises(SchemaError, match=r"Protocol.parameters\['a'\].*not finite"):
+        Protocol("x", parameters={"a": math.nan})
+    with pytest.raises(SchemaError, match="unknown parameter 'b'"):
+        Protocol("x", parameters={"a": 1}, units={"b": "m"})
+    with pytest.raises(SchemaError, match="unknown key"):
+        Protocol.from_dict({"name": "x", "colour": "red"})
+
+
+def _camera(name="c0", **kw):
+    args = dict(name=name, K=[[2000, 0, 320], [0, 2000, 240], [0, 0, 1]], distortion=np.zeros(5),
+                R=np.eye(3), t=[0, 0, 0.2], image_size=(640, 480))
+    args.update(kw)
+    return CameraModel(**args)
+
+
+def test_camera_and_rig():
+    rig = CameraRig((_camera("a"), _camera("b")))
+    assert rig["b"].name == "b" and len(rig) == 2
+    assert rig[0].P.shape == (3, 4)
+    assert np.allclose(rig[0].centre, [0, 0, -0.2])
+    with pytest.raises(SchemaError, match=r"CameraModel\['c0'\].R.*not a rotation"):
+        _camera(R=np.diag([1, 1, -1.0]))
+    with pytest.raises(SchemaError, match=r"CameraModel\['c0'\].distortion.*length 3"):
+        _camera(distortion=[0, 0, 0])
+    with pytest.raises(SchemaError, match=r"CameraModel\['c0'\].K"):
+        _camera(K=np.eye(2))
+    with pytest.raises(SchemaError, match="duplicate camera name"):
+        CameraRig((_camera("a"), _camera("a")))
+    with pytest.raises(KeyError, match="camera 'z' is not in the rig"):
+        rig["z"]
+
+
+def test_image_sequence():
+    seq = ImageSequence("s", np.zeros((2, 4, 8, 10), np.uint8), ("a", "b", "c", "d"), [0.0, 0.1])
+    assert seq.image_size == (10, 8) and seq.n_frames == 2
+    with pytest.raises(SchemaError, match="camera_names.*3 names for 4 cameras"):
+        ImageSequence("s", np.zeros((2, 4, 8, 10), np.uint8), ("a", "b", "c"), [0.0, 0.1])
+    with pytest.raises(SchemaError, match="ImageSequence.time_s"):
+        ImageSequence("s", np.zeros((2, 1, 8, 10), np.uint8), ("a",), [0.0, 0.1, 0.2])
+    with pytest.raises(SchemaError, match="ImageSequence.frames.*dtype"):
+        ImageSequence("s", np.zeros((2, 1, 8, 10), np.int8), ("a",), [0.0, 0.1])
+
+
+def test_surface_profile_and_track():
+    prof = SurfaceProfile(points=np.zeros((5, 3)), quality=np.ones(5))
+    assert prof.n_points == 5
+    with pytest.raises(SchemaError, match="SurfaceProfile.quality"):
+        SurfaceProfile(points=np.zeros((5, 3)), quality=np.ones(4))
+    pts = np.zeros((4, 3, 3))
+    valid = np.ones((4, 3), bool)
+    pts[1, 2] = np.nan
+    valid[1, 2] = False
+    tr = SurfaceTrack(points=pts, valid=valid, time_s=[0, 1, 2])
+    assert tr.n_points == 4 and tr.n_frames == 3
+    with pytest.raises(SchemaError, match="SurfaceTrack.points.*valid is not finite"):
+        SurfaceTrack(points=pts, valid=np.ones((4, 3), bool), time_s=[0, 1, 2])
+    with pytest.raises(SchemaError, match="SurfaceTrack.valid"):
+        SurfaceTrack(points=pts, valid=np.ones((4, 2), bool), time_s=[0, 1, 2])
+
+
+def test_parameter_set():
+    ps = ParameterSet([Parameter("skin.mu", 10, "kPa", 1, 100), Parameter("nu", 0.45, "1", 0, 0.5, free=False),
+                       Parameter("k2", 5.0, lower=0.0)])
+    assert ps["skin.mu"] == pytest.approx(1e4) and ps.param("skin.mu").unit == "Pa"
+    assert ps.free_names == ["skin.mu", "k2"]
+    ps2 = ps.with_free_vector([2e4, 3.0])
+    assert ps2["skin.mu"] == 2e4 and ps2["nu"] == 0.45
+    assert ParameterSet.from_list(ps.to_list()) == ps
+    lo, hi = ps.free_bounds()
+    assert lo.tolist() == [1e3, 0.0] and hi[1] == math.inf
+    with pytest.raises(SchemaError, match=r"Parameter\['skin.mu'\].value.*outside its bounds"):
+        ps.with_free_vector([1e6, 3.0])
+    with pytest.raises(SchemaError, match="duplicate parameter name"):
+        ParameterSet([Parameter("a", 1), Parameter("a", 2)])
+    with pytest.raises(SchemaError, match=r"Parameter\['kappa'\].value"):
+        Parameter("kappa", 0.4, "1", 0, 1 / 3)
+    with pytest.raises(SchemaError, match="expected 2 values"):
+        ps.with_free_vector([1.0])
+
+
+def test_fit_result_and_gap_report_roundtrip():
+    ps = ParameterSet([Parameter("K", 1450, "N/m", 0, 1e5)])
+    fit = FitResult("kelvin-voigt", ps, objective=1e-9, n_evaluations=12, residual_rms_m=1e-5,
+                    covariance=[[4.0]])
+    back = FitResult.from_dict(fit.to_dict())
+    assert back.parameters == ps and back.covariance.shape == (1, 1)
+    with pytest.raises(SchemaError, match="FitResult.covariance"):
+        FitResult("m", ps, objective=0.0, covariance=np.eye(2))
+    gap = GapReport("m", gap_rms_m=2e-5, residual_by_point_m=[1e-5, 3e-5], withheld_effect="prestress",
+                    candidates=[EffectScore("slip", 2e-5, 1.8e-5), EffectScore("prestress", 2e-5, 0.5e-5)])
+    assert gap.best.effect == "prestress" and gap.best.reduction == pytest.approx(0.75)
+    d = gap.to_dict()
+    assert d["candidates"][0]["effect"] == "prestress"
+    with pytest.raises(SchemaError, match="GapReport.gap_rms_m"):
+        GapReport("m", gap_rms_m=-1.0)
