@@ -19,7 +19,7 @@ demo: venv
 	$(BIN)/skinkit demo --out demo-output
 
 test: venv
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
 lint: venv
 	$(BIN)/ruff check skinkit plugins hardware tests

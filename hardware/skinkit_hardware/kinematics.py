@@ -58,6 +58,7 @@ class Geometry:
     travel_m: tuple[float, float] = (0.0, 0.010)
     home_m: float = 0.005
     _u: np.ndarray = field(init=False, repr=False, compare=False)
+    _w: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.base_radius_m > 0 or not self.tip_height_m > 0:
@@ -66,7 +67,10 @@ class Geometry:
         if not lo < self.home_m < hi:
             raise KinematicsError(f"Geometry: home_m={self.home_m} is not inside travel_m={self.travel_m}")
         a = np.deg2rad(np.asarray(self.motor_angles_deg, dtype=float))
-        object.__setattr__(self, "_u", np.stack([np.cos(a), np.sin(a), np.zeros(3)], axis=1))
+        u = np.stack([np.cos(a), np.sin(a), np.zeros(3)], axis=1)
+        object.__setattr__(self, "_u", u)
+        # in-plane normals of the guide lines (e_z x u), computed once: this is a hot path
+        object.__setattr__(self, "_w", np.stack([-u[:, 1], u[:, 0], np.zeros(3)], axis=1))
 
     @property
     def radial(self) -> np.ndarray:
@@ -95,13 +99,13 @@ def _rotation(r: np.ndarray) -> np.ndarray:
 
 def _leg_residual(g: Geometry, p: np.ndarray, rot: np.ndarray, q: np.ndarray) -> np.ndarray:
     """``(..., 6)`` distances [m] of each pin from its platform line (two components each)."""
-    u = g.radial  # (3 arms, 3)
-    ez = np.array([0.0, 0.0, 1.0])
-    w = np.cross(ez, u)  # in-plane normals of the guide lines
-    xy = g.pins_xy()
-    a = np.concatenate([np.broadcast_to(xy, q.shape[:-1] + (3, 2)), q[..., None]], axis=-1)
+    w = g._w
+    xy = g.base_radius_m * g._u[:, :2]
+    a = np.empty(q.shape[:-1] + (3, 3))
+    a[..., :2] = xy
+    a[..., 2] = q
     d = a - p[..., None, :]  # (..., arms, 3)
-    n = rot @ ez  # (..., 3) platform normal
+    n = rot[..., :, 2]  # (..., 3) platform normal
     wr = np.einsum("...ij,aj->...ai", rot, w)  # (..., arms, 3)
     e1 = np.einsum("...ai,...i->...a", d, n)
     e2 = np.einsum("...ai,...ai->...a", d, wr)
@@ -178,14 +182,18 @@ def jacobian(q: np.ndarray, geometry: Geometry | None = None, step_m: float = 1e
     Central differences of :func:`forward`; the error is O(step^2 / r), below 1e-9.
     Motor forces that balance a tip force ``f`` are ``J.T @ f`` (virtual work).
     """
+    return forward_and_jacobian(q, geometry, step_m)[1]
+
+
+def forward_and_jacobian(q: np.ndarray, geometry: Geometry | None = None,
+                         step_m: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Tip ``(..., 3)`` [m] and Jacobian ``(..., 3, 3)`` in one batched solve (7 poses per ``q``)."""
     g = geometry or Geometry()
     q = np.asarray(q, dtype=float)
-    cols = []
-    for j in range(3):
-        dq = np.zeros(3)
-        dq[j] = step_m
-        cols.append((forward(q + dq, g) - forward(q - dq, g)) / (2 * step_m))
-    return np.stack(cols, axis=-1)
+    steps = np.concatenate([np.zeros((1, 3)), step_m * np.eye(3), -step_m * np.eye(3)])
+    tips = forward(q[..., None, :] + steps, g)  # (..., 7, 3)
+    jac = (tips[..., 1:4, :] - tips[..., 4:7, :]) / (2 * step_m)  # (..., j, i)
+    return tips[..., 0, :], np.swapaxes(jac, -1, -2)
 
 
 def in_travel(q: np.ndarray, geometry: Geometry | None = None) -> np.ndarray:

@@ -24,6 +24,7 @@ _COMMANDS: dict[str, str] = {
     "import-csv": "skinkit.cli.import_csv:import_csv",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",
+    "vision": "skinkit.cli.vision:vision",
 }
 
 

@@ -1,0 +1,503 @@
+"""The device model: the robot's firmware and physics, ticked at the control rate.
+
+One :class:`Device` is what a real controller (the thesis's CompactRIO FPGA) would be: it
+holds a preloaded programme in its own memory, runs a PID per arm at 10 kHz (position
+mode) or applies a motor-force programme open loop (force mode), enforces the safety
+limits every tick, and streams decimated samples. The in-process ``sim`` driver calls it
+directly; the emulator process wraps it behind the serial and CAN wire protocols.
+
+Physics per arm (semi-implicit Euler at the control period):
+``m a = Kf(x) I - b v - k (x - x_rest) - m g + (J^T f_skin)_i``, with hard stops 0.5 mm
+outside the travel range. The skin force acts at the tip; it reaches the arms through the
+kinematic Jacobian ``J`` (virtual work), which is refreshed every 100 ticks (the tip moves
+<0.1 mm in 10 ms in every protocol, so the linearisation error is below 1 um).
+
+Samples (one row per streamed tick, see :data:`COLUMNS`): sample index, tick, measured arm
+positions [m], measured currents [A], F/T force [N] (force applied by the probe to the
+skin), F/T torque [N m], flags (RobotRecord FLAG_* bits, OR-ed over the decimation window).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skinkit.schemas.robot import (
+    FLAG_CAMERA_TRIGGER,
+    FLAG_CONTACT,
+    FLAG_ESTOP,
+    FLAG_LIMIT,
+    FLAG_SATURATED,
+)
+from skinkit_hardware import faults as F
+from skinkit_hardware.kinematics import Geometry, forward, forward_and_jacobian
+from skinkit_hardware.params import Limits, RobotParameters
+from skinkit_hardware.safety import check_programme
+from skinkit_hardware.skin import KelvinVoigtSkin, SkinLoad
+
+COLUMNS = ("index", "tick", "q1", "q2", "q3", "i1", "i2", "i3", "fx", "fy", "fz", "tx", "ty", "tz",
+           "flags")
+
+IDLE, HOLD, HOMING, RUNNING, FAULTED = "idle", "hold", "homing", "running", "fault"
+
+
+@dataclass
+class Injection:
+    """Faults injected into the device model for tests (all off by default).
+
+    ``stuck_motor`` (1..3) reads a constant from ``stuck_after_s`` of run time on.
+    """
+
+    stuck_motor: int = 0
+    stuck_after_s: float = 0.0
+
+
+@dataclass
+class Event:
+    """Something the device reports besides samples.
+
+    ``kind``: ``"home_done"`` (``q`` zero arm positions [m]), ``"run_end"``, ``"fault"``
+    (``fault``), ``"refused"`` (``fault``, ``index`` of the offending setpoint).
+    ``generated`` counts the samples streamed in the run.
+    """
+
+    kind: str
+    fault: F.Fault | None = None
+    q: tuple[float, float, float] | None = None
+    generated: int = 0
+    index: int = 0
+
+
+@dataclass
+class Device:
+    """Firmware + physics of one simulated robot. See the module docstring."""
+
+    params: RobotParameters = field(default_factory=RobotParameters)
+    limits: Limits = field(default_factory=Limits)
+    geometry: Geometry = field(default_factory=Geometry)
+    skin: SkinLoad = field(default_factory=KelvinVoigtSkin)
+    seed: int = 0
+    skin_gap_m: float = 0.001
+    clock: Callable[[], float] | None = None
+    injection: Injection = field(default_factory=Injection)
+    decimation: int = 10
+
+    def __post_init__(self) -> None:
+        p = self.params
+        self.rng = np.random.default_rng(self.seed)
+        self.tick = 0
+        self.mode = IDLE
+        self.energised = False
+        # the arms rest where spring and gravity balance, clamped by the hard stops
+        rest = p.spring_rest_m - p.mass_kg * p.gravity_m_s2 / p.stiffness_N_per_m
+        self.x = [max(rest, self.limits.travel_m[0] - 5e-4)] * 3
+        self.v = [0.0, 0.0, 0.0]
+        self.integ = [0.0, 0.0, 0.0]
+        self.xf = list(self.x)
+        self.th = [0.0, 0.0, 0.0]
+        self.setpoint = list(self.x)
+        self.last_raw = [-1, -1, -1]
+        self.same_raw = [0, 0, 0]
+        self.tip_home = forward(np.full(3, self.geometry.home_m), self.geometry)
+        self.skin_origin = self.tip_home + np.array([0.0, 0.0, self.skin_gap_m])
+        self._refresh_kinematics()
+        self.programme: np.ndarray | None = None
+        self.prog_mode = "position"
+        self.prog_rate = 1000.0
+        self.trigger_period = 0
+        self.run_tick0 = 0
+        self.sample_index = 0
+        self.generated = 0
+        self.post_fault_left = -1
+        self.fault: F.Fault | None = None
+        self.fault_tick = -1
+        self.off_tick = -1
+        self.flags_acc = 0
+        self.streaming = False
+        self.events: list[Event] = []
+        self.rows: list[tuple] = []
+        self.home_target = 0.0
+        self.home_speed = 0.0
+        self.home_contact = 0.01
+        self.last_fz = 0.0
+        self.last_host = self._now()
+
+    # -- time -------------------------------------------------------------------------
+    def _now(self) -> float:
+        return self.clock() if self.clock is not None else self.tick * self.params.dt
+
+    @property
+    def time_s(self) -> float:
+        """Device time [s] since power-on."""
+        return self.tick * self.params.dt
+
+    # -- host commands ----------------------------------------------------------------
+    def heartbeat(self) -> None:
+        """The host is alive (every command counts as one)."""
+        self.last_host = self._now()
+
+    def configure(self, decimation: int | None = None, watchdog_s: float | None = None) -> None:
+        self.heartbeat()
+        if decimation is not None:
+            if not 1 <= int(decimation) <= 1000:
+                raise ValueError(f"decimation must be 1..1000, got {decimation}")
+            self.decimation = int(decimation)
+        if watchdog_s is not None:
+            self.limits = Limits(**{**self.limits.__dict__, "watchdog_s": float(watchdog_s)})
+
+    def clear(self) -> None:
+        """Leave the fault state (motors stay off until the next home or hold)."""
+        self.heartbeat()
+        if self.mode == FAULTED:
+            self.mode = IDLE
+            self.fault = None
+            self.th = [0.0, 0.0, 0.0]
+
+    def hold(self) -> None:
+        """Energise and hold the present measured positions."""
+        self.heartbeat()
+        if self.mode == FAULTED:
+            return
+        self.setpoint = list(self.xf)
+        self.integ = [0.0, 0.0, 0.0]
+        self.energised = True
+        self.mode = HOLD
+
+    def home(self, contact_N: float = 0.01, speed_m_s: float = 0.002) -> None:
+        """Go to the home pose, then rise until the tip force reaches ``contact_N``."""
+        self.heartbeat()
+        if self.mode == FAULTED:
+            return
+        self.hold()
+        self.mode = HOMING
+        self.home_target = self.geometry.home_m
+        self.home_contact = float(contact_N)
+        self.home_speed = float(speed_m_s)
+        self._home_phase = 0
+
+    def load(self, mode: str, rate_hz: float, setpoints: np.ndarray, trigger_period_s: float = 0.0) -> Event | None:
+        """Store a programme; returns a ``refused`` event (and keeps nothing) if it breaks a limit."""
+        self.heartbeat()
+        setpoints = np.asarray(setpoints, dtype=float)
+        if not rate_hz > 0 or rate_hz > self.params.control_rate_hz:
+            return self._refuse(F.Fault(F.BAD_COMMAND, value=rate_hz), 0)
+        if self.mode in (RUNNING, FAULTED):
+            return self._refuse(F.Fault(F.BAD_COMMAND), 0)
+        bad = check_programme(mode, setpoints, rate_hz, self.limits, self.params)
+        if bad is not None:
+            return self._refuse(*bad)
+        self.programme = setpoints
+        self.prog_mode = mode
+        self.prog_rate = float(rate_hz)
+        dec = self.decimation
+        period = round(trigger_period_s * self.params.control_rate_hz / dec) * dec if trigger_period_s > 0 else 0
+        self.trigger_period = int(period)
+        return None
+
+    def _refuse(self, fault: F.Fault, index: int) -> Event:
+        ev = Event("refused", fault=fault, index=index)
+        self.events.append(ev)
+        return ev
+
+    def start(self) -> None:
+        """Run the loaded programme from its first setpoint."""
+        self.heartbeat()
+        if self.mode == FAULTED or self.programme is None:
+            self.events.append(Event("refused", fault=self.fault or F.Fault(F.BAD_COMMAND)))
+            return
+        if self.prog_mode == "position" and not self.energised:
+            self.hold()
+        self.energised = True
+        self.mode = RUNNING
+        self.run_tick0 = self.tick
+        self.sample_index = 0
+        self.generated = 0
+        self.flags_acc = 0
+        self.streaming = True
+        self.post_fault_left = -1
+        self.fault_tick = self.off_tick = -1
+
+    def stop(self) -> None:
+        """End a run early and hold position."""
+        self.heartbeat()
+        if self.mode == RUNNING:
+            self._end_run()
+
+    def estop(self) -> None:
+        """De-energise now (host emergency stop)."""
+        self._trip(F.Fault(F.ESTOP, time_s=self._run_time()))
+
+    def disable(self) -> None:
+        """De-energise without a fault (end of session)."""
+        self.heartbeat()
+        self.energised = False
+        if self.mode != FAULTED:
+            self.mode = IDLE
+        self.streaming = False
+
+    # -- internals ----------------------------------------------------------------------
+    def _run_time(self) -> float:
+        return (self.tick - self.run_tick0) * self.params.dt if self.mode == RUNNING else self.time_s
+
+    def _refresh_kinematics(self) -> None:
+        q = np.array(self.x)
+        # plain floats: numpy scalar arithmetic is several times slower in the tick loop
+        tip, self.jac = forward_and_jacobian(q, self.geometry)
+        self.tip_ref = tuple(tip.tolist())
+        self.jl = tuple(self.jac.ravel().tolist())
+        self.q_ref = tuple(q.tolist())
+
+    def _end_run(self) -> None:
+        self.streaming = False
+        self.events.append(Event("run_end", generated=self.generated))
+        self.programme = None
+        self.hold()
+
+    def _trip(self, fault: F.Fault) -> None:
+        if self.mode == FAULTED:
+            return
+        self.energised = False
+        self.fault = fault
+        self.fault_tick = self.tick
+        was_streaming = self.streaming
+        self.mode = FAULTED
+        self.flags_acc |= FLAG_ESTOP if fault.code == F.ESTOP else FLAG_LIMIT
+        if was_streaming:
+            self.post_fault_left = max(1, int(self.limits.post_fault_s * self.params.control_rate_hz))
+        else:
+            self.events.append(Event("fault", fault=fault, generated=self.generated))
+
+    def drain(self) -> np.ndarray:
+        """Samples streamed since the last call, ``(n, 15)`` (see :data:`COLUMNS`)."""
+        rows, self.rows = self.rows, []
+        return np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
+
+    def take_events(self) -> list[Event]:
+        ev, self.events = self.events, []
+        return ev
+
+    # -- the control loop -------------------------------------------------------------
+    def advance(self, n_ticks: int) -> None:
+        """Run ``n_ticks`` control periods (physics, control, safety, streaming)."""
+        p, lim = self.params, self.limits
+        if self.energised and self._now() - self.last_host > lim.watchdog_s:
+            self._trip(F.Fault(F.WATCHDOG, value=self._now() - self.last_host, limit=lim.watchdog_s,
+                               time_s=self._run_time()))
+        dt = p.dt
+        m, b, k, g = p.mass_kg, p.damping_Ns_per_m, p.stiffness_N_per_m, p.gravity_m_s2
+        rest = p.spring_rest_m
+        kf0, droop = p.force_constant_N_per_A, p.force_constant_droop
+        s_lo, s_hi = p.stroke_m
+        mid, half = 0.5 * (s_lo + s_hi), 0.5 * (s_hi - s_lo)
+        imax = p.peak_current_A
+        fpk = lim.peak_force_N
+        kp, ki, kd = p.kp_N_per_m, p.ki_N_per_m_s, p.kd_Ns_per_m
+        alpha = 1.0 - math.exp(-2 * math.pi * p.derivative_filter_hz * dt)
+        th_a = dt / p.thermal_time_constant_s
+        cont2 = lim.continuous_force_N ** 2
+        t_lo, t_hi = lim.travel_m
+        stop_lo, stop_hi = t_lo - 5e-4, t_hi + 5e-4
+        a_lo, a_hi = p.adc_span_m
+        nlev = (1 << p.adc_bits) - 1
+        lsb = (a_hi - a_lo) / nlev
+        ilsb = p.current_lsb_A
+        fres, tres = p.ft_force_resolution_N, p.ft_torque_resolution_Nm
+        plen = p.probe_length_m
+        tip_lim2 = lim.tip_force_N ** 2
+        noise = self.rng.standard_normal((n_ticks, 6)).tolist()
+        sig_q, sig_i = p.pot_sigma_m, p.current_noise_A
+        x, v, integ, xf, th = self.x, self.v, self.integ, self.xf, self.th
+        skin = self.skin
+        so = tuple(self.skin_origin.tolist())
+        inj = self.injection
+        for n in range(n_ticks):
+            if self.tick % 100 == 0:
+                self._refresh_kinematics()
+            j00, j01, j02, j10, j11, j12, j20, j21, j22 = self.jl
+            tr, qr = self.tip_ref, self.q_ref
+            nz = noise[n]
+            dq0, dq1, dq2 = x[0] - qr[0], x[1] - qr[1], x[2] - qr[2]
+            u = (tr[0] + j00 * dq0 + j01 * dq1 + j02 * dq2 - so[0],
+                 tr[1] + j10 * dq0 + j11 * dq1 + j12 * dq2 - so[1],
+                 tr[2] + j20 * dq0 + j21 * dq1 + j22 * dq2 - so[2])
+            vt = (j00 * v[0] + j01 * v[1] + j02 * v[2],
+                  j10 * v[0] + j11 * v[1] + j12 * v[2],
+                  j20 * v[0] + j21 * v[1] + j22 * v[2])
+            fs = skin.reaction(u, vt, dt)
+            run_k = self.tick - self.run_tick0
+            # setpoint for this tick
+            mode = self.mode
+            force_mode = False
+            sp = self.setpoint
+            if mode == RUNNING:
+                prog = self.programme
+                pos = run_k * self.prog_rate * dt
+                i0 = int(pos)
+                if i0 >= prog.shape[0] - 1:
+                    row = prog[-1]
+                    if self.prog_mode == "force":
+                        self.setpoint = list(xf)
+                    else:
+                        self.setpoint = [row[0], row[1], row[2]]
+                    self._end_run()
+                    sp = self.setpoint
+                    mode = self.mode
+                else:
+                    fr = pos - i0
+                    r0, r1 = prog[i0], prog[i0 + 1]
+                    sp = [r0[0] + fr * (r1[0] - r0[0]), r0[1] + fr * (r1[1] - r0[1]),
+                          r0[2] + fr * (r1[2] - r0[2])]
+                    force_mode = self.prog_mode == "force"
+            elif mode == HOMING:
+                sp = self._homing_setpoint(sp)
+            flags = 0
+            cur = [0.0, 0.0, 0.0]
+            meas = [0.0, 0.0, 0.0]
+            for i in range(3):
+                # measure
+                raw = int(round((x[i] + sig_q * nz[i] - a_lo) / lsb))
+                raw = 0 if raw < 0 else (nlev if raw > nlev else raw)
+                if inj.stuck_motor == i + 1 and mode == RUNNING and run_k * dt >= inj.stuck_after_s:
+                    raw = self.last_raw[i]
+                if raw == self.last_raw[i]:
+                    self.same_raw[i] += 1
+                else:
+                    self.same_raw[i] = 0
+                    self.last_raw[i] = raw
+                qm = a_lo + raw * lsb
+                meas[i] = qm
+                xf_prev = xf[i]
+                xf[i] += alpha * (qm - xf[i])
+                # control
+                if self.energised:
+                    kfm = kf0 * (1.0 - droop * min(((qm - mid) / half) ** 2, 1.5))
+                    if force_mode:
+                        fcmd = sp[i]
+                    else:
+                        e = sp[i] - qm
+                        fcmd = kp * e + ki * integ[i] - kd * (xf[i] - xf_prev) / dt + m * g
+                        if abs(fcmd) < fpk:  # anti-windup: integrate only when not saturated
+                            integ[i] += e * dt
+                    if fcmd > fpk:
+                        fcmd, flags = fpk, flags | FLAG_SATURATED
+                    elif fcmd < -fpk:
+                        fcmd, flags = -fpk, flags | FLAG_SATURATED
+                    c = fcmd / kfm
+                    if c > imax:
+                        c, flags = imax, flags | FLAG_SATURATED
+                    elif c < -imax:
+                        c, flags = -imax, flags | FLAG_SATURATED
+                    cur[i] = c
+            # physics
+            jt = (j00 * fs[0] + j10 * fs[1] + j20 * fs[2],
+                  j01 * fs[0] + j11 * fs[1] + j21 * fs[2],
+                  j02 * fs[0] + j12 * fs[1] + j22 * fs[2])
+            for i in range(3):
+                kf = kf0 * (1.0 - droop * min(((x[i] - mid) / half) ** 2, 1.5))
+                fm = kf * cur[i]
+                th[i] += (fm * fm - th[i]) * th_a
+                acc = (fm - b * v[i] - k * (x[i] - rest) - m * g + jt[i]) / m
+                v[i] += acc * dt
+                x[i] += v[i] * dt
+                if x[i] < stop_lo:
+                    x[i], v[i] = stop_lo, 0.0
+                elif x[i] > stop_hi:
+                    x[i], v[i] = stop_hi, 0.0
+            # sensors at the tip: the probe pushes the skin with -fs
+            fx = round(-fs[0] / fres) * fres
+            fy = round(-fs[1] / fres) * fres
+            fz = round(-fs[2] / fres) * fres
+            self.last_fz = fz
+            if fz >= self.home_contact:
+                flags |= FLAG_CONTACT
+            self.tick += 1
+            # safety, every tick
+            if self.energised:
+                tnow = (self.tick - 1 - self.run_tick0) * dt if mode == RUNNING else (self.tick - 1) * dt
+                for i in range(3):
+                    if self.same_raw[i] >= lim.stuck_ticks:
+                        self._trip(F.Fault(F.STUCK_SENSOR, i + 1, meas[i], time_s=tnow))
+                        break
+                    if meas[i] < t_lo or meas[i] > t_hi:
+                        self._trip(F.Fault(F.TRAVEL, i + 1, meas[i], t_lo if meas[i] < t_lo else t_hi, tnow))
+                        break
+                    if th[i] > cont2:
+                        self._trip(F.Fault(F.CONTINUOUS_FORCE, i + 1, math.sqrt(th[i]),
+                                           lim.continuous_force_N, tnow))
+                        break
+                else:
+                    if fx * fx + fy * fy + fz * fz > tip_lim2:
+                        self._trip(F.Fault(F.TIP_FORCE, 0, math.sqrt(fx * fx + fy * fy + fz * fz),
+                                           lim.tip_force_N, tnow))
+                if not self.energised:
+                    self.off_tick = self.tick  # the next tick computes zero current
+            elif self.off_tick < 0 and self.fault_tick >= 0:
+                self.off_tick = self.tick
+            # stream
+            self.flags_acc |= flags
+            if self.streaming and (self.tick - 1 - self.run_tick0) % self.decimation == 0:
+                fl = self.flags_acc
+                if self.trigger_period and mode == RUNNING and run_k % self.trigger_period == 0:
+                    fl |= FLAG_CAMERA_TRIGGER
+                if self.mode == FAULTED:
+                    fl |= FLAG_ESTOP if self.fault and self.fault.code == F.ESTOP else FLAG_LIMIT
+                ci = [round((cur[i] + sig_i * nz[3 + i]) / ilsb) * ilsb for i in range(3)]
+                self.rows.append((self.sample_index, self.tick - 1 - self.run_tick0, meas[0], meas[1], meas[2],
+                                  ci[0], ci[1], ci[2], fx, fy, fz,
+                                  round(-plen * fy / tres) * tres, round(plen * fx / tres) * tres, 0.0, fl))
+                self.sample_index += 1
+                self.generated += 1
+                self.flags_acc = 0
+            if self.post_fault_left > 0:
+                self.post_fault_left -= 1
+                if self.post_fault_left == 0:
+                    self.streaming = False
+                    self.events.append(Event("fault", fault=self.fault, generated=self.generated))
+                    self.post_fault_left = -1
+
+    def _homing_setpoint(self, sp: list[float]) -> list[float]:
+        dt = self.params.dt
+        if self._home_phase == 0:  # go to the home pose at 10 mm/s
+            step = 0.01 * dt
+            new = [s + max(-step, min(step, self.home_target - s)) for s in sp]
+            if all(abs(nv - self.home_target) < 1e-12 for nv in new) and all(
+                    abs(xi - self.home_target) < 20e-6 for xi in self.xf):
+                self._home_phase = 1
+            self.setpoint = new
+            return new
+        # approach: rise until the F/T sensor reads the contact force
+        if self.last_fz >= self.home_contact:
+            self.mode = HOLD
+            self.setpoint = list(self.xf)
+            self.events.append(Event("home_done", q=(self.xf[0], self.xf[1], self.xf[2])))
+            return self.setpoint
+        new = [s + self.home_speed * dt for s in sp]
+        if max(new) > self.limits.travel_m[1] - 1e-4:
+            self._trip(F.Fault(F.NO_CONTACT, 0, max(new), self.limits.travel_m[1], self.time_s))
+            return sp
+        self.setpoint = new
+        return new
+
+
+
+def run_device_until(device: Device, done: Callable[[list[Event]], bool], max_s: float,
+                     block_ticks: int = 100) -> list[Event]:
+    """Advance ``device`` in blocks until ``done(events)`` or ``max_s`` of device time; returns events."""
+    events: list[Event] = []
+    t_end = device.time_s + max_s
+    while device.time_s < t_end:
+        device.heartbeat()
+        device.advance(block_ticks)
+        events += device.take_events()
+        if done(events):
+            break
+    return events
+
+
+def wall_clock() -> float:
+    """The emulator's firmware clock (monotonic wall time)."""
+    return time.monotonic()

@@ -1,0 +1,1 @@
+"""Built-in constitutive laws (entry-point group ``skinkit.laws``)."""

@@ -1,0 +1,93 @@
+"""Gasser-Ogden-Holzapfel law with fibre dispersion, FEBio's uncoupled conventions.
+
+W = c/2 (Ī1 - 3) + Σ_α k1/(2 k2) [exp(k2 Ē_α²) - 1] + k/2 (ln J)²,
+Ē_α = κ (Ī1 - 3) + (1 - 3κ) (Ī4α - 1),
+
+with fibre family α active only in tension (Ī4α > 1, as FEBio). The fibres lie in the
+e1-e2 plane of the local frame at ±γ from e1 (one family: +γ only), exactly as FEBio's
+``gamma``; the local frame is the global one turned by the option ``frame_angle`` [rad]
+about z. The thesis's Abaqus form (Eq 7.1) has C10 = c/2.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from skinkit.fem.hyper import (
+    VOLUMETRIC_KINDS,
+    iso_I1,
+    iso_I4,
+    kinematics,
+    volumetric_energy,
+    volumetric_stress,
+)
+from skinkit.schemas import Parameter
+
+
+class GOH:
+    """Parameters ``c``, ``k1``, ``k`` [Pa], ``k2`` [1], ``kappa`` [1] in [0, 1/3], ``gamma`` [rad].
+
+    Options: ``families`` (1 or 2), ``frame_angle`` [rad], ``volumetric`` (``"log"``, FEBio's
+    default, or ``"quadratic"``).
+    """
+
+    name = "goh"
+    complex_safe = True
+
+    def __init__(self, families: int = 2, frame_angle: float = 0.0, volumetric: str = "log") -> None:
+        if families not in (1, 2):
+            raise ValueError(f"families must be 1 or 2, got {families!r}")
+        if volumetric not in VOLUMETRIC_KINDS:
+            raise ValueError(f"volumetric must be one of {VOLUMETRIC_KINDS}, got {volumetric!r}")
+        self.families = int(families)
+        self.frame_angle = float(frame_angle)
+        self.volumetric = volumetric
+
+    def parameters(self) -> list[Parameter]:
+        return [Parameter("c", 2e4, "Pa", 0.0, np.inf),
+                Parameter("k1", 1e4, "Pa", 0.0, np.inf),
+                Parameter("k2", 10.0, "1", 1e-6, 1e3),
+                Parameter("kappa", 0.1, "1", 0.0, 1.0 / 3.0),
+                Parameter("gamma", 0.0, "rad", -np.pi / 2, np.pi / 2),
+                Parameter("k", 5e5, "Pa", 0.0, np.inf)]
+
+    def fibres(self, gamma: Any) -> list[np.ndarray]:
+        """Reference unit fibre directions, each ``(..., 3)`` (batched over ``gamma``)."""
+        th = self.frame_angle
+        e1 = np.array([np.cos(th), np.sin(th), 0.0])
+        e2 = np.array([-np.sin(th), np.cos(th), 0.0])
+        g = np.asarray(gamma)[..., None]
+        out = [np.cos(g) * e1 + np.sin(g) * e2]
+        if self.families == 2:
+            out.append(np.cos(g) * e1 - np.sin(g) * e2)
+        return out
+
+    def _fibre_terms(self, C, Cinv, J, I1b, dI1b, p):
+        k1, k2, kap = (np.asarray(p[n]) for n in ("k1", "k2", "kappa"))
+        for a in self.fibres(p["gamma"]):
+            I4b, dI4b = iso_I4(C, Cinv, J, a)
+            active = np.real(I4b) > 1.0
+            E = kap * (I1b - 3) + (1 - 3 * kap) * (I4b - 1)
+            E = np.where(active, E, 0.0)
+            yield k1, k2, kap, E, dI4b, active
+
+    def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        Cinv, J, I1 = kinematics(C)
+        I1b, dI1b = iso_I1(C, Cinv, J, I1)
+        W = 0.5 * p["c"] * (I1b - 3) + volumetric_energy(self.volumetric, p["k"], J)
+        for k1, k2, _, E, _, active in self._fibre_terms(C, Cinv, J, I1b, dI1b, p):
+            W = W + np.where(active, k1 / (2 * k2) * (np.exp(k2 * E ** 2) - 1), 0.0)
+        return W
+
+    def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        Cinv, J, I1 = kinematics(C)
+        I1b, dI1b = iso_I1(C, Cinv, J, I1)
+        S = np.asarray(p["c"])[..., None, None] * dI1b \
+            + volumetric_stress(self.volumetric, p["k"], J, Cinv)
+        for k1, k2, kap, E, dI4b, _ in self._fibre_terms(C, Cinv, J, I1b, dI1b, p):
+            w = 2 * k1 * E * np.exp(k2 * E ** 2)  # 2 ∂W/∂Ē, zero where inactive (E = 0)
+            S = S + w[..., None, None] * (kap[..., None, None] * dI1b
+                                          + (1 - 3 * kap)[..., None, None] * dI4b)
+        return S

@@ -1,0 +1,53 @@
+"""Uncoupled Mooney-Rivlin law: W = c1 (Ī1 - 3) + c2 (Ī2 - 3) + U(J)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from skinkit.fem.hyper import (
+    VOLUMETRIC_KINDS,
+    iso_I1,
+    iso_I2,
+    kinematics,
+    volumetric_energy,
+    volumetric_stress,
+)
+from skinkit.schemas import Parameter
+
+
+class MooneyRivlin:
+    """Parameters ``c1``, ``c2``, ``K`` [Pa] (small-strain shear modulus 2 (c1 + c2)).
+
+    Option ``volumetric``: ``"quadratic"`` (K/2 (J-1)², default) or ``"log"``. The tangent is
+    derived by the engine (complex step of the analytic stress).
+    """
+
+    name = "mooney-rivlin"
+    complex_safe = True
+
+    def __init__(self, volumetric: str = "quadratic") -> None:
+        if volumetric not in VOLUMETRIC_KINDS:
+            raise ValueError(f"volumetric must be one of {VOLUMETRIC_KINDS}, got {volumetric!r}")
+        self.volumetric = volumetric
+
+    def parameters(self) -> list[Parameter]:
+        return [Parameter("c1", 4e3, "Pa", 0.0, np.inf),
+                Parameter("c2", 1e3, "Pa", 0.0, np.inf),
+                Parameter("K", 2.5e5, "Pa", 0.0, np.inf)]
+
+    def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        Cinv, J, I1 = kinematics(C)
+        I1b, _ = iso_I1(C, Cinv, J, I1)
+        I2b, _ = iso_I2(C, Cinv, J, I1)
+        return (p["c1"] * (I1b - 3) + p["c2"] * (I2b - 3)
+                + volumetric_energy(self.volumetric, p["K"], J))
+
+    def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        Cinv, J, I1 = kinematics(C)
+        _, d1 = iso_I1(C, Cinv, J, I1)
+        _, d2 = iso_I2(C, Cinv, J, I1)
+        c1 = np.asarray(p["c1"])[..., None, None]
+        c2 = np.asarray(p["c2"])[..., None, None]
+        return 2 * c1 * d1 + 2 * c2 * d2 + volumetric_stress(self.volumetric, p["K"], J, Cinv)

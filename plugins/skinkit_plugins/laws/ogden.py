@@ -1,0 +1,82 @@
+"""Uncoupled N-term Ogden law.
+
+W = Σₚ 2μₚ/αₚ² (λ̄₁^αₚ + λ̄₂^αₚ + λ̄₃^αₚ - 3) + U(J) (Abaqus form: small-strain shear
+modulus Σₚ μₚ), with λ̄ₐ = J^(-1/3) λₐ the isochoric principal stretches.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from skinkit.fem.hyper import VOLUMETRIC_KINDS, volumetric_energy
+from skinkit.schemas import Parameter
+
+
+def _principal(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    c, N = np.linalg.eigh(np.asarray(C, dtype=float))
+    return c, N
+
+
+class Ogden:
+    """Parameters ``mu1, alpha1, ..., muN, alphaN`` and ``K``; option ``terms`` (N ≥ 1).
+
+    The stress uses the spectral form S = Σₐ 2 ∂W/∂cₐ Nₐ⊗Nₐ (cₐ eigenvalues of C), which
+    stays exact for repeated eigenvalues; the tangent is derived by the engine by central
+    differences of the stress (eigen-decompositions are not complex-step safe).
+    """
+
+    name = "ogden"
+    complex_safe = False
+
+    def __init__(self, terms: int = 1, volumetric: str = "quadratic") -> None:
+        if int(terms) != terms or terms < 1:
+            raise ValueError(f"terms must be a positive integer, got {terms!r}")
+        if volumetric not in VOLUMETRIC_KINDS:
+            raise ValueError(f"volumetric must be one of {VOLUMETRIC_KINDS}, got {volumetric!r}")
+        self.terms = int(terms)
+        self.volumetric = volumetric
+
+    def parameters(self) -> list[Parameter]:
+        out = []
+        for i in range(1, self.terms + 1):
+            out.append(Parameter(f"mu{i}", 1e4 / self.terms, "Pa", -np.inf, np.inf))
+            # α = 0 makes the energy singular; admissible are α in [-30, -0.01] U [0.01, 30],
+            # which bounds alone cannot express: the stress checks μα > 0 below
+            out.append(Parameter(f"alpha{i}", 8.0 if i == 1 else -2.0, "1", -30.0, 30.0))
+        out.append(Parameter("K", 2.5e5, "Pa", 0.0, np.inf))
+        return out
+
+    def _terms(self, p: Mapping[str, Any]):
+        return [(p[f"mu{i}"], p[f"alpha{i}"]) for i in range(1, self.terms + 1)]
+
+    def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        c, _ = _principal(C)
+        J = np.sqrt(np.prod(c, axis=-1))
+        cb = c * J[..., None] ** (-2.0 / 3.0)
+        W = volumetric_energy(self.volumetric, p["K"], J)
+        for mu, al in self._terms(p):
+            mu = np.asarray(mu)[..., None]
+            al = np.asarray(al)[..., None]
+            W = W + (2 * mu / al ** 2 * (cb ** (al / 2) - 1)).sum(axis=-1)
+        return W
+
+    def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        c, N = _principal(C)
+        J = np.sqrt(np.prod(c, axis=-1))
+        cb = c * J[..., None] ** (-2.0 / 3.0)
+        beta = np.zeros_like(c)
+        for mu, al in self._terms(p):
+            mu = np.asarray(mu)[..., None]
+            al = np.asarray(al)[..., None]
+            pw = cb ** (al / 2)
+            beta = beta + mu / al * (pw - pw.mean(axis=-1, keepdims=True))
+        K = np.asarray(p["K"])
+        if self.volumetric == "quadratic":
+            JdU = J * K * (J - 1)
+        else:
+            JdU = K * np.log(J)
+        # 2 ∂W/∂cₐ = (2 βₐ + J U') / cₐ
+        coef = (2 * beta + JdU[..., None] * np.ones(3)) / c
+        return np.einsum("...ia,...a,...ja->...ij", N, coef, N)

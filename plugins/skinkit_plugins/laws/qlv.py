@@ -1,0 +1,71 @@
+"""Quasi-linear viscoelasticity: a Prony series around any elastic law (thesis Eqs 7.6-7.7).
+
+S(t) = ∫₀ᵗ g_R(t - s) dSₑ/ds ds with g_R(t) = 1 - Σᵢ gᵢ (1 - exp(-t/τᵢ)), Sₑ the elastic
+law's PK2 stress (the engine integrates it, see :mod:`skinkit.fem.viscoelastic`). In a
+static solve the law answers with its instantaneous elastic response.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from skinkit import registry
+from skinkit.fem import lawkit
+from skinkit.schemas import Parameter
+
+
+class QLV:
+    """Options: ``elastic`` (a law name in ``skinkit.laws`` or a law object), ``terms`` (N ≥ 1),
+    ``elastic_options`` (mapping passed to the elastic law). Parameters: the elastic law's,
+    then ``g1..gN`` [1] (Σ gᵢ < 1) and ``tau1..tauN`` [s]."""
+
+    name = "qlv"
+
+    def __init__(self, elastic: Any = "neo-hookean-ni", terms: int = 1,
+                 elastic_options: Mapping[str, Any] | None = None) -> None:
+        if int(terms) != terms or terms < 1:
+            raise ValueError(f"terms must be a positive integer, got {terms!r}")
+        self.terms = int(terms)
+        if isinstance(elastic, str):
+            elastic = registry.create("skinkit.laws", elastic, **dict(elastic_options or {}))
+        if not callable(getattr(elastic, "energy", None)):
+            raise ValueError(f"elastic must be a law with an energy, got {elastic!r}")
+        self.elastic = elastic
+
+    @property
+    def complex_safe(self) -> bool:  # type: ignore[override]
+        return lawkit.is_complex_safe(self.elastic) and lawkit.has_own(self.elastic, "stress")
+
+    def parameters(self) -> list[Parameter]:
+        out = list(self.elastic.parameters())
+        for i in range(1, self.terms + 1):
+            out.append(Parameter(f"g{i}", 0.3 / self.terms, "1", 0.0, 0.999))
+        for i in range(1, self.terms + 1):
+            out.append(Parameter(f"tau{i}", 10.0 ** (i - 1), "s", 1e-6, 1e6))
+        return out
+
+    def _elastic_p(self, p: Mapping[str, Any]) -> dict[str, Any]:
+        names = lawkit.parameter_names(self.elastic)
+        return {n: p[n] for n in names}
+
+    def prony(self, p: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+        """``(g, tau)`` each ``(N,)``: relative moduli [1] and relaxation times [s]."""
+        g = np.array([p[f"g{i}"] for i in range(1, self.terms + 1)])
+        tau = np.array([p[f"tau{i}"] for i in range(1, self.terms + 1)])
+        if np.real(g).sum() >= 1.0:
+            raise ValueError(f"the Prony moduli must sum below 1, got {np.real(g).sum():g}")
+        return g, tau
+
+    def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        return self.elastic.energy(C, self._elastic_p(p))
+
+    def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        return lawkit.stress(self.elastic, C, self._elastic_p(p))
+
+    def tangent(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        return lawkit.tangent(self.elastic, C, self._elastic_p(p))
+
+    def response(self, C: np.ndarray, p: Mapping[str, Any], with_tangent: bool = True):
+        return lawkit.response(self.elastic, C, self._elastic_p(p), with_tangent)

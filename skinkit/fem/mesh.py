@@ -1,0 +1,178 @@
+"""27-node hexahedral meshes (scikit-fem ``MeshHex2``): blocks, phantoms, the in vivo disc.
+
+A :class:`FEMesh` holds every node of the quadratic mesh (vertices, edge, face and centre
+nodes, in scikit-fem's ``MeshHex2.doflocs`` order) so that moving any node (fitting to a
+surface) keeps the isoparametric, possibly curved, geometry. Lengths are in metres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from skfem import MeshHex, MeshHex2
+
+from skinkit.fem.errors import ModelError
+
+
+@dataclass
+class FEMesh:
+    """A quadratic hexahedral mesh with named regions and node sets.
+
+    Attributes:
+        nodes: ``(N, 3)`` node coordinates [m].
+        t: ``(8, n_el)`` vertex connectivity of the underlying linear mesh (scikit-fem order).
+        elements: ``(n_el, 27)`` node indices of each element (scikit-fem ``ElementHex2`` order).
+        region: ``(n_el,)`` region index of each element (into ``regions``).
+        regions: region names, e.g. ``["skin", "subdermal"]``.
+        node_sets: name -> sorted node indices (``"top"``, ``"bottom"``, ``"outer"``, ...).
+    """
+
+    nodes: np.ndarray
+    t: np.ndarray
+    elements: np.ndarray
+    region: np.ndarray
+    regions: list[str]
+    node_sets: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.nodes.shape[0])
+
+    @property
+    def n_elements(self) -> int:
+        return int(self.elements.shape[0])
+
+    @property
+    def n_dof(self) -> int:
+        return 3 * self.n_nodes
+
+    def skfem_mesh(self) -> MeshHex2:
+        """The scikit-fem ``MeshHex2`` with the current node positions."""
+        return MeshHex2(doflocs=np.ascontiguousarray(self.nodes.T), t=self.t, validate=False)
+
+    def with_nodes(self, nodes: np.ndarray) -> FEMesh:
+        """A copy with node positions replaced (same topology)."""
+        nodes = np.asarray(nodes, dtype=float)
+        if nodes.shape != self.nodes.shape:
+            raise ModelError("mesh.nodes", f"expected shape {self.nodes.shape}, got {nodes.shape}")
+        return FEMesh(nodes, self.t, self.elements, self.region, list(self.regions),
+                      {k: v.copy() for k, v in self.node_sets.items()})
+
+    def region_elements(self, name: str) -> np.ndarray:
+        """Indices of the elements of region ``name``."""
+        if name not in self.regions:
+            raise ModelError("region", f"no region {name!r}; regions are {self.regions}")
+        return np.flatnonzero(self.region == self.regions.index(name))
+
+
+def _from_linear(m: MeshHex) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    m2 = MeshHex2.from_mesh(m)
+    from skfem import Basis, ElementHex2
+    # a basis of intorder 1 is the cheapest way to get the element -> node table
+    b = Basis(m2, ElementHex2(), intorder=1)
+    return np.ascontiguousarray(m2.doflocs.T), m.t, np.ascontiguousarray(b.element_dofs.T)
+
+
+def _region_by_z(nodes: np.ndarray, elements: np.ndarray, z_interfaces: Sequence[float]) -> np.ndarray:
+    """Region index of each element from its centroid height: 0 is the top layer."""
+    zc = nodes[elements, 2].mean(axis=1)
+    # interfaces are listed top-down; an element below k interfaces is in layer k
+    return np.sum(zc[:, None] < np.asarray(z_interfaces)[None, :], axis=1)
+
+
+def _near(a: np.ndarray, b: float, scale: float) -> np.ndarray:
+    return np.abs(a - b) <= 1e-9 * max(scale, 1e-12)
+
+
+def _layer_coords(thicknesses: Sequence[float], n_layers: Sequence[int]) -> np.ndarray:
+    """z coordinates of element boundaries, top (z = 0) down, returned ascending."""
+    zs = [0.0]
+    for t, n in zip(thicknesses, n_layers):
+        if t <= 0 or n < 1:
+            raise ModelError("mesh.layers", f"thickness {t} m and element count {n} must be positive")
+        zs.extend(list(zs[-1] - t * np.arange(1, n + 1) / n))
+    return np.array(sorted(zs))
+
+
+def block_mesh(size: Sequence[float] = (1.0, 1.0, 1.0), n: Sequence[int] = (2, 2, 2),
+               layers: Sequence[tuple[str, float, int]] | None = None) -> FEMesh:
+    """A box ``[0, Lx] x [0, Ly] x [-Lz, 0]`` of 27-node hexahedra (top face at z = 0).
+
+    ``n`` elements per direction; ``layers`` optionally splits it through the thickness as
+    ``(name, thickness [m], element layers)`` from the top (thicknesses must sum to ``Lz``).
+    Node sets: ``top``, ``bottom``, ``xmin``, ``xmax``, ``ymin``, ``ymax``, ``sides``.
+    """
+    Lx, Ly, Lz = (float(v) for v in size)
+    if min(Lx, Ly, Lz) <= 0 or min(n) < 1:
+        raise ModelError("mesh", f"size {size} must be positive and n {n} at least 1")
+    if layers:
+        tot = sum(t for _, t, _ in layers)
+        if abs(tot - Lz) > 1e-9 * Lz:
+            raise ModelError("mesh.layers", f"layer thicknesses sum to {tot} m, not the height {Lz} m")
+        z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
+        names = [nm for nm, _, _ in layers]
+    else:
+        z = np.linspace(-Lz, 0.0, n[2] + 1)
+        names = ["body"]
+    m = MeshHex.init_tensor(np.linspace(0, Lx, n[0] + 1), np.linspace(0, Ly, n[1] + 1), z)
+    nodes, t, el = _from_linear(m)
+    if layers:
+        ifaces = list(np.cumsum([-th for _, th, _ in layers])[:-1])
+        region = _region_by_z(nodes, el, ifaces)
+    else:
+        region = np.zeros(el.shape[0], dtype=int)
+    x, y, zz = nodes.T
+    L = max(Lx, Ly, Lz)
+    sets = {"top": _near(zz, 0.0, L), "bottom": _near(zz, -Lz, L),
+            "xmin": _near(x, 0.0, L), "xmax": _near(x, Lx, L),
+            "ymin": _near(y, 0.0, L), "ymax": _near(y, Ly, L)}
+    sets["sides"] = sets["xmin"] | sets["xmax"] | sets["ymin"] | sets["ymax"]
+    return FEMesh(nodes, t, el, region, names, {k: np.flatnonzero(v) for k, v in sets.items()})
+
+
+def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
+              layers: Sequence[tuple[str, float, int]] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2)),
+              n_across: int = 9, grading: float = 0.4) -> FEMesh:
+    """The in vivo geometry: a layered disc under the support plate's hole.
+
+    A square grid of ``n_across`` x ``n_across`` elements is mapped onto the disc (elliptical
+    square-to-disc map, applied to every node so the element edges follow the circle) and
+    graded radially, ``r -> R s (a + (1 - a) s)`` with ``s = r/R`` and ``a = grading``, so
+    that elements near the centre are about ``grading`` times the average size. Layers are
+    ``(name, thickness [m], element layers)`` from the top (z = 0) down.
+
+    Node sets: ``top``, ``bottom``, ``outer`` (the rim, r = R), ``indenter`` (top nodes
+    with r <= indenter radius).
+    """
+    R = 0.5 * float(diameter)
+    r_ind = 0.5 * float(indenter_diameter)
+    if R <= 0 or not 0 < r_ind < R:
+        raise ModelError("mesh", f"need 0 < indenter diameter {indenter_diameter} < diameter {diameter}")
+    if not 0 < grading <= 1:
+        raise ModelError("mesh.grading", f"must be in (0, 1], got {grading}")
+    if n_across < 2:
+        raise ModelError("mesh.n_across", f"must be at least 2, got {n_across}")
+    z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
+    s = np.linspace(-1.0, 1.0, n_across + 1)
+    m = MeshHex.init_tensor(s, s, z)
+    nodes, t, el = _from_linear(m)
+    u, v = nodes[:, 0], nodes[:, 1]
+    x = u * np.sqrt(1 - v ** 2 / 2)
+    y = v * np.sqrt(1 - u ** 2 / 2)
+    r = np.hypot(x, y)
+    g = grading + (1 - grading) * r  # r is already in units of R here
+    nodes = np.column_stack([R * x * g, R * y * g, nodes[:, 2]])
+    ifaces = list(np.cumsum([-th for _, th, _ in layers])[:-1])
+    region = _region_by_z(nodes, el, ifaces)
+    rr = np.hypot(nodes[:, 0], nodes[:, 1])
+    H = float(sum(th for _, th, _ in layers))
+    top = _near(nodes[:, 2], 0.0, H)
+    sets = {"top": top, "bottom": _near(nodes[:, 2], -H, H),
+            "outer": np.abs(rr - R) <= 1e-9 * R,
+            "indenter": top & (rr <= r_ind * (1 + 1e-9))}
+    if not sets["indenter"].any():
+        raise ModelError("mesh.indenter_diameter", "no top node lies under the indenter; refine the mesh")
+    return FEMesh(nodes, t, el, region, [nm for nm, _, _ in layers],
+                  {k: np.flatnonzero(v) for k, v in sets.items()})
