@@ -48,7 +48,8 @@ def run(n_blocks: int = 200, block: int = 1000, repeats: int = 3) -> dict[str, f
             path = Path(tmp) / f"h5{r}.h5"
             t0 = time.perf_counter()
             with h5py.File(path, "w") as f:
-                ds = {c: f.create_dataset(c, (0, 3), maxshape=(None, 3), chunks=(block, 3), dtype="f8") for c in CHANNELS}
+                ds = {c: f.create_dataset(c, (0, 3), maxshape=(None, 3), chunks=(block, 3), dtype="f8")
+                      for c in CHANNELS}
                 ds["time_s"] = f.create_dataset("time_s", (0,), maxshape=(None,), chunks=(block,), dtype="f8")
                 ds["flags"] = f.create_dataset("flags", (0,), maxshape=(None,), chunks=(block,), dtype="u4")
                 m = 0

@@ -43,7 +43,7 @@ def as_array(
         raise SchemaError(
             field, f"expected {len(shape)}-d array of shape {_fmt(shape)}, got shape {arr.shape}"
         )
-    for axis, (want, got) in enumerate(zip(shape, arr.shape)):
+    for axis, (want, got) in enumerate(zip(shape, arr.shape, strict=True)):
         if isinstance(want, str):
             bound = dims.setdefault(want, got)
             if bound != got:

@@ -129,7 +129,7 @@ class ParameterSet:
         names = self.free_names
         if x.shape != (len(names),):
             raise SchemaError("ParameterSet.free_vector", f"expected {len(names)} values, got {x.size}")
-        return self.with_values(dict(zip(names, x.tolist())))
+        return self.with_values(dict(zip(names, x.tolist(), strict=True)))
 
     def with_values(self, values: Mapping[str, float]) -> ParameterSet:
         """A copy with some values replaced (SI), bounds checked."""

@@ -92,7 +92,8 @@ class RobotRecord:
                 raise SchemaError("RobotRecord.flags", "must be non-negative integers (a bit set)")
             self.flags = as_array(flags, "RobotRecord.flags", ("N",), "count", dims, dtype=np.uint32)
         if not isinstance(self.protocol, Protocol):
-            raise SchemaError("RobotRecord.protocol", f"must be a Protocol, got {type(self.protocol).__name__}")
+            raise SchemaError("RobotRecord.protocol",
+                              f"must be a Protocol, got {type(self.protocol).__name__}")
 
     @property
     def n_samples(self) -> int:

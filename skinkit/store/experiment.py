@@ -453,7 +453,7 @@ class Experiment:
     def write_images(self, seq: ImageSequence) -> None:
         """Store a whole image sequence."""
         with self.image_writer(seq.name, seq.camera_names, seq.image_size, seq.frames.dtype) as w:
-            for frame, t in zip(seq.frames, seq.time_s):
+            for frame, t in zip(seq.frames, seq.time_s, strict=True):
                 w.append(frame, float(t))
 
     @_reading

@@ -70,3 +70,38 @@ class SpeckleTexture:
                 cy = j + 0.15 + 0.7 * _hash(i, j, self.seed, 2)
                 acc += a * np.exp(-((u - cx) ** 2 + (v - cy) ** 2) / s2)
         return self.background + self.contrast * (1.0 - np.exp(-1.5 * acc))
+
+
+@dataclass(frozen=True)
+class SolidSpeckle:
+    """Gaussian-dot speckle filling 3D body coordinates (for curved rigid bodies: the cone).
+
+    A surface cutting the dot field shows dots of random apparent size. Same attributes as
+    :class:`SpeckleTexture`; dots beyond one neighbouring cell are below 3e-5 of a dot.
+    """
+
+    cell: float
+    sigma_frac: float = 0.25
+    background: float = 0.15
+    contrast: float = 0.75
+    fill: float = 0.9
+    seed: int = 0
+
+    def __call__(self, P: np.ndarray) -> np.ndarray:
+        """Intensity [0..1] at ``(N, 3)`` body coordinates."""
+        q = np.asarray(P, dtype=float) / self.cell
+        base = np.floor(q).astype(np.int64)
+        s2 = 2.0 * self.sigma_frac**2
+        acc = np.zeros(len(q))
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                for dk in (-1, 0, 1):
+                    i, j, k = base[:, 0] + di, base[:, 1] + dj, base[:, 2] + dk
+                    ij = i * 7919 + k
+                    on = _hash(ij, j, self.seed, 13) < self.fill
+                    a = (0.6 + 0.4 * _hash(ij, j, self.seed, 14)) * on
+                    c = np.stack([i + 0.15 + 0.7 * _hash(ij, j, self.seed, 10),
+                                  j + 0.15 + 0.7 * _hash(ij, j, self.seed, 11),
+                                  k + 0.15 + 0.7 * _hash(ij, j, self.seed, 12)], axis=1)
+                    acc += a * np.exp(-np.sum((q - c) ** 2, axis=1) / s2)
+        return self.background + self.contrast * (1.0 - np.exp(-1.5 * acc))

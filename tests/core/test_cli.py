@@ -79,7 +79,8 @@ def test_inspect_json_shape(tmp_path):
 def test_inspect_bad_file_one_line_exit_2(tmp_path, content, needle):
     p = tmp_path / "bad.h5"
     p.write_bytes(content)
-    proc = subprocess.run([sys.executable, "-m", "skinkit", "inspect", str(p)], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "skinkit", "inspect", str(p)], capture_output=True,
+                          text=True)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and needle in proc.stderr and proc.stderr.startswith("error: ")
     assert "Traceback" not in proc.stderr

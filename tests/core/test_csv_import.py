@@ -14,7 +14,8 @@ from skinkit.schemas import Protocol, RobotRecord
 from skinkit.store import read_robot_csv, write_robot_csv
 from skinkit.store.csv_import import parse_robot_csv
 
-REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "healthy_skin_extension_relaxation.csv"
+REAL = (Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
+        / "healthy_skin_extension_relaxation.csv")
 
 
 def _parse(text: str) -> RobotRecord:

@@ -67,7 +67,8 @@ def env(tmp_path_factory):
     bad = build_wheel(root, "tp-broken", {
         "tp_broken/__init__.py": "",
         "tp_broken/boom.py": "raise RuntimeError('tp-broken cannot find its calibration table')\n",
-        "tp_broken/half.py": "class HalfLaw:\n    name = 'half'\n    def parameters(self):\n        return []\n",
+        "tp_broken/half.py": ("class HalfLaw:\n    name = 'half'\n"
+                              "    def parameters(self):\n        return []\n"),
     }, {"skinkit.laws": {"tp-boom": "tp_broken.boom:Law", "tp-half": "tp_broken.half:HalfLaw"}})
     pip_install(python, good)
     pip_install(python, bad)

@@ -138,7 +138,8 @@ def test_surface_profile_and_track():
 
 
 def test_parameter_set():
-    ps = ParameterSet([Parameter("skin.mu", 10, "kPa", 1, 100), Parameter("nu", 0.45, "1", 0, 0.5, free=False),
+    ps = ParameterSet([Parameter("skin.mu", 10, "kPa", 1, 100),
+                       Parameter("nu", 0.45, "1", 0, 0.5, free=False),
                        Parameter("k2", 5.0, lower=0.0)])
     assert ps["skin.mu"] == pytest.approx(1e4) and ps.param("skin.mu").unit == "Pa"
     assert ps.free_names == ["skin.mu", "k2"]

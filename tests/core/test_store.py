@@ -48,7 +48,8 @@ def test_roundtrip_everything(tmp_path):
                         rig.names, [0.0, 0.5, 1.0])
     prof = SurfaceProfile(np.random.default_rng(2).normal(size=(20, 3)), np.ones(20),
                           uncertainty_px=np.full(20, 2.0))
-    track = SurfaceTrack(np.zeros((20, 3, 3)), np.ones((20, 3), bool), [0.0, 0.5, 1.0], point_ids=np.arange(20))
+    track = SurfaceTrack(np.zeros((20, 3, 3)), np.ones((20, 3), bool), [0.0, 0.5, 1.0],
+                         point_ids=np.arange(20))
     fit = FitResult("kv", ParameterSet([Parameter("K", 1450, "N/m", 0, 1e4)]), objective=0.5)
     with create_experiment(path) as exp:
         exp.set_metadata(subject="S01", site="forearm")
@@ -123,7 +124,8 @@ def test_sigkill_while_appending_keeps_flushed_blocks(tmp_path, kill_after_block
     path = tmp_path / "crash.h5"
     script = tmp_path / "writer.py"
     script.write_text(_WRITER)
-    proc = subprocess.Popen([sys.executable, str(script), str(path), "250"], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, str(script), str(path), "250"], stdout=subprocess.PIPE,
+                            text=True)
     reported = 0
     try:
         for _ in range(kill_after_blocks):

@@ -22,7 +22,8 @@ def build_wheel(out_dir: Path, dist: str, modules: dict[str, str], entry_points:
     info = f"{norm}-{version}.dist-info"
     files: dict[str, bytes] = {path: textwrap.dedent(src).encode() for path, src in modules.items()}
     files[f"{info}/METADATA"] = f"Metadata-Version: 2.1\nName: {dist}\nVersion: {version}\n".encode()
-    files[f"{info}/WHEEL"] = b"Wheel-Version: 1.0\nGenerator: skinkit-tests\nRoot-Is-Purelib: true\nTag: py3-none-any\n"
+    files[f"{info}/WHEEL"] = (b"Wheel-Version: 1.0\nGenerator: skinkit-tests\nRoot-Is-Purelib: true\n"
+                              b"Tag: py3-none-any\n")
     ep = "".join(f"[{g}]\n" + "".join(f"{n} = {t}\n" for n, t in eps.items()) + "\n"
                  for g, eps in entry_points.items())
     files[f"{info}/entry_points.txt"] = ep.encode()

@@ -1,0 +1,223 @@
+"""The thesis's measurement protocols as named, parameterised :class:`~skinkit.schemas.Protocol` objects.
+
+Sources (reference text):
+
+* ``preconditioning`` -- 7.2.1: after contact, a 2 mm normal indentation held 30 s while the
+  adhesive sets and the skin preconditions, then back to zero.
+* ``normal_indentation``, ``in_plane_000`` ... ``in_plane_330`` (12 directions, 30 deg apart),
+  ``normal_retraction``, ``out_of_plane_330/285/240`` (45 deg from the skin plane) -- 7.2.1 and
+  Table 12: 1.5 mm peak-to-peak sinusoid at 0.1 Hz for three periods. The sinusoid is
+  one-sided, ``pp/2 (1 - cos 2 pi f t)``, so each direction is a stretch from the zero
+  position and back (retraction is the normal direction pulled out of the skin).
+* ``stochastic_preconditioning`` -- 4.1.3: 0.5 Hz sinusoidal ramp from zero to full force for
+  three periods, 10 s at full force, then 100 s of the stochastic input.
+* ``stochastic_full_scale`` -- 4.1.3: Gaussian force, low-passed at 200 Hz, up to 3.5 N per
+  motor, all three motors together (normal) or one motor with the others held (tangential).
+* ``incremental_a`` / ``incremental_b`` -- 4.1.3: the stochastic input scaled to 20 % with its
+  mean stepped across the full range, 15 increments then 15 decrements; A precedes each
+  step with a zero-max-zero force triangle, B holds the step's mean.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from skinkit.acquisition.programmes import Programme, direction, one_sided_sine, stochastic
+from skinkit.errors import SkinkitError
+from skinkit.schemas import Protocol
+
+
+class ProtocolError(SkinkitError):
+    """An unknown protocol name or a bad protocol parameter."""
+
+
+@dataclass(frozen=True)
+class _Entry:
+    kind: str
+    description: str
+    defaults: dict[str, Any]
+    units: dict[str, str]
+    build: Callable[[dict[str, Any]], Programme]
+
+
+_SINE_UNITS = {"theta": "deg", "phi": "deg", "peak_to_peak": "m", "frequency": "Hz", "periods": "1",
+               "setpoint_rate": "Hz", "camera_rate": "Hz"}
+
+
+def _sine(p: dict[str, Any]) -> Programme:
+    rate = float(p["setpoint_rate"])
+    duration = float(p["periods"]) / float(p["frequency"])
+    t = np.arange(int(round(duration * rate)) + 1) / rate
+    s = one_sided_sine(t, float(p["peak_to_peak"]), float(p["frequency"]))
+    return Programme("trajectory", rate, s[:, None] * direction(float(p["theta"]), float(p["phi"])),
+                     float(p["camera_rate"]))
+
+
+def _precondition(p: dict[str, Any]) -> Programme:
+    rate = float(p["setpoint_rate"])
+    ramp, hold, depth = float(p["ramp"]), float(p["hold"]), float(p["depth"])
+    t = np.arange(int(round((2 * ramp + hold) * rate)) + 1) / rate
+    # smooth (raised-cosine) ramps so the PID is not asked for a velocity step
+    up = 0.5 * (1 - np.cos(np.pi * np.clip(t / ramp, 0, 1)))
+    down = 0.5 * (1 - np.cos(np.pi * np.clip((t - ramp - hold) / ramp, 0, 1)))
+    z = depth * (up - down)
+    return Programme("trajectory", rate, np.stack([0 * z, 0 * z, z], axis=1), float(p["camera_rate"]))
+
+
+def _motor_columns(f: np.ndarray, p: dict[str, Any]) -> np.ndarray:
+    """Per-motor forces: all motors (``axis`` 0, normal) or one motor with the others held."""
+    axis = int(p["axis"])
+    if axis not in (0, 1, 2, 3):
+        raise ProtocolError(f"parameter 'axis' must be 0 (normal, all motors) or a motor 1..3, got {axis}")
+    if axis == 0:
+        return np.repeat(f[:, None], 3, axis=1)
+    out = np.full((f.size, 3), float(p["hold_force"]))
+    out[:, axis - 1] = f
+    return out
+
+
+_FORCE_UNITS = {"force_max": "N", "duration": "s", "cutoff": "Hz", "setpoint_rate": "Hz", "axis": "1",
+                "hold_force": "N", "seed": "1", "camera_rate": "Hz"}
+
+
+def _full_scale(p: dict[str, Any]) -> Programme:
+    rate = float(p["setpoint_rate"])
+    n = int(round(float(p["duration"]) * rate)) + 1
+    u = stochastic(n, rate, float(p["cutoff"]), int(p["seed"]))
+    f = float(p["force_max"]) * (0.5 + u / 6.0)  # +-3 sigma spans 0..force_max
+    return Programme("force", rate, _motor_columns(f, p), float(p["camera_rate"]))
+
+
+def _stoch_precondition(p: dict[str, Any]) -> Programme:
+    rate, fmax = float(p["setpoint_rate"]), float(p["force_max"])
+    f_ramp = 0.5
+    t1 = np.arange(int(round(3 / f_ramp * rate))) / rate
+    ramp = fmax * 0.5 * (1 - np.cos(2 * np.pi * f_ramp * t1)) * np.clip(t1 * f_ramp / 3 * 2, 0, 1)
+    hold = np.full(int(round(float(p["hold"]) * rate)), fmax)
+    n = int(round(float(p["duration"]) * rate)) + 1
+    u = stochastic(n, rate, float(p["cutoff"]), int(p["seed"]))
+    f = np.concatenate([ramp, hold, fmax * (0.5 + u / 6.0)])
+    return Programme("force", rate, _motor_columns(f, p), float(p["camera_rate"]))
+
+
+def _incremental(variant: str) -> Callable[[dict[str, Any]], Programme]:
+    def build(p: dict[str, Any]) -> Programme:
+        rate, fmax = float(p["setpoint_rate"]), float(p["force_max"])
+        k, scale = int(p["increments"]), float(p["scale"])
+        n_inc = int(round(float(p["increment_duration"]) * rate))
+        n_pre = int(round(float(p["precondition_duration"]) * rate))
+        means = np.linspace(scale / 2, 1 - scale / 2, k)
+        means = np.concatenate([means, means[::-1]])
+        u = stochastic(n_inc * means.size + 1, rate, float(p["cutoff"]), int(p["seed"]))
+        parts = []
+        for j, m in enumerate(means):
+            if variant == "a":  # zero - max - zero triangle
+                pre = fmax * (1 - np.abs(np.linspace(-1, 1, n_pre)))
+            else:  # hold the step's mean
+                pre = np.full(n_pre, fmax * m)
+            parts += [pre, fmax * (m + scale * u[j * n_inc:(j + 1) * n_inc] / 6.0)]
+        parts.append(np.array([fmax * means[-1]]))
+        return Programme("force", rate, _motor_columns(np.concatenate(parts), p), float(p["camera_rate"]))
+
+    return build
+
+
+def _catalogue() -> dict[str, _Entry]:
+    sine = {"peak_to_peak": 1.5e-3, "frequency": 0.1, "periods": 3, "setpoint_rate": 100.0,
+            "camera_rate": 1.0}
+    out: dict[str, _Entry] = {
+        "preconditioning": _Entry(
+            "trajectory", "2 mm normal indentation held 30 s after contact (thesis 7.2.1)",
+            {"depth": 2e-3, "hold": 30.0, "ramp": 1.0, "setpoint_rate": 100.0, "camera_rate": 0.0},
+            {"depth": "m", "hold": "s", "ramp": "s", "setpoint_rate": "Hz", "camera_rate": "Hz"},
+            _precondition),
+        "normal_indentation": _Entry(
+            "trajectory", "1.5 mm p-p sinusoid into the skin, 0.1 Hz, 3 periods (Table 12)",
+            {"theta": 0.0, "phi": 90.0, **sine}, _SINE_UNITS, _sine),
+    }
+    for theta in range(0, 360, 30):
+        out[f"in_plane_{theta:03d}"] = _Entry(
+            "trajectory", f"1.5 mm p-p in-plane stretch at theta={theta} deg (Table 12)",
+            {"theta": float(theta), "phi": 0.0, **sine}, _SINE_UNITS, _sine)
+    out["normal_retraction"] = _Entry(
+        "trajectory", "1.5 mm p-p sinusoid pulling the skin out along the normal (Table 12)",
+        {"theta": 0.0, "phi": -90.0, **sine}, _SINE_UNITS, _sine)
+    for theta in (330, 285, 240):
+        out[f"out_of_plane_{theta:03d}"] = _Entry(
+            "trajectory", f"1.5 mm p-p at 45 deg out of plane, theta={theta} deg (Table 12)",
+            {"theta": float(theta), "phi": 45.0, **sine}, _SINE_UNITS, _sine)
+    force = {"force_max": 3.5, "cutoff": 200.0, "setpoint_rate": 1000.0, "axis": 0, "hold_force": 1.0,
+             "seed": 0, "camera_rate": 0.0}
+    out["stochastic_preconditioning"] = _Entry(
+        "force", "0.5 Hz ramp to full force x3, 10 s hold, 100 s stochastic (thesis 4.1.3)",
+        {**force, "hold": 10.0, "duration": 100.0}, {**_FORCE_UNITS, "hold": "s"}, _stoch_precondition)
+    out["stochastic_full_scale"] = _Entry(
+        "force", "Gaussian force 0..3.5 N per motor, low-passed at 200 Hz, 100 s (thesis 4.1.3)",
+        {**force, "duration": 100.0}, _FORCE_UNITS, _full_scale)
+    inc = {**force, "increments": 15, "scale": 0.2, "increment_duration": 10.0,
+           "precondition_duration": 2.0}
+    inc_units = {**_FORCE_UNITS, "increments": "1", "scale": "1", "increment_duration": "s",
+                 "precondition_duration": "s"}
+    inc_units.pop("duration")
+    out["incremental_a"] = _Entry(
+        "force", "20 % stochastic input stepped up then down 15x, triangle preconditioning (Protocol A)",
+        inc, inc_units, _incremental("a"))
+    out["incremental_b"] = _Entry(
+        "force", "20 % stochastic input stepped up then down 15x, mean-hold preconditioning (Protocol B)",
+        inc, inc_units, _incremental("b"))
+    return out
+
+
+_CATALOGUE = _catalogue()
+
+
+def names() -> list[str]:
+    """Names of the built-in protocols, in thesis order."""
+    return list(_CATALOGUE)
+
+
+def make_protocol(name: str, **parameters: Any) -> Protocol:
+    """The protocol ``name`` with its defaults overridden by ``parameters`` (in the units
+    :func:`describe` lists). Raises :class:`ProtocolError` naming an unknown protocol or parameter."""
+    entry = _CATALOGUE.get(name)
+    if entry is None:
+        raise ProtocolError(f"unknown protocol {name!r}; known: {', '.join(_CATALOGUE)}")
+    unknown = sorted(set(parameters) - set(entry.defaults))
+    if unknown:
+        raise ProtocolError(f"protocol {name!r} has no parameter(s) {unknown}; "
+                            f"parameters: {sorted(entry.defaults)}")
+    params = dict(entry.defaults)
+    for key, value in parameters.items():
+        try:
+            params[key] = type(entry.defaults[key])(value)
+        except (TypeError, ValueError):
+            raise ProtocolError(f"protocol {name!r}: parameter {key!r} must be a number, got {value!r}") from None
+    proto = Protocol(name, kind=entry.kind, parameters=params, units=dict(entry.units),
+                     description=entry.description)
+    prog = programme(proto)
+    return Protocol(name, kind=entry.kind, parameters=params, units=dict(entry.units),
+                    duration_s=prog.duration_s, description=entry.description)
+
+
+def programme(protocol: Protocol) -> Programme:
+    """The setpoints of ``protocol`` (a built-in name with any parameter values)."""
+    entry = _CATALOGUE.get(protocol.name)
+    if entry is None:
+        raise ProtocolError(f"no programme for protocol {protocol.name!r}; known: {', '.join(_CATALOGUE)}")
+    params = {**entry.defaults, **protocol.parameters}
+    for key in ("setpoint_rate", "frequency", "periods"):
+        if key in params and not float(params[key]) > 0:
+            raise ProtocolError(f"protocol {protocol.name!r}: parameter {key!r} must be > 0, got {params[key]}")
+    try:
+        return entry.build(params)
+    except (ValueError, ZeroDivisionError) as exc:
+        raise ProtocolError(f"protocol {protocol.name!r}: cannot build its programme ({exc})") from None
+
+
+def catalogue() -> list[Protocol]:
+    """Every built-in protocol with its default parameters and planned duration."""
+    return [make_protocol(n) for n in _CATALOGUE]

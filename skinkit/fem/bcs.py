@@ -1,0 +1,136 @@
+"""Boundary conditions: prescribed displacements and a rigid region tied to a reference point.
+
+A load programme is a function of a time-like variable ``t`` (the load factor in [0, 1]
+for a static solve, seconds for a viscoelastic history).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skinkit.fem.errors import ModelError
+
+Programme = Callable[[float], np.ndarray]
+
+
+def ramp(value) -> Programme:
+    """``t -> t * value`` (a static load ramp over the load factor ``t`` in [0, 1])."""
+    v = np.asarray(value, dtype=float)
+    return lambda t: t * v
+
+
+@dataclass
+class Prescribed:
+    """Displacements ``values(t)`` ``(len(dofs),)`` [m] imposed on ``dofs``."""
+
+    dofs: np.ndarray
+    values: Programme
+
+
+@dataclass
+class Rigid:
+    """A rigid (translating) region: ``nodes`` move together with a reference point.
+
+    ``mode`` ``"displacement"``: the point's displacement ``programme(t)`` ``(3,)`` [m] is
+    imposed; ``"force"``: the force ``programme(t)`` ``(3,)`` [N] is applied to the point and
+    its displacement is solved for.
+    """
+
+    nodes: np.ndarray
+    mode: str
+    programme: Programme
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("displacement", "force"):
+            raise ModelError("indenter.mode", f"must be 'displacement' or 'force', got {self.mode!r}")
+        self.nodes = np.asarray(self.nodes, dtype=int)
+        if self.nodes.size == 0:
+            raise ModelError("indenter.nodes", "the rigid region has no nodes")
+
+
+@dataclass
+class BoundaryConditions:
+    """Prescribed displacements and an optional rigid reference point on a mesh of ``n_dof`` dofs."""
+
+    n_dof: int
+    prescribed: list[Prescribed] = field(default_factory=list)
+    rigid: Rigid | None = None
+
+    def fix(self, nodes: np.ndarray, components=(0, 1, 2)) -> BoundaryConditions:
+        """Fix ``components`` of ``nodes`` at zero; returns self for chaining."""
+        dofs = (3 * np.asarray(nodes)[:, None] + np.asarray(components)[None, :]).ravel()
+        self.prescribed.append(Prescribed(dofs, lambda t, n=dofs.size: np.zeros(n)))
+        return self
+
+    def prescribe(self, nodes: np.ndarray, component: int, programme: Callable[[float], float]
+                  ) -> BoundaryConditions:
+        """Impose ``programme(t)`` [m] on ``component`` of every node in ``nodes``."""
+        dofs = 3 * np.asarray(nodes) + int(component)
+        self.prescribed.append(Prescribed(dofs, lambda t, f=programme, n=dofs.size: np.full(n, f(t))))
+        return self
+
+    def compile(self) -> DofMap:
+        return DofMap(self)
+
+
+class DofMap:
+    """Full dofs -> reduced unknowns: free dofs, then (force mode) the reference point's 3."""
+
+    def __init__(self, bc: BoundaryConditions) -> None:
+        self.bc = bc
+        n = bc.n_dof
+        role = np.zeros(n, dtype=int)  # 0 free, 1 prescribed, 2 rigid
+        for pr in bc.prescribed:
+            role[pr.dofs] = 1
+        self.rigid_dofs = None
+        if bc.rigid is not None:
+            rd = 3 * bc.rigid.nodes[:, None] + np.arange(3)[None, :]
+            if np.any(role[rd] == 1):
+                raise ModelError("indenter", "indenter nodes are also fixed by another condition")
+            role[rd] = 2
+            self.rigid_dofs = rd
+        free = np.flatnonzero(role == 0)
+        self.n_free = free.size
+        self.map = np.full(n, -1, dtype=np.int64)
+        self.map[free] = np.arange(free.size)
+        self.force_mode = bc.rigid is not None and bc.rigid.mode == "force"
+        if self.force_mode:
+            self.map[self.rigid_dofs] = self.n_free + np.arange(3)[None, :]
+        self.n_unknowns = self.n_free + (3 if self.force_mode else 0)
+
+    def apply_prescribed(self, u: np.ndarray, t: float) -> None:
+        """Write the prescribed values at ``t`` into ``u`` (in place)."""
+        for pr in self.bc.prescribed:
+            u[pr.dofs] = pr.values(t)
+        rg = self.bc.rigid
+        if rg is not None and rg.mode == "displacement":
+            u[self.rigid_dofs] = np.asarray(rg.programme(t), dtype=float)[None, :]
+
+    def external(self, t: float) -> np.ndarray:
+        """``(n_unknowns,)`` external forces on the unknowns at ``t`` [N]."""
+        f = np.zeros(self.n_unknowns)
+        if self.force_mode:
+            f[self.n_free:] = np.asarray(self.bc.rigid.programme(t), dtype=float)
+        return f
+
+    def scatter(self, u: np.ndarray, dq: np.ndarray, alpha: float = 1.0) -> np.ndarray:
+        """``u + alpha * dq`` expanded onto the full dofs (prescribed dofs unchanged)."""
+        out = u.copy()
+        m = self.map >= 0
+        out[m] += alpha * dq[self.map[m]]
+        return out
+
+    def rigid_displacement(self, u: np.ndarray) -> np.ndarray | None:
+        """``(3,)`` reference-point displacement [m] (None without a rigid region)."""
+        if self.rigid_dofs is None:
+            return None
+        return u[self.rigid_dofs[0]].copy()
+
+    def rigid_force(self, r_full: np.ndarray) -> np.ndarray | None:
+        """``(3,)`` total internal force on the rigid region [N] (the force it exerts)."""
+        if self.rigid_dofs is None:
+            return None
+        return r_full[self.rigid_dofs].sum(axis=0)

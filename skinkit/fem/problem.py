@@ -1,0 +1,178 @@
+"""A discretised solid: mesh + one material (law, parameters, pre-stress) per region.
+
+:class:`Problem` evaluates element residuals and tangents for a displacement field, with
+quasi-linear viscoelastic histories where a law has a Prony series.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skinkit.fem import lawkit, viscoelastic
+from skinkit.fem.assembly import (
+    DEFAULT_INTORDER,
+    Geometry,
+    check_inversion,
+    element_residual,
+    element_tangent,
+    geometry,
+)
+from skinkit.fem.errors import ModelError
+from skinkit.fem.mesh import FEMesh
+from skinkit.fem.tensors import push_with
+
+
+@dataclass
+class Material:
+    """A law bound to a region.
+
+    Attributes:
+        region: region name in the mesh.
+        law: a :class:`skinkit.protocols.Law` object.
+        params: parameter name -> SI value.
+        F0: optional initial deformation gradient (pre-stress), ``(3, 3)`` or
+            ``(n_el_region, n_q, 3, 3)``; the law sees ``C_e = F0ᵀ C F0``.
+    """
+
+    region: str
+    law: Any
+    params: Mapping[str, Any]
+    F0: np.ndarray | None = None
+    elements: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+
+    def prony(self) -> tuple[np.ndarray, np.ndarray] | None:
+        f = getattr(self.law, "prony", None)
+        return f(self.params) if callable(f) else None
+
+
+def prestretch(l1: float, l2: float, angle: float = 0.0, l3: float | None = None) -> np.ndarray:
+    """``(3, 3)`` in-plane anisotropic pre-stretch: ``l1`` along the in-plane direction at
+    ``angle`` [rad] from x, ``l2`` across it, ``l3`` through the thickness (isochoric
+    ``1/(l1 l2)`` if None)."""
+    if l1 <= 0 or l2 <= 0 or (l3 is not None and l3 <= 0):
+        raise ModelError("prestress", f"stretches must be positive, got {l1}, {l2}, {l3}")
+    l3 = 1.0 / (l1 * l2) if l3 is None else l3
+    c, s = np.cos(angle), np.sin(angle)
+    Q = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    return Q @ np.diag([l1, l2, l3]) @ Q.T
+
+
+class Problem:
+    """Mesh, geometry and materials; evaluates element forces and tangents.
+
+    ``materials`` must cover every region of the mesh exactly once.
+    """
+
+    def __init__(self, mesh: FEMesh, materials: list[Material], intorder: int = DEFAULT_INTORDER,
+                 geom: Geometry | None = None) -> None:
+        self.mesh = mesh
+        self.geom = geom if geom is not None else geometry(mesh, intorder)
+        names = [m.region for m in materials]
+        for r in mesh.regions:
+            if names.count(r) != 1:
+                raise ModelError("materials", f"region {r!r} needs exactly one material, has {names.count(r)}")
+        for m in materials:
+            if m.region not in mesh.regions:
+                raise ModelError("materials", f"no region {m.region!r} in the mesh ({mesh.regions})")
+            m.elements = mesh.region_elements(m.region)
+            m.params = lawkit.check_parameters(m.law, dict(m.params), f"materials[{m.region}]")
+            if m.F0 is not None:
+                m.F0 = np.asarray(m.F0, dtype=float)
+                if np.linalg.det(m.F0.reshape(-1, 3, 3)).min() <= 0:
+                    raise ModelError(f"materials[{m.region}].prestress", "det F0 must be positive")
+        self.materials = materials
+        nq = self.geom.w.shape[1]
+        self.state: dict[int, viscoelastic.PronyState] = {}
+        for k, m in enumerate(materials):
+            pr = m.prony()
+            if pr is not None:
+                self.state[k] = viscoelastic.PronyState.zeros(len(pr[0]), (m.elements.size, nq))
+
+    @property
+    def n_dof(self) -> int:
+        return self.mesh.n_dof
+
+    @property
+    def viscous(self) -> bool:
+        return bool(self.state)
+
+    def material_response(self, k: int, F: np.ndarray, with_tangent: bool, dt: float | None):
+        """``(S, CC)`` of material ``k`` at deformation gradients ``F`` of its elements."""
+        m = self.materials[k]
+        C = np.swapaxes(F, -1, -2) @ F
+        if m.F0 is not None:
+            C = np.swapaxes(m.F0, -1, -2) @ C @ m.F0
+        S, CC = lawkit.response(m.law, C, m.params, with_tangent)
+        if k in self.state and dt is not None:
+            g, tau = m.prony()
+            S, fac, _ = viscoelastic.trial(self.state[k], g, tau, dt, S)
+            if CC is not None:
+                CC = fac * CC
+        if m.F0 is not None:
+            S, CC = push_with(m.F0, S, CC)
+        return S, CC
+
+    def evaluate(self, u: np.ndarray, with_tangent: bool = True, dt: float | None = None):
+        """Element forces ``(n_el, 81)`` [N] and tangents ``(n_el, 81, 81)`` [N/m] (or None).
+
+        ``dt`` [s] advances viscous histories by a trial step (None: elastic response of
+        viscous laws, as for a static solve). Raises :class:`InvertedElementError`.
+        """
+        g = self.geom
+        ne = self.mesh.n_elements
+        re = np.empty((ne, g.edofs.shape[1]))
+        Ke = np.empty((ne, g.edofs.shape[1], g.edofs.shape[1])) if with_tangent else None
+        for k, m in enumerate(self.materials):
+            el = m.elements
+            F = self._F(u, el)
+            S, CC = self.material_response(k, F, with_tangent, dt)
+            re[el] = element_residual(g.dN[el], g.w[el], F, S)
+            if with_tangent:
+                Ke[el] = element_tangent(g.dN[el], g.w[el], F, S, CC)
+        return re, Ke
+
+    def _F(self, u: np.ndarray, el: np.ndarray) -> np.ndarray:
+        from skinkit.fem.assembly import deformation_gradient
+        F = deformation_gradient(self.geom, u, el)
+        check_inversion(F, el)
+        return F
+
+    def commit(self, u: np.ndarray, dt: float) -> None:
+        """Accept a converged time step: store the viscous histories at ``u``."""
+        for k, st in self.state.items():
+            m = self.materials[k]
+            F = self._F(u, m.elements)
+            C = np.swapaxes(F, -1, -2) @ F
+            if m.F0 is not None:
+                C = np.swapaxes(m.F0, -1, -2) @ C @ m.F0
+            Se = lawkit.response(m.law, C, m.params, False)[0]
+            g, tau = m.prony()
+            _, _, h_new = viscoelastic.trial(st, g, tau, dt, Se)
+            st.h = h_new
+            st.Se = Se
+
+    def save_state(self) -> dict[int, viscoelastic.PronyState]:
+        return {k: s.copy() for k, s in self.state.items()}
+
+    def restore_state(self, saved: dict[int, viscoelastic.PronyState]) -> None:
+        self.state = {k: s.copy() for k, s in saved.items()}
+
+    def stress_at(self, u: np.ndarray, dt: float | None = None) -> np.ndarray:
+        """``(n_el, n_q, 3, 3)`` PK2 stress [Pa] (with respect to the mesh configuration)."""
+        nq = self.geom.w.shape[1]
+        out = np.zeros((self.mesh.n_elements, nq, 3, 3))
+        for k, m in enumerate(self.materials):
+            F = self._F(u, m.elements)
+            out[m.elements] = self.material_response(k, F, False, dt)[0]
+        return out
+
+    def cauchy_at(self, u: np.ndarray, dt: float | None = None) -> np.ndarray:
+        """``(n_el, n_q, 3, 3)`` Cauchy stress [Pa]."""
+        S = self.stress_at(u, dt)
+        from skinkit.fem.assembly import deformation_gradient
+        F = deformation_gradient(self.geom, u)
+        return F @ S @ np.swapaxes(F, -1, -2) / np.linalg.det(F)[..., None, None]

@@ -1,0 +1,181 @@
+"""Wiener model: unit-DC-gain second-order dynamics followed by a static nonlinearity.
+
+Thesis 4.1.2: the linear IRF divided by its DC compliance predicts an output in newtons,
+``x``; the nonlinearity ``Y = C1 (1 - exp(-C2 x))`` (Eq. 4.9) is fitted between ``x`` and
+the measured position, and the linear part is re-estimated, until the VAF converges. The
+dynamics are then the scaled inertia ``Is = I/K`` [s^2] and damping ``Bs = B/K`` [s].
+
+The thesis re-estimates the IRF through the inverse nonlinearity; inverting the exponential
+amplifies noise near its asymptote (y -> C1), so here the linear step instead re-fits Is and
+Bs to the measured output through the current nonlinearity (output error). A final joint
+least-squares pass over Is, Bs and the nonlinearity gives the estimates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from skinkit.sysid.checks import Signals, SysidError, check_signals
+from skinkit.sysid.linear import LinearModel, identify_signals
+from skinkit.sysid.lti import SecondOrder, simulate
+from skinkit.sysid.metrics import vaf
+from skinkit.sysid.nonlinearity import StaticNonlinearity, fit_exponential, fit_polynomial
+
+
+@dataclass
+class WienerModel:
+    """An identified Wiener model.
+
+    Attributes:
+        Is_s2, Bs_s: scaled inertia [s^2] and damping [s] of the unit-DC-gain dynamics
+            (robot plus skin: the robot's dynamics cannot be removed once K is folded
+            into the nonlinearity).
+        nonlinearity: the static nonlinearity from ``x`` [N] to position [m].
+        linear: the linear model the iteration started from (its VAF is ``vaf_linear_pct``).
+        vaf_wiener_pct: VAF of the Wiener model's simulated output [%].
+        vaf_history: VAF after each iteration [%]; iterations: how many were run.
+    """
+
+    Is_s2: float
+    Bs_s: float
+    nonlinearity: StaticNonlinearity
+    linear: LinearModel
+    vaf_wiener_pct: float
+    vaf_history: list[float]
+    rate_hz: float
+    hold: str
+    converged: bool
+    issues: list[str] = field(default_factory=list)
+
+    @property
+    def dynamics(self) -> SecondOrder:
+        return SecondOrder.from_scaled(self.Is_s2, self.Bs_s)
+
+    @property
+    def iterations(self) -> int:
+        return len(self.vaf_history)
+
+    def intermediate(self, force_N: np.ndarray) -> np.ndarray:
+        """Linear-part output ``x`` [N] ``(N,)`` for force ``(N,)`` [N]."""
+        return simulate(self.dynamics, np.asarray(force_N, float), self.rate_hz, self.hold)
+
+    def predict(self, force_N: np.ndarray) -> np.ndarray:
+        """Position [m] ``(N,)``, simulated with :mod:`scipy.signal` from equilibrium."""
+        return self.nonlinearity(self.intermediate(force_N))
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.linear.to_dict()
+        d.update({"model": "wiener", "Is_s2": self.Is_s2, "Bs_s": self.Bs_s,
+                  "vaf_wiener_pct": self.vaf_wiener_pct, "iterations": self.iterations,
+                  "vaf_history_pct": list(self.vaf_history), "converged": self.converged,
+                  "nonlinearity": self.nonlinearity.to_dict(), "warnings": list(self.issues)})
+        if self.nonlinearity.kind == "exponential":
+            d["C1_m"], d["C2_per_N"] = self.nonlinearity.params[:2]
+        return d
+
+
+def _fit_nl(kind: str, x: np.ndarray, y: np.ndarray, degree: int, fit_offset: bool,
+            start: StaticNonlinearity | None) -> StaticNonlinearity:
+    if kind == "exponential":
+        return fit_exponential(x, y, fit_offset, start)
+    return fit_polynomial(x, y, degree)
+
+
+def identify_wiener_signals(sig: Signals, memory_s: float | None = None, *,
+                            nonlinearity: str = "exponential", degree: int = 3,
+                            fit_offset: bool = False, max_iter: int = 20, tol_pct: float = 1e-3,
+                            joint: bool = True, hold: str = "foh",
+                            linear: LinearModel | None = None, **linear_kw: Any) -> WienerModel:
+    """:func:`identify_wiener` on already checked :class:`Signals`."""
+    if nonlinearity not in ("exponential", "polynomial"):
+        raise SysidError(f"nonlinearity must be 'exponential' or 'polynomial', got {nonlinearity!r}")
+    lin = linear if linear is not None else identify_signals(sig, memory_s, hold=hold, **linear_kw)
+    f, y, rate = sig.force_N, sig.position_m, sig.rate_hz
+    hold = lin.hold if lin.hold != "impulse" else "foh"
+    burn = lin.burn_in
+    yy = y[burn:]
+    q = np.log([lin.total.Is_s2, lin.total.Bs_s])
+    if not np.all(np.isfinite(q)):
+        raise SysidError("the linear model has no positive scaled inertia and damping to start "
+                         "a Wiener model from (see the linear model's warnings)")
+
+    def x_of(qq: np.ndarray) -> np.ndarray:
+        return simulate(SecondOrder.from_scaled(*np.exp(qq)), f, rate, hold)
+
+    g: StaticNonlinearity | None = None
+    history: list[float] = []
+    converged = False
+    for _ in range(max_iter):
+        x = x_of(q)
+        g = _fit_nl(nonlinearity, x[burn:], yy, degree, fit_offset, g)
+        history.append(vaf(yy, g(x[burn:])))
+        if len(history) > 1 and abs(history[-1] - history[-2]) < tol_pct:
+            converged = True
+            break
+        g_now = g
+        sol = least_squares(lambda qq, g_now=g_now: g_now(x_of(qq)[burn:]) - yy, q, method="lm")
+        q = sol.x
+    assert g is not None
+    if joint:
+        q, g = _joint(q, g, x_of, yy, burn, nonlinearity, degree)
+        history.append(vaf(yy, g(x_of(q)[burn:])))
+    Is, Bs = (float(v) for v in np.exp(q))
+    return WienerModel(Is_s2=Is, Bs_s=Bs, nonlinearity=g, linear=lin,
+                       vaf_wiener_pct=history[-1], vaf_history=history, rate_hz=rate, hold=hold,
+                       converged=converged, issues=sig.issues)
+
+
+def _joint(q: np.ndarray, g: StaticNonlinearity, x_of: Any, yy: np.ndarray, burn: int,
+           kind: str, degree: int) -> tuple[np.ndarray, StaticNonlinearity]:
+    """Joint least squares over the dynamics and the nonlinearity (polynomial coefficients,
+    being linear, are solved exactly inside each residual)."""
+    if kind == "polynomial":
+        def resid(qq: np.ndarray) -> np.ndarray:
+            x = x_of(qq)[burn:]
+            return np.polyval(np.polyfit(x, yy, degree), x) - yy
+
+        sol = least_squares(resid, q, method="lm")
+        x = x_of(sol.x)[burn:]
+        return sol.x, fit_polynomial(x, yy, degree)
+    n_nl = 3 if g.params[2] != 0.0 else 2
+    p0 = np.concatenate([q, g.params[:n_nl]])
+
+    def resid_e(p: np.ndarray) -> np.ndarray:
+        gg = StaticNonlinearity("exponential", (p[2], p[3], p[4] if n_nl == 3 else 0.0))
+        return gg(x_of(p[:2])[burn:]) - yy
+
+    scale = np.concatenate([[1.0, 1.0], np.abs(p0[2:]) + 1e-12])
+    sol = least_squares(resid_e, p0, method="lm", x_scale=scale)
+    p = sol.x
+    return p[:2], StaticNonlinearity("exponential", (float(p[2]), float(p[3]),
+                                                     float(p[4]) if n_nl == 3 else 0.0))
+
+
+def identify_wiener(force_N: Any, position_m: Any, rate_hz: float | None = None,
+                    memory_s: float | None = None, *, time_s: Any = None,
+                    nonlinearity: str = "exponential", degree: int = 3, fit_offset: bool = False,
+                    max_iter: int = 20, tol_pct: float = 1e-3, joint: bool = True,
+                    hold: str = "foh", flags: Any = None, force_limit_N: float | None = None,
+                    **linear_kw: Any) -> WienerModel:
+    """Identify a Wiener model (thesis Eq. 4.9 nonlinearity by default).
+
+    Args:
+        force_N: ``(N,)`` force [N] including its mean (the nonlinearity sees absolute force).
+        position_m: ``(N,)`` position [m] from the unloaded surface (``Y = 0`` at ``x = 0``;
+            set ``fit_offset`` when the zero is unknown).
+        rate_hz / time_s / memory_s / hold / flags / force_limit_N: as :func:`identify_linear`.
+        nonlinearity: ``"exponential"`` (``C1 (1 - exp(-C2 x))``) or ``"polynomial"``.
+        degree: polynomial degree.
+        max_iter, tol_pct: iterate until the VAF changes by less than ``tol_pct`` [%].
+        joint: finish with a joint least-squares pass over dynamics and nonlinearity.
+        **linear_kw: passed to the linear identification (``two_sided``, ``rank``, ...).
+    """
+    sig = check_signals(force_N, position_m, rate_hz=rate_hz, time_s=time_s, memory_s=memory_s,
+                        flags=flags, force_limit_N=force_limit_N)
+    return identify_wiener_signals(sig, memory_s, nonlinearity=nonlinearity, degree=degree,
+                                   fit_offset=fit_offset, max_iter=max_iter, tol_pct=tol_pct,
+                                   joint=joint, hold=hold, **linear_kw)

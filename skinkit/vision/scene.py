@@ -1,0 +1,297 @@
+"""What the cameras of a rig see: speckled skin, calibration boards, the speckled conical
+indenter and fluorescent marker spheres, rendered with exact ground truth.
+
+Every object answers ``hit(origin, dirs) -> (depth, radiance)`` for world rays (depth is the
+ray parameter [m], ``inf`` where the ray misses). :func:`render_view` casts ``s x s`` rays
+per pixel through the (distorted) camera model, keeps the nearest hit, averages the samples
+over the pixel and exposes the result through a :class:`~skinkit.vision.sensor.Sensor`.
+Ground truth is geometric: a material point's image position is the projection of its
+3D position (:func:`skinkit.vision.camera.project`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skinkit.schemas import CameraModel
+from skinkit.vision import VisionError
+from skinkit.vision import camera as cam_ops
+from skinkit.vision.sensor import Sensor
+from skinkit.vision.texture import SolidSpeckle, SpeckleTexture
+
+Height = Callable[[np.ndarray, np.ndarray], np.ndarray]
+Displacement = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+BACKGROUND = 0.05  # radiance where no object is hit [0..1]
+
+
+def flat(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """The plane z = 0."""
+    return np.zeros(np.broadcast(X, Y).shape)
+
+
+def forearm(radius_m: float = 0.035) -> Height:
+    """A forearm-like cylinder of ``radius_m`` [m] along x, crest at z = 0."""
+    def h(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        Yc = np.clip(Y, -0.95 * radius_m, 0.95 * radius_m)
+        return np.sqrt(radius_m**2 - Yc**2) - radius_m + 0.0 * X
+    return h
+
+
+@dataclass
+class Skin:
+    """A speckled height-field surface ``z = height(X, Y)`` over material coordinates
+    ``(X, Y)`` [m], optionally deformed by ``displacement(X, Y) -> (N, 3)`` [m].
+
+    Speckle covers ``|X| <= half_extent_m[0]``, ``|Y| <= half_extent_m[1]``; beyond is plain.
+    """
+
+    texture: SpeckleTexture
+    height: Height = flat
+    half_extent_m: tuple[float, float] = (0.025, 0.025)
+    displacement: Displacement | None = None
+
+    def reference(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` undeformed positions of material points [m]."""
+        X = np.ravel(X).astype(float)
+        Y = np.ravel(Y).astype(float)
+        return np.column_stack([X, Y, self.height(X, Y)])
+
+    def position(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` current (deformed) positions of material points [m]."""
+        p = self.reference(X, Y)
+        if self.displacement is not None:
+            p = p + np.asarray(self.displacement(np.ravel(X), np.ravel(Y)), float)
+        return p
+
+    def deformed(self, displacement: Displacement | None) -> Skin:
+        """The same skin under another displacement field."""
+        return Skin(self.texture, self.height, self.half_extent_m, displacement)
+
+    def intersect(self, origin: np.ndarray, dirs: np.ndarray, iterations: int = 20,
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Ray parameter ``(N,)`` [m] (inf if missed) and material coordinates ``(N, 2)`` [m].
+
+        Newton on ``position(X, Y) = origin + s d``, started on the plane z = height(0, 0).
+        """
+        n = len(dirs)
+        z0 = float(self.height(np.zeros(1), np.zeros(1))[0])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (z0 - origin[2]) / dirs[:, 2]
+        p0 = origin + s[:, None] * dirs
+        u = np.column_stack([p0[:, 0], p0[:, 1], s])
+        eps = 1e-7
+        ok = np.isfinite(s) & (s > 0)
+        for _ in range(iterations):
+            P = self.position(u[:, 0], u[:, 1])
+            F = P - origin - u[:, 2:3] * dirs
+            if np.all(np.abs(F[ok]) < 1e-11):
+                break
+            JX = (self.position(u[:, 0] + eps, u[:, 1]) - P) / eps
+            JY = (self.position(u[:, 0], u[:, 1] + eps) - P) / eps
+            J = np.stack([JX, JY, -dirs], axis=2)
+            with np.errstate(all="ignore"):
+                step = np.linalg.solve(J, F[:, :, None])[:, :, 0]
+            u = u - np.nan_to_num(step)
+        P = self.position(u[:, 0], u[:, 1])
+        F = np.linalg.norm(P - origin - u[:, 2:3] * dirs, axis=1)
+        ok &= (F < 1e-9) & (u[:, 2] > 0)
+        depth = np.where(ok, u[:, 2], np.inf)
+        return depth.reshape(n), u[:, :2]
+
+    def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        depth, XY = self.intersect(origin, dirs)
+        inside = (np.abs(XY[:, 0]) <= self.half_extent_m[0]) & (np.abs(XY[:, 1]) <= self.half_extent_m[1])
+        rad = np.full(len(dirs), 0.5 * self.texture.background)
+        rad[inside] = self.texture(XY[inside, 0], XY[inside, 1])
+        return depth, rad
+
+
+@dataclass
+class Board:
+    """A planar checkerboard: ``inner`` = (columns, rows) of inner corners, ``square_m`` [m],
+    placed by ``R`` (board -> world rotation) and ``t`` [m] (board origin = first inner corner).
+    Board coordinates of inner corner (i, j) are ``(i * square, j * square, 0)``.
+    """
+
+    inner: tuple[int, int] = (9, 6)
+    square_m: float = 0.004
+    R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    t: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    margin_squares: float = 0.7
+
+    def object_points(self) -> np.ndarray:
+        """``(cols * rows, 3)`` inner-corner board coordinates [m], row-major (x fastest)."""
+        c, r = self.inner
+        j, i = np.mgrid[0:r, 0:c]
+        return np.column_stack([i.ravel(), j.ravel(), np.zeros(c * r)]) * self.square_m
+
+    def corners_world(self) -> np.ndarray:
+        """``(cols * rows, 3)`` inner corners in the world [m]."""
+        return self.object_points() @ np.asarray(self.R).T + np.asarray(self.t)
+
+    def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R = np.asarray(self.R, float)
+        nrm = R[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = ((np.asarray(self.t) - origin) @ nrm) / (dirs @ nrm)
+        p = origin + s[:, None] * dirs
+        q = (p - self.t) @ R  # board coordinates
+        a = q[:, 0] / self.square_m
+        b = q[:, 1] / self.square_m
+        c, r = self.inner
+        m = self.margin_squares
+        on_board = (a >= -1 - m) & (a <= c + m) & (b >= -1 - m) & (b <= r + m) & (s > 0)
+        squares = (a >= -1) & (a < c) & (b >= -1) & (b < r)
+        black = (np.floor(a).astype(np.int64) + np.floor(b).astype(np.int64)) % 2 == 0
+        rad = np.where(squares & black, 0.08, 0.9)
+        return np.where(on_board, s, np.inf), rad
+
+
+@dataclass
+class Cone:
+    """The speckled conical indenter head (thesis 5.3), a rigid body.
+
+    ``apex`` [m]; ``axis`` unit vector from the apex into the cone (towards its wide end);
+    ``half_angle_deg``; ``height_m`` along the axis. The probe tip lies ``tip_length_m``
+    beyond the apex on the other side: ``tip = apex - tip_length_m * axis``.
+    """
+
+    apex: np.ndarray
+    axis: np.ndarray
+    half_angle_deg: float = 30.0
+    height_m: float = 0.008
+    tip_length_m: float = 0.004
+    texture: SolidSpeckle = field(default_factory=lambda: SolidSpeckle(cell=0.0005, seed=7))
+
+    def __post_init__(self) -> None:
+        self.apex = np.asarray(self.apex, float)
+        self.axis = np.asarray(self.axis, float) / np.linalg.norm(self.axis)
+
+    @property
+    def tip(self) -> np.ndarray:
+        """``(3,)`` probe tip position [m]."""
+        return self.apex - self.tip_length_m * self.axis
+
+    def _body(self, p: np.ndarray) -> np.ndarray:
+        # Body coordinates: any fixed frame bound to the cone; speckle moves with it.
+        from skinkit.vision.rigs import look_at
+
+        B = look_at(np.zeros(3), self.axis, up=(0.3, 0.5, 0.81))
+        return (p - self.apex) @ B.T
+
+    def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = self.axis
+        c2 = np.cos(np.deg2rad(self.half_angle_deg)) ** 2
+        w = origin - self.apex
+        dv = dirs @ n
+        wv = float(w @ n)
+        A = dv**2 - c2
+        B = 2 * (dv * wv - c2 * (dirs @ w))
+        C = wv**2 - c2 * float(w @ w)
+        disc = B**2 - 4 * A * C
+        depth = np.full(len(dirs), np.inf)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
+            for s in ((-B - sq) / (2 * A), (-B + sq) / (2 * A)):
+                h = wv + s * dv
+                good = np.isfinite(s) & (s > 0) & (h >= 0) & (h <= self.height_m) & (s < depth)
+                depth = np.where(good, s, depth)
+            # The flat top of the cone closes it (plain, dark).
+            s_cap = (self.height_m - wv) / dv
+            pc = origin + s_cap[:, None] * dirs - self.apex
+            rcap = np.linalg.norm(pc - np.outer(pc @ n, n), axis=1)
+            cap = np.isfinite(s_cap) & (s_cap > 0) & (rcap <= self.height_m * np.tan(np.deg2rad(
+                self.half_angle_deg))) & (s_cap < depth)
+        depth = np.where(cap, s_cap, depth)
+        rad = np.full(len(dirs), 0.1)
+        side = np.isfinite(depth) & ~cap
+        p = origin + depth[side, None] * dirs[side]
+        rad[side] = self.texture(self._body(p))
+        return depth, rad
+
+    def surface_points(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``(n, 3)`` random points on the lateral surface [m] (for tests of the fit)."""
+        h = self.height_m * np.sqrt(rng.uniform(0.05, 1, n))
+        th = rng.uniform(0, 2 * np.pi, n)
+        from skinkit.vision.rigs import look_at
+
+        B = look_at(np.zeros(3), self.axis, up=(0.3, 0.5, 0.81))
+        r = h * np.tan(np.deg2rad(self.half_angle_deg))
+        local = np.column_stack([r * np.cos(th), r * np.sin(th), h])
+        return self.apex + local @ B
+
+
+@dataclass
+class Markers:
+    """Small fluorescent spheres of ``radius_m`` [m] centred at ``centres`` ``(M, 3)`` [m]."""
+
+    centres: np.ndarray
+    radius_m: float = 0.0003
+    brightness: float = 1.0
+
+    def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        depth = np.full(len(dirs), np.inf)
+        for c in np.asarray(self.centres, float):
+            w = origin - c
+            b = dirs @ w
+            disc = b**2 - (float(w @ w) - self.radius_m**2)
+            with np.errstate(invalid="ignore"):
+                s = -b - np.sqrt(np.where(disc >= 0, disc, np.nan))
+            good = np.isfinite(s) & (s > 0) & (s < depth)
+            depth = np.where(good, s, depth)
+        return depth, np.full(len(dirs), self.brightness)
+
+
+_RAY_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _camera_rays(cam: CameraModel, supersample: int) -> tuple[np.ndarray, np.ndarray]:
+    key = (cam.name, cam.K.tobytes(), cam.distortion.tobytes(), cam.R.tobytes(), cam.t.tobytes(),
+           cam.image_size, supersample)
+    if key not in _RAY_CACHE:
+        if len(_RAY_CACHE) > 16:
+            _RAY_CACHE.clear()
+        _RAY_CACHE[key] = cam_ops.rays(cam, cam_ops.pixel_grid(cam.image_size, supersample))
+    return _RAY_CACHE[key]
+
+
+def radiance(cam: CameraModel, objects: Sequence[object], supersample: int = 2) -> np.ndarray:
+    """``(H, W)`` radiance [0..1]: nearest object hit along ``supersample**2`` rays per pixel."""
+    if supersample < 1:
+        raise VisionError(f"supersample must be >= 1, got {supersample}")
+    origin, dirs = _camera_rays(cam, supersample)
+    depth = np.full(len(dirs), np.inf)
+    rad = np.full(len(dirs), BACKGROUND)
+    for obj in objects:
+        d, r = obj.hit(origin, dirs)  # type: ignore[attr-defined]
+        nearer = d < depth
+        depth = np.where(nearer, d, depth)
+        rad = np.where(nearer, r, rad)
+    w, h = cam.image_size
+    return rad.reshape(h, w, supersample * supersample).mean(axis=2)
+
+
+def render_view(cam: CameraModel, objects: Sequence[object], sensor: Sensor,
+                rng: np.random.Generator | int | None, supersample: int = 2) -> np.ndarray:
+    """The quantised image ``(H, W)`` camera ``cam`` takes of ``objects``."""
+    return sensor.expose(radiance(cam, objects, supersample), rng)
+
+
+def visible(cam: CameraModel, objects: Sequence[object], X: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
+    """``(N,)`` bool: world points ``X`` [m] that are in the image and not hidden by ``objects``."""
+    X = np.asarray(X, float)
+    px = cam_ops.project(cam, X)
+    w, h = cam.image_size
+    inside = np.all(np.isfinite(px), axis=1) & (px[:, 0] >= -0.5) & (px[:, 1] >= -0.5) & \
+        (px[:, 0] <= w - 0.5) & (px[:, 1] <= h - 0.5)
+    d = X - cam.centre
+    dist = np.linalg.norm(d, axis=1)
+    dirs = d / dist[:, None]
+    nearest = np.full(len(X), np.inf)
+    for obj in objects:
+        nearest = np.minimum(nearest, obj.hit(cam.centre, dirs)[0])  # type: ignore[attr-defined]
+    return inside & (nearest >= dist - tol_m)
