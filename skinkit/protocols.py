@@ -166,8 +166,15 @@ def required_members(protocol: type) -> list[str]:
 
 
 def missing_members(obj: Any, protocol: type) -> list[str]:
-    """Members of ``protocol`` that ``obj`` (a class or an instance) lacks."""
-    return [m for m in required_members(protocol) if not hasattr(obj, m)]
+    """Members of ``protocol`` that ``obj`` (a class or an instance) lacks, or has but cannot
+    call where the protocol defines a method (reported as ``"name (not callable)"``)."""
+    out = []
+    for m in required_members(protocol):
+        if not hasattr(obj, m):
+            out.append(m)
+        elif callable(vars(protocol).get(m)) and not callable(getattr(obj, m)):
+            out.append(f"{m} (not callable)")
+    return out
 
 
 __all__ = [

@@ -28,13 +28,13 @@ class KelvinVoigtSkin:
     """Spring and dashpot in parallel, stiffer normal than tangential.
 
     Defaults are of the order of the in vivo forearm stiffness of thesis chapter 4
-    (hundreds of N/m) [assumed values].
+    (3 kN/m: 10.5 N of summed motor force indents ~3.5 mm) [assumed values].
     """
 
-    k_normal_N_per_m: float = 300.0
-    k_tangential_N_per_m: float = 150.0
-    b_normal_Ns_per_m: float = 1.0
-    b_tangential_Ns_per_m: float = 0.5
+    k_normal_N_per_m: float = 3000.0
+    k_tangential_N_per_m: float = 1500.0
+    b_normal_Ns_per_m: float = 3.0
+    b_tangential_Ns_per_m: float = 1.5
     glued: bool = False
 
     def reaction(self, u, v, dt):  # noqa: ANN001 - hot path, plain floats
@@ -55,9 +55,9 @@ class WienerSkin:
     contribution); static nonlinearity: ``f = -(k1 w + k3 w^3)`` (strain stiffening).
     """
 
-    k1_normal_N_per_m: float = 200.0
+    k1_normal_N_per_m: float = 2000.0
     k3_normal_N_per_m3: float = 2.0e8
-    k1_tangential_N_per_m: float = 100.0
+    k1_tangential_N_per_m: float = 1000.0
     k3_tangential_N_per_m3: float = 1.0e8
     tau_s: float = 0.005
     glued: bool = False

@@ -122,21 +122,10 @@ class NewtonSolver:
             self.timings.solve += time.perf_counter() - t0
             self.timings.iterations += 1
             self.last_factor = fac
-            alpha = 1.0
-            while True:
-                try:
-                    u_try = self.dofmap.scatter(u, du, alpha)
-                    r_try, _, _ = self._residual(u_try, t, dt, False)
-                    n_try = float(np.linalg.norm(r_try))
-                    ok = np.isfinite(n_try) and (not o.line_search or n_try <= (1 - 1e-4 * alpha) * norm
-                                                 or norm <= 10 * max(o.rtol * ref, o.atol))
-                except InvertedElementError:
-                    ok = False
-                if ok or not o.line_search or alpha < 1 / 32:
-                    break
-                alpha *= 0.5
-            if not ok:
-                raise SolverError(f"line search found no decrease at t = {t:g} (|r| = {norm:.3g} N)")
+            u_try, alpha = self._line_search(u, du, r, t, dt)
+            if u_try is None:
+                raise SolverError(f"line search failed at t = {t:g} (|r| = {norm:.3g} N): "
+                                  "every trial step inverted an element or diverged")
             u = u_try
             r, K, _ = self._residual(u, t, dt, True)
             norm = float(np.linalg.norm(r))
@@ -144,6 +133,41 @@ class NewtonSolver:
             return u, o.max_iter, norm
         raise SolverError(f"no convergence in {o.max_iter} iterations at t = {t:g} "
                           f"(|r| = {norm:.3g} N, reference {ref:.3g} N)")
+
+    def _line_search(self, u, du, r, t, dt):
+        """Energy line search: find alpha with |du . r(u + alpha du)| <= 0.5 |du . r(u)|.
+
+        Alpha is halved while a trial inverts an element; otherwise secant steps on the
+        directional derivative (at most 4). Without ``line_search`` the full step is taken.
+        """
+        s0 = float(du @ r)
+        alpha, lo, s_lo = 1.0, 0.0, s0
+        best = None
+        for _ in range(12):
+            try:
+                u_try = self.dofmap.scatter(u, du, alpha)
+                r_try, _, _ = self._residual(u_try, t, dt, False)
+            except InvertedElementError:
+                alpha *= 0.5
+                continue
+            if not np.all(np.isfinite(r_try)):
+                alpha *= 0.5
+                continue
+            if not self.options.line_search:
+                return u_try, alpha
+            s1 = float(du @ r_try)
+            if best is None:
+                best = (u_try, alpha)
+            if abs(s1) <= 0.5 * abs(s0) or s0 >= 0:
+                return u_try, alpha
+            # secant on s(alpha) between the last two points, kept within [0.1, 1] of alpha
+            a_new = lo + (alpha - lo) * s_lo / (s_lo - s1) if s_lo != s1 else alpha
+            lo, s_lo = alpha, s1
+            if s1 < 0:  # still descending at alpha: the full step was short, keep it
+                return u_try, alpha
+            alpha = float(np.clip(a_new, 0.1 * alpha, alpha))
+            best = (u_try, alpha)
+        return best if best is not None else (None, 0.0)
 
     def step_result(self, u: np.ndarray, t: float, its: int, norm: float, dt: float | None) -> StepResult:
         re, _ = self.problem.evaluate(u, False, dt)

@@ -24,7 +24,7 @@ from skinkit.sysid.metrics import vaf
 from skinkit.sysid.robot import RobotDynamics
 
 #: longest memory tried by the automatic choice [s] (skin IRFs last < 0.25 s, thesis 4.2.1)
-MAX_AUTO_MEMORY_S = 0.5
+MAX_AUTO_MEMORY_S = 0.3
 #: the automatic memory ends where the fitted envelope has fallen to this fraction
 ENVELOPE_END = 1e-3
 #: a damped-sinusoid fit accounting for less of the IRF's variance than this is poor [%]

@@ -84,21 +84,34 @@ class Skin:
         p0 = origin + s[:, None] * dirs
         u = np.column_stack([p0[:, 0], p0[:, 1], s])
         eps = 1e-7
-        ok = np.isfinite(s) & (s > 0)
+        done = np.zeros(n, bool)
+        active = np.flatnonzero(np.isfinite(s) & (s > 0))
         for _ in range(iterations):
-            P = self.position(u[:, 0], u[:, 1])
-            F = P - origin - u[:, 2:3] * dirs
-            if np.all(np.abs(F[ok]) < 1e-11):
+            if len(active) == 0:
                 break
-            JX = (self.position(u[:, 0] + eps, u[:, 1]) - P) / eps
-            JY = (self.position(u[:, 0], u[:, 1] + eps) - P) / eps
-            J = np.stack([JX, JY, -dirs], axis=2)
+            ua, da = u[active], dirs[active]
+            P = self.position(ua[:, 0], ua[:, 1])
+            F = P - origin - ua[:, 2:3] * da
+            conv = np.all(np.abs(F) < 1e-11, axis=1)
+            done[active[conv]] = True
+            keep = ~conv
+            active, ua, da, P, F = active[keep], ua[keep], da[keep], P[keep], F[keep]
+            if len(active) == 0:
+                break
+            a = (self.position(ua[:, 0] + eps, ua[:, 1]) - P) / eps
+            b = (self.position(ua[:, 0], ua[:, 1] + eps) - P) / eps
+            c = -da
+            # Cramer's rule for the 3x3 systems [a b c] step = F, one per ray.
+            bxc = np.cross(b, c)
+            det = np.sum(a * bxc, axis=1)
             with np.errstate(all="ignore"):
-                step = np.linalg.solve(J, F[:, :, None])[:, :, 0]
-            u = u - np.nan_to_num(step)
-        P = self.position(u[:, 0], u[:, 1])
-        F = np.linalg.norm(P - origin - u[:, 2:3] * dirs, axis=1)
-        ok &= (F < 1e-9) & (u[:, 2] > 0)
+                step = np.column_stack([np.sum(F * bxc, axis=1),
+                                        np.sum(a * np.cross(F, c), axis=1),
+                                        np.sum(a * np.cross(b, F), axis=1)]) / det[:, None]
+            good = np.all(np.isfinite(step), axis=1)
+            u[active[good]] = ua[good] - step[good]
+            active = active[good]
+        ok = done & (u[:, 2] > 0)
         depth = np.where(ok, u[:, 2], np.inf)
         return depth.reshape(n), u[:, :2]
 
@@ -155,16 +168,16 @@ class Board:
 class Cone:
     """The speckled conical indenter head (thesis 5.3), a rigid body.
 
-    ``apex`` [m]; ``axis`` unit vector from the apex into the cone (towards its wide end);
-    ``half_angle_deg``; ``height_m`` along the axis. The probe tip lies ``tip_length_m``
-    beyond the apex on the other side: ``tip = apex - tip_length_m * axis``.
+    ``apex`` [m]; ``axis`` unit vector from the apex into the cone (towards its wide end,
+    which faces the skin); ``half_angle_deg``; ``height_m`` along the axis. The probe tip
+    lies on the axis ``tip_length_m`` from the apex: ``tip = apex + tip_length_m * axis``.
     """
 
     apex: np.ndarray
     axis: np.ndarray
-    half_angle_deg: float = 30.0
-    height_m: float = 0.008
-    tip_length_m: float = 0.004
+    half_angle_deg: float = 40.0
+    height_m: float = 0.006
+    tip_length_m: float = 0.010
     texture: SolidSpeckle = field(default_factory=lambda: SolidSpeckle(cell=0.0005, seed=7))
 
     def __post_init__(self) -> None:
@@ -174,7 +187,7 @@ class Cone:
     @property
     def tip(self) -> np.ndarray:
         """``(3,)`` probe tip position [m]."""
-        return self.apex - self.tip_length_m * self.axis
+        return self.apex + self.tip_length_m * self.axis
 
     def _body(self, p: np.ndarray) -> np.ndarray:
         # Body coordinates: any fixed frame bound to the cone; speckle moves with it.

@@ -108,3 +108,21 @@ def test_demo_runs(tmp_path):
     data = json.loads(res.output)
     assert data["store"]["records"][0]["samples"] == 10000
     assert (tmp_path / "d" / "record.png").stat().st_size > 10_000
+
+
+def test_recover_after_a_crash(tmp_path):
+    crashed = tmp_path / "crashed.h5"
+    code = ("import os, numpy as np\n"
+            "from skinkit.schemas import Protocol, RobotRecord\n"
+            "from skinkit.store import create_experiment\n"
+            f"exp = create_experiment({str(crashed)!r})\n"
+            "w = exp.record_writer(Protocol('p'), ['tip_force'], 100.0).__enter__()\n"
+            "w.append(RobotRecord(time_s=np.arange(50) / 100, tip_force=np.ones((50, 3))))\n"
+            "os._exit(1)  # die without closing anything\n")
+    subprocess.run([sys.executable, "-c", code], check=False)
+    out = tmp_path / "ok.h5"
+    res = CliRunner().invoke(cli, ["recover", str(crashed), str(out)])
+    assert res.exit_code == 0, res.output
+    assert "p: 50 samples (incomplete)" in res.output
+    res = CliRunner().invoke(cli, ["recover", str(crashed), str(out)])
+    assert res.exit_code == 2 and "already exists" in res.output

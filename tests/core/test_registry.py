@@ -124,6 +124,11 @@ def test_protocol_members():
 
     assert missing_members(NoEnergy, Law) == ["energy"]
 
+    class EnergyNotCallable(NoEnergy):
+        energy = 3.0
+
+    assert missing_members(EnergyNotCallable, Law) == ["energy (not callable)"]
+
 
 def test_listing_is_lazy():
     """available() reads metadata only: nothing is imported."""

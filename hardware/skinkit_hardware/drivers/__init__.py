@@ -1,0 +1,1 @@
+"""Driver plugins registered under ``skinkit.drivers``: ``sim``, ``serial``, ``can``."""
