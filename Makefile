@@ -24,8 +24,9 @@ test: venv
 lint: venv
 	$(BIN)/ruff check skinkit plugins hardware tests
 
+# With pyenv, make every installed 3.10-3.13 visible to tox at once.
 tox: venv
-	$(BIN)/tox
+	PYENV_VERSION="$$(pyenv versions --bare 2>/dev/null | grep -E '^3\.1[0-3]\.' | paste -sd: -)" $(BIN)/tox
 
 clean:
 	rm -rf $(VENV) demo-output .tox

@@ -140,8 +140,13 @@ class Device:
         """The host is alive (every command counts as one)."""
         self.last_host = self._now()
 
-    def configure(self, decimation: int | None = None, watchdog_s: float | None = None) -> None:
+    def configure(self, decimation: int | None = None, watchdog_s: float | None = None,
+                  tip_force_N: float | None = None) -> None:
+        """Streaming decimation, watchdog time and tip-force limit (a host may only lower the
+        firmware's tip-force limit, never raise it)."""
         self.heartbeat()
+        if tip_force_N is not None and 0 < tip_force_N < self.limits.tip_force_N:
+            self.limits = Limits(**{**self.limits.__dict__, "tip_force_N": float(tip_force_N)})
         if decimation is not None:
             if not 1 <= int(decimation) <= 1000:
                 raise ValueError(f"decimation must be 1..1000, got {decimation}")
@@ -280,13 +285,17 @@ class Device:
         ev, self.events = self.events, []
         return ev
 
+    def check_watchdog(self) -> None:
+        """De-energise when the host has been silent longer than the watchdog time."""
+        silent = self._now() - self.last_host
+        if self.energised and silent > self.limits.watchdog_s:
+            self._trip(F.Fault(F.WATCHDOG, value=silent, limit=self.limits.watchdog_s, time_s=self._run_time()))
+
     # -- the control loop -------------------------------------------------------------
     def advance(self, n_ticks: int) -> None:
         """Run ``n_ticks`` control periods (physics, control, safety, streaming)."""
         p, lim = self.params, self.limits
-        if self.energised and self._now() - self.last_host > lim.watchdog_s:
-            self._trip(F.Fault(F.WATCHDOG, value=self._now() - self.last_host, limit=lim.watchdog_s,
-                               time_s=self._run_time()))
+        self.check_watchdog()
         dt = p.dt
         m, b, k, g = p.mass_kg, p.damping_Ns_per_m, p.stiffness_N_per_m, p.gravity_m_s2
         rest = p.spring_rest_m

@@ -72,7 +72,7 @@ class HostDriver:
 
     name = "host"
     #: seconds without any data from the device during a run before the link is declared dead
-    link_timeout_s = 1.0
+    link_timeout_s = 3.0
 
     def __init__(self, geometry: Geometry | None = None, params: RobotParameters | None = None,
                  limits: Limits | None = None) -> None:
@@ -92,7 +92,8 @@ class HostDriver:
         """Open the link; ``decimation`` (control ticks per streamed sample) is common to all."""
         self.decimation = int(options.pop("decimation", self.decimation))
         self.transport = self._open(**options)
-        self.transport.send("configure", decimation=self.decimation, watchdog_s=self.limits.watchdog_s)
+        self.transport.send("configure", decimation=self.decimation, watchdog_s=self.limits.watchdog_s,
+                            tip_force_N=self.limits.tip_force_N)
 
     def _open(self, **options: Any) -> Transport:
         raise NotImplementedError

@@ -103,7 +103,7 @@ class Limits:
     continuous_force_N: float = 4.95
     travel_m: tuple[float, float] = (0.0, 0.010)
     tip_force_N: float = 12.0
-    watchdog_s: float = 0.25
+    watchdog_s: float = 0.5
     stuck_ticks: int = 50
     post_fault_s: float = 0.02
 

@@ -7,6 +7,7 @@ programme that slips past a host still cannot move the robot.
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import lfilter
 
 from skinkit_hardware import faults as F
 from skinkit_hardware.params import Limits, RobotParameters
@@ -18,8 +19,6 @@ def thermal_rms(force_N: np.ndarray, rate_hz: float, tau_s: float) -> np.ndarray
     ``force_N`` ``(N, 3)`` sampled at ``rate_hz``; the filter is the one the device runs every
     tick (``th += (F^2 - th) dt / tau``), evaluated exactly for piecewise-constant input.
     """
-    from scipy.signal import lfilter
-
     a = np.exp(-1.0 / (rate_hz * tau_s))
     th = lfilter([1.0 - a], [1.0, -a], np.asarray(force_N, float) ** 2, axis=0)
     return np.sqrt(th)

@@ -25,6 +25,7 @@ _COMMANDS: dict[str, str] = {
     "recover": "skinkit.cli.recover:recover",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",
+    "sysid": "skinkit.cli.sysid:sysid",
     "vision": "skinkit.cli.vision:vision",
 }
 

@@ -12,6 +12,8 @@ import click
 #: benchmark name -> "module:command"
 _BENCHES: dict[str, str] = {
     "store": "skinkit.bench.store:bench_store",
+    "sysid": "skinkit.bench.sysid:bench_sysid",
+    "fem": "skinkit.bench.fem:bench_fem",
     "vision": "skinkit.bench.vision:bench_vision",
 }
 

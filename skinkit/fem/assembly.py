@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from skfem import Basis, ElementHex2
 
 from skinkit.fem.errors import InvertedElementError
+from skinkit.fem.threads import single_threaded_blas
 from skinkit.fem.mesh import FEMesh
 from skinkit.fem.tensors import I3
 
@@ -31,8 +32,9 @@ class Geometry:
         dN: ``(n_el, n_q, 27, 3)`` gradients dNₐ/dX [1/m].
         w: ``(n_el, n_q)`` quadrature weight x det J [m³].
         N: ``(n_q, 27)`` shape function values at the reference quadrature points.
-        edofs: ``(n_el, 81)`` vector dofs of each element, ordered (node, component).
+        edofs: ``(n_el, 81)`` vector dofs of each element, ordered (component, node).
         intorder: quadrature degree used.
+        dNT: ``(n_el, n_q, 3, 27)`` the gradients transposed (contiguous, for products).
     """
 
     dN: np.ndarray
@@ -40,6 +42,7 @@ class Geometry:
     N: np.ndarray
     edofs: np.ndarray
     intorder: int
+    dNT: np.ndarray
 
 
 def geometry(mesh: FEMesh, intorder: int = DEFAULT_INTORDER) -> Geometry:
@@ -56,68 +59,110 @@ def geometry(mesh: FEMesh, intorder: int = DEFAULT_INTORDER) -> Geometry:
     if np.any(w <= 0):
         e = int(np.argmin(w.min(axis=1)))
         raise InvertedElementError(e, float(w[e].min()))
-    edofs = (3 * np.asarray(basis.element_dofs).T[:, :, None] + np.arange(3)).reshape(mesh.n_elements, -1)
-    return Geometry(dN, w, N, edofs, intorder)
+    # element dofs component-major, (i, a): the strain operator then comes out of one
+    # batched product in this order (see strain_operator)
+    nodes = np.asarray(basis.element_dofs).T
+    edofs = (3 * nodes[:, None, :] + np.arange(3)[None, :, None]).reshape(mesh.n_elements, -1)
+    dNT = np.ascontiguousarray(np.swapaxes(dN, -1, -2))
+    return Geometry(dN, w, N, edofs, intorder, dNT)
 
 
 def deformation_gradient(geom: Geometry, u: np.ndarray, elements: np.ndarray | None = None) -> np.ndarray:
     """``(n_el, n_q, 3, 3)`` deformation gradients ``F = I + ∂u/∂X`` of displacement ``u`` ``(n_dof,)``."""
     ed = geom.edofs if elements is None else geom.edofs[elements]
     dN = geom.dN if elements is None else geom.dN[elements]
-    ue = u[ed].reshape(ed.shape[0], -1, 3)
-    return I3 + np.einsum("eai,eqaJ->eqiJ", ue, dN, optimize=True)
+    ue = u[ed].reshape(ed.shape[0], 3, -1)
+    return I3 + np.einsum("eia,eqaJ->eqiJ", ue, dN, optimize=True)
 
 
 def element_residual(dN: np.ndarray, w: np.ndarray, F: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """``(n_el, 81)`` internal forces ``∫ F S : ∇δu`` [N]."""
+    """``(n_el, 81)`` internal forces ``∫ F S : ∇δu`` [N], ordered (component, node)."""
     P = F @ S
-    return np.einsum("eqiJ,eqaJ,eq->eai", P, dN, w, optimize=True).reshape(dN.shape[0], -1)
+    return np.einsum("eqiJ,eqaJ,eq->eia", P, dN, w, optimize=True).reshape(dN.shape[0], -1)
+
+
+_VI = np.array([0, 1, 2, 0, 1, 0])
+_VJ = np.array([0, 1, 2, 1, 2, 2])
+
+
+def voigt_tangent(CC: np.ndarray) -> np.ndarray:
+    """``(..., 6, 6)`` Voigt form (order 11, 22, 33, 12, 23, 13) of a minor-symmetric tangent."""
+    return CC[..., _VI[:, None], _VJ[:, None], _VI[None, :], _VJ[None, :]]
+
+
+def _selector() -> np.ndarray:
+    P = np.zeros((6, 3, 3))
+    for v, (I, J) in enumerate(zip(_VI, _VJ)):
+        P[v, I, J] += 1.0
+        if I != J:
+            P[v, J, I] += 1.0
+    return P
+
+
+_P = _selector()
+
+
+def strain_operator(dNT: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """``(n_el, n_q, 6, 81)`` B: Voigt Green-strain variation per nodal displacement.
+
+    ``δE_IJ = Σₐ δu_ia (F_iI dNₐ_J + F_iJ dNₐ_I)/2``, shear rows as engineering strains,
+    columns ordered (component i, node a). Built as ``(F P) dNᵀ``: one batched product.
+    ``dNT`` is ``(n_el, n_q, 3, 27)``.
+    """
+    ne, nq = F.shape[:2]
+    FP = np.einsum("vIJ,eqiI->eqviJ", _P, F, optimize=True).reshape(ne, nq, 18, 3)
+    return np.matmul(FP, dNT).reshape(ne, nq, 6, -1)
 
 
 def element_tangent(dN: np.ndarray, w: np.ndarray, F: np.ndarray, S: np.ndarray,
-                    CC: np.ndarray) -> np.ndarray:
-    """``(n_el, 81, 81)`` consistent tangents [N/m].
+                    CC: np.ndarray, dNT: np.ndarray | None = None) -> np.ndarray:
+    """``(n_el, 81, 81)`` consistent tangents [N/m]: material plus geometric stiffness.
 
-    ``K_(ai)(bk) = Σ_q w dNₐ_J A_iJkL dN_b_L`` with ``A = F·CC·Fᵀ + δ S`` (material plus
-    geometric stiffness), evaluated as two batched matrix products.
+    Material: ``Σ_q w Bᵀ D B`` with the Voigt tangent D, the quadrature points stacked into
+    the contraction so that one matrix product per element does the work. Rows and columns
+    are ordered (component, node) like :attr:`Geometry.edofs`. Geometric:
+    ``δ_ik Σ_q w dNₐ_J S_JL dN_b_L``.
     """
+    with single_threaded_blas():
+        return _element_tangent(dN, w, F, S, CC, dNT)
+
+
+def _element_tangent(dN, w, F, S, CC, dNT):
     ne, nq, nb, _ = dN.shape
-    A = _material_part(CC, F)
-    A += np.einsum("ik,eqJL->eqiJkL", I3, S)
-    # T[e, q, a, (i k L)] = Σ_J dN[e,q,a,J] A[e,q,i,J,k,L]
-    A2 = A.transpose(0, 1, 3, 2, 4, 5).reshape(ne, nq, 3, 27)
-    T = np.matmul(dN, A2)                                   # (e, q, a, 27=(i,k,L))
-    T = T.reshape(ne, nq, nb, 3, 3, 3).transpose(0, 2, 3, 4, 1, 5).reshape(ne, nb * 9, nq * 3)
-    B = (dN * w[:, :, None, None]).transpose(0, 1, 3, 2).reshape(ne, nq * 3, nb)
-    K = np.matmul(T, B)                                     # (e, (a,i,k), b)
-    return K.reshape(ne, nb, 3, 3, nb).transpose(0, 1, 2, 4, 3).reshape(ne, nb * 3, nb * 3)
-
-
-def _material_part(CC: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """``F_iI CC_IJKL F_kK`` as ``(..., i, J, k, L)``."""
-    sh = CC.shape[:-4]
-    # contract K with F_kK: CC(..., IJ L, K) @ F^T(K, k)
-    X = np.matmul(CC.transpose(*range(len(sh)), -4, -3, -1, -2).reshape(*sh, 27, 3),
-                  np.swapaxes(F, -1, -2))                   # (..., (I,J,L), k)
-    X = X.reshape(*sh, 3, 9 * 1 * 3)                         # (..., I, (J,L,k))
-    Y = np.matmul(F, X)                                      # (..., i, (J,L,k))
-    return Y.reshape(*sh, 3, 3, 3, 3).transpose(*range(len(sh)), -4, -3, -1, -2)
+    if dNT is None:
+        dNT = np.ascontiguousarray(np.swapaxes(dN, -1, -2))
+    B = strain_operator(dNT, F)                                      # (e, q, 6, 81)
+    D = voigt_tangent(CC) * w[:, :, None, None]                      # (e, q, 6, 6)
+    DB = np.matmul(D, B)                                             # (e, q, 6, 81)
+    K = np.matmul(B.reshape(ne, nq * 6, nb * 3).transpose(0, 2, 1), DB.reshape(ne, nq * 6, nb * 3))
+    dNS = np.matmul(dN, S * w[:, :, None, None])                     # (e, q, a, L)
+    G = np.matmul(dNS.transpose(0, 2, 1, 3).reshape(ne, nb, nq * 3),
+                  dNT.reshape(ne, nq * 3, nb))                       # (e, a, b)
+    K4 = K.reshape(ne, 3, nb, 3, nb)
+    for i in range(3):
+        K4[:, i, :, i, :] += G
+    return K
 
 
 class SparsePattern:
     """The sparsity pattern of a reduced system, built once, reused for every assembly.
 
+    With ``upper`` only the upper triangle is kept (for symmetric solvers).
     ``dof_map`` ``(n_dof,)`` sends each full dof to its reduced unknown, or -1 when it is
     prescribed (several dofs may share an unknown: a rigid region tied to a reference point).
     """
 
-    def __init__(self, edofs: np.ndarray, dof_map: np.ndarray, n_unknowns: int) -> None:
+    def __init__(self, edofs: np.ndarray, dof_map: np.ndarray, n_unknowns: int,
+                 upper: bool = False) -> None:
         self.n = int(n_unknowns)
+        self.upper = bool(upper)
         self.dof_map = np.asarray(dof_map)
         r = self.dof_map[edofs]                              # (e, 81)
         rows = np.repeat(r, r.shape[1], axis=1).ravel()
         cols = np.tile(r, (1, r.shape[1])).ravel()
         valid = (rows >= 0) & (cols >= 0)
+        if upper:  # symmetric solvers take the upper triangle only
+            valid &= cols >= rows
         self.take = np.flatnonzero(valid)
         keys = rows[valid].astype(np.int64) * self.n + cols[valid]
         uniq, self.inv = np.unique(keys, return_inverse=True)

@@ -36,12 +36,14 @@ class Rigid:
 
     ``mode`` ``"displacement"``: the point's displacement ``programme(t)`` ``(3,)`` [m] is
     imposed; ``"force"``: the force ``programme(t)`` ``(3,)`` [N] is applied to the point and
-    its displacement is solved for.
+    its displacement is solved for. ``components`` are the tied directions (default all:
+    a bonded indenter); ``(2,)`` gives a frictionless one (the nodes slide freely in x, y).
     """
 
     nodes: np.ndarray
     mode: str
     programme: Programme
+    components: tuple[int, ...] = (0, 1, 2)
 
     def __post_init__(self) -> None:
         if self.mode not in ("displacement", "force"):
@@ -49,6 +51,9 @@ class Rigid:
         self.nodes = np.asarray(self.nodes, dtype=int)
         if self.nodes.size == 0:
             raise ModelError("indenter.nodes", "the rigid region has no nodes")
+        self.components = tuple(int(c) for c in self.components)
+        if not self.components or any(c not in (0, 1, 2) for c in self.components):
+            raise ModelError("indenter.components", f"must be a subset of (0, 1, 2), got {self.components}")
 
 
 @dataclass
@@ -87,7 +92,8 @@ class DofMap:
             role[pr.dofs] = 1
         self.rigid_dofs = None
         if bc.rigid is not None:
-            rd = 3 * bc.rigid.nodes[:, None] + np.arange(3)[None, :]
+            self.rigid_components = np.array(bc.rigid.components)
+            rd = 3 * bc.rigid.nodes[:, None] + self.rigid_components[None, :]
             if np.any(role[rd] == 1):
                 raise ModelError("indenter", "indenter nodes are also fixed by another condition")
             role[rd] = 2
@@ -98,8 +104,8 @@ class DofMap:
         self.map[free] = np.arange(free.size)
         self.force_mode = bc.rigid is not None and bc.rigid.mode == "force"
         if self.force_mode:
-            self.map[self.rigid_dofs] = self.n_free + np.arange(3)[None, :]
-        self.n_unknowns = self.n_free + (3 if self.force_mode else 0)
+            self.map[self.rigid_dofs] = self.n_free + np.arange(rd.shape[1])[None, :]
+        self.n_unknowns = self.n_free + (self.rigid_dofs.shape[1] if self.force_mode else 0)
 
     def apply_prescribed(self, u: np.ndarray, t: float) -> None:
         """Write the prescribed values at ``t`` into ``u`` (in place)."""
@@ -107,13 +113,13 @@ class DofMap:
             u[pr.dofs] = pr.values(t)
         rg = self.bc.rigid
         if rg is not None and rg.mode == "displacement":
-            u[self.rigid_dofs] = np.asarray(rg.programme(t), dtype=float)[None, :]
+            u[self.rigid_dofs] = np.asarray(rg.programme(t), dtype=float)[self.rigid_components][None, :]
 
     def external(self, t: float) -> np.ndarray:
         """``(n_unknowns,)`` external forces on the unknowns at ``t`` [N]."""
         f = np.zeros(self.n_unknowns)
         if self.force_mode:
-            f[self.n_free:] = np.asarray(self.bc.rigid.programme(t), dtype=float)
+            f[self.n_free:] = np.asarray(self.bc.rigid.programme(t), dtype=float)[self.rigid_components]
         return f
 
     def scatter(self, u: np.ndarray, dq: np.ndarray, alpha: float = 1.0) -> np.ndarray:
@@ -127,10 +133,13 @@ class DofMap:
         """``(3,)`` reference-point displacement [m] (None without a rigid region)."""
         if self.rigid_dofs is None:
             return None
-        return u[self.rigid_dofs[0]].copy()
+        out = np.full(3, np.nan)  # untied directions have no single displacement
+        out[self.rigid_components] = u[self.rigid_dofs[0]]
+        return out
 
     def rigid_force(self, r_full: np.ndarray) -> np.ndarray | None:
         """``(3,)`` total internal force on the rigid region [N] (the force it exerts)."""
         if self.rigid_dofs is None:
             return None
-        return r_full[self.rigid_dofs].sum(axis=0)
+        nodes = self.bc.rigid.nodes
+        return r_full.reshape(-1, 3)[nodes].sum(axis=0)

@@ -23,7 +23,7 @@ from skinkit.fem.assembly import (
 )
 from skinkit.fem.errors import ModelError
 from skinkit.fem.mesh import FEMesh
-from skinkit.fem.tensors import push_with
+from skinkit.fem.tensors import I3, push_with
 
 
 @dataclass
@@ -85,6 +85,18 @@ class Problem:
                 if np.linalg.det(m.F0.reshape(-1, 3, 3)).min() <= 0:
                     raise ModelError(f"materials[{m.region}].prestress", "det F0 must be positive")
         self.materials = materials
+        # group the elements material by material once, so that each material works on a
+        # contiguous slice of the geometry arrays (no gathers in the hot path)
+        order = np.concatenate([m.elements for m in materials])
+        self.order = order
+        if not np.array_equal(order, np.arange(order.size)):
+            g = self.geom
+            self.geom = Geometry(g.dN[order], g.w[order], g.N, g.edofs[order], g.intorder, g.dNT[order])
+        start = 0
+        self.slices: list[slice] = []
+        for m in materials:
+            self.slices.append(slice(start, start + m.elements.size))
+            start += m.elements.size
         nq = self.geom.w.shape[1]
         self.state: dict[int, viscoelastic.PronyState] = {}
         for k, m in enumerate(materials):
@@ -126,26 +138,29 @@ class Problem:
         ne = self.mesh.n_elements
         re = np.empty((ne, g.edofs.shape[1]))
         Ke = np.empty((ne, g.edofs.shape[1], g.edofs.shape[1])) if with_tangent else None
-        for k, m in enumerate(self.materials):
-            el = m.elements
-            F = self._F(u, el)
+        for k in range(len(self.materials)):
+            el = self.slices[k]
+            F = self._F(u, k)
             S, CC = self.material_response(k, F, with_tangent, dt)
             re[el] = element_residual(g.dN[el], g.w[el], F, S)
             if with_tangent:
-                Ke[el] = element_tangent(g.dN[el], g.w[el], F, S, CC)
+                Ke[el] = element_tangent(g.dN[el], g.w[el], F, S, CC, g.dNT[el])
         return re, Ke
 
-    def _F(self, u: np.ndarray, el: np.ndarray) -> np.ndarray:
-        from skinkit.fem.assembly import deformation_gradient
-        F = deformation_gradient(self.geom, u, el)
-        check_inversion(F, el)
+    def _F(self, u: np.ndarray, k: int) -> np.ndarray:
+        """Deformation gradients ``(n_el_k, n_q, 3, 3)`` of material ``k``'s elements."""
+        el = self.slices[k]
+        g = self.geom
+        ue = u[g.edofs[el]].reshape(-1, 3, g.dN.shape[2])
+        F = I3 + np.einsum("eia,eqaJ->eqiJ", ue, g.dN[el], optimize=True)
+        check_inversion(F, self.order[el])
         return F
 
     def commit(self, u: np.ndarray, dt: float) -> None:
         """Accept a converged time step: store the viscous histories at ``u``."""
         for k, st in self.state.items():
             m = self.materials[k]
-            F = self._F(u, m.elements)
+            F = self._F(u, k)
             C = np.swapaxes(F, -1, -2) @ F
             if m.F0 is not None:
                 C = np.swapaxes(m.F0, -1, -2) @ C @ m.F0
@@ -166,13 +181,20 @@ class Problem:
         nq = self.geom.w.shape[1]
         out = np.zeros((self.mesh.n_elements, nq, 3, 3))
         for k, m in enumerate(self.materials):
-            F = self._F(u, m.elements)
+            F = self._F(u, k)
             out[m.elements] = self.material_response(k, F, False, dt)[0]
+        return out
+
+    def deformation_gradients(self, u: np.ndarray) -> np.ndarray:
+        """``(n_el, n_q, 3, 3)`` deformation gradients, in mesh element order."""
+        nq = self.geom.w.shape[1]
+        out = np.zeros((self.mesh.n_elements, nq, 3, 3))
+        for k, m in enumerate(self.materials):
+            out[m.elements] = self._F(u, k)
         return out
 
     def cauchy_at(self, u: np.ndarray, dt: float | None = None) -> np.ndarray:
         """``(n_el, n_q, 3, 3)`` Cauchy stress [Pa]."""
         S = self.stress_at(u, dt)
-        from skinkit.fem.assembly import deformation_gradient
-        F = deformation_gradient(self.geom, u)
+        F = self.deformation_gradients(u)
         return F @ S @ np.swapaxes(F, -1, -2) / np.linalg.det(F)[..., None, None]

@@ -84,14 +84,15 @@ class NewtonSolver:
         self.problem = problem
         self.dofmap = bc.compile()
         self.options = options or SolverOptions()
-        linsolve.resolve(self.options.linear)
-        self.pattern = SparsePattern(problem.geom.edofs, self.dofmap.map, self.dofmap.n_unknowns)
+        self.linear = linsolve.make(self.options.linear)
+        self.pattern = SparsePattern(problem.geom.edofs, self.dofmap.map, self.dofmap.n_unknowns,
+                                     upper=self.linear.upper)
         self.timings = Timings()
-        self.last_factor = None
 
     def _residual(self, u: np.ndarray, t: float, dt: float | None, with_tangent: bool):
         t0 = time.perf_counter()
         re, Ke = self.problem.evaluate(u, with_tangent, dt)
+        self._last_re = re
         r = self.pattern.vector(re) - self.dofmap.external(t)
         K = self.pattern.matrix(Ke) if with_tangent else None
         self.timings.assembly += time.perf_counter() - t0
@@ -99,50 +100,82 @@ class NewtonSolver:
             self.timings.tangent_assemblies += 1
         return r, K, re
 
-    def increment(self, u: np.ndarray, t: float, dt: float | None, u_guess: np.ndarray | None = None):
-        """Solve one increment to time ``t`` from ``u``. Returns ``(u, iterations, |r|)``.
+    def increment(self, u: np.ndarray, t: float, dt: float | None):
+        """Solve one increment to time ``t`` from the converged ``u``.
 
-        Raises :class:`SolverError` (not converged) or :class:`InvertedElementError`.
+        Returns ``(u, iterations, |r|)``; raises :class:`SolverError` (not converged) or
+        :class:`InvertedElementError`. The residual is checked before a tangent is built, so
+        a converged iterate costs no tangent.
         """
         o = self.options
-        u = (u if u_guess is None else u_guess).copy()
-        self.dofmap.apply_prescribed(u, t)
-        f_scale = float(np.linalg.norm(self.dofmap.external(t)))
-        r, K, _ = self._residual(u, t, dt, True)
-        ref = max(float(np.linalg.norm(r)), f_scale)
+        u, r, ref = self._predict(u, t, dt)
         norm = float(np.linalg.norm(r))
-        for it in range(1, o.max_iter + 1):
+        tol = max(o.rtol * ref, o.atol)
+        for it in range(o.max_iter + 1):
             if not np.isfinite(norm):
                 raise SolverError(f"residual is not finite at t = {t:g}")
-            if norm <= max(o.rtol * ref, o.atol):
-                return u, it - 1, norm
+            if norm <= tol:
+                return u, it, norm
+            if it == o.max_iter:
+                break
+            r, K, _ = self._residual(u, t, dt, True)
             t0 = time.perf_counter()
-            fac = linsolve.factorize(o.linear, K)
-            du = -fac.solve(r)
+            self.linear.factor(K)
+            du = -self.linear.solve(r)
             self.timings.solve += time.perf_counter() - t0
             self.timings.iterations += 1
-            self.last_factor = fac
-            u_try, alpha = self._line_search(u, du, r, t, dt)
-            if u_try is None:
+            u, r = self._line_search(u, du, r, t, dt)
+            if u is None:
                 raise SolverError(f"line search failed at t = {t:g} (|r| = {norm:.3g} N): "
                                   "every trial step inverted an element or diverged")
-            u = u_try
-            r, K, _ = self._residual(u, t, dt, True)
             norm = float(np.linalg.norm(r))
-        if norm <= max(o.rtol * ref, o.atol):
-            return u, o.max_iter, norm
         raise SolverError(f"no convergence in {o.max_iter} iterations at t = {t:g} "
                           f"(|r| = {norm:.3g} N, reference {ref:.3g} N)")
 
-    def _line_search(self, u, du, r, t, dt):
-        """Energy line search: find alpha with |du . r(u + alpha du)| <= 0.5 |du . r(u)|.
+    def _predict(self, u_old: np.ndarray, t: float, dt: float | None):
+        """Tangent predictor: spread the prescribed increment through the body linearly.
 
-        Alpha is halved while a trial inverts an element; otherwise secant steps on the
-        directional derivative (at most 4). Without ``line_search`` the full step is taken.
+        ``K_ff dq = -(r(u_old) + K_fp du_p)`` with the tangent at the converged state, so the
+        first Newton iterate is not a mesh whose boundary layer alone has moved. Returns the
+        first iterate, its residual, and the reference residual norm of the increment.
+        """
+        u_new = u_old.copy()
+        self.dofmap.apply_prescribed(u_new, t)
+        dup = u_new - u_old
+        t0 = time.perf_counter()
+        re, Ke = self.problem.evaluate(u_old, True, dt)
+        re = re + np.einsum("eij,ej->ei", Ke, dup[self.problem.geom.edofs])
+        rhs = self.pattern.vector(re) - self.dofmap.external(t)
+        K = self.pattern.matrix(Ke)
+        self.timings.assembly += time.perf_counter() - t0
+        self.timings.tangent_assemblies += 1
+        ref = max(float(np.linalg.norm(rhs)), float(np.linalg.norm(self.dofmap.external(t))))
+        t0 = time.perf_counter()
+        self.linear.factor(K)
+        dq = -self.linear.solve(rhs)
+        self.timings.solve += time.perf_counter() - t0
+        self.timings.iterations += 1
+        for alpha in (1.0, 0.5, 0.25, 0.125, 0.0):
+            cand = self.dofmap.scatter(u_new, dq, alpha)
+            try:
+                r, _, _ = self._residual(cand, t, dt, False)
+            except InvertedElementError:
+                if alpha == 0.0:
+                    raise
+                continue
+            return cand, r, ref
+        raise AssertionError("unreachable")
+
+    def _line_search(self, u, du, r, t, dt):
+        """Energy line search on ``s(α) = du · r(u + α du)``; returns ``(u_new, r_new)``.
+
+        The full step is taken when ``|s(1)| <= 0.5 |s(0)|`` or when the energy still
+        decreases at α = 1; otherwise secant steps on s (at most 4). α is halved while a
+        trial inverts an element. Without ``line_search`` only the inversion guard acts.
         """
         s0 = float(du @ r)
         alpha, lo, s_lo = 1.0, 0.0, s0
-        best = None
+        best = (None, None)
         for _ in range(12):
             try:
                 u_try = self.dofmap.scatter(u, du, alpha)
@@ -153,24 +186,17 @@ class NewtonSolver:
             if not np.all(np.isfinite(r_try)):
                 alpha *= 0.5
                 continue
-            if not self.options.line_search:
-                return u_try, alpha
             s1 = float(du @ r_try)
-            if best is None:
-                best = (u_try, alpha)
-            if abs(s1) <= 0.5 * abs(s0) or s0 >= 0:
-                return u_try, alpha
-            # secant on s(alpha) between the last two points, kept within [0.1, 1] of alpha
+            if not self.options.line_search or abs(s1) <= 0.5 * abs(s0) or s0 >= 0 or s1 < 0:
+                return u_try, r_try
+            best = (u_try, r_try)
             a_new = lo + (alpha - lo) * s_lo / (s_lo - s1) if s_lo != s1 else alpha
             lo, s_lo = alpha, s1
-            if s1 < 0:  # still descending at alpha: the full step was short, keep it
-                return u_try, alpha
             alpha = float(np.clip(a_new, 0.1 * alpha, alpha))
-            best = (u_try, alpha)
-        return best if best is not None else (None, 0.0)
+        return best
 
     def step_result(self, u: np.ndarray, t: float, its: int, norm: float, dt: float | None) -> StepResult:
-        re, _ = self.problem.evaluate(u, False, dt)
+        re = self._last_re if dt is None or not self.problem.viscous else self.problem.evaluate(u, False, dt)[0]
         rf = full_vector(self.problem.geom.edofs, re, self.problem.n_dof)
         return StepResult(t, its, norm, self.dofmap.rigid_displacement(u),
                           self.dofmap.rigid_force(rf), rf)
@@ -188,7 +214,6 @@ class NewtonSolver:
         u = np.zeros(self.problem.n_dof) if u0 is None else np.asarray(u0, dtype=float).copy()
         t_prev = 0.0 if not times or times[0] > 0 else times[0]
         out_u, out_steps = [], []
-        u_prev_inc = np.zeros_like(u)
         for t_target in times:
             if t_target <= t_prev and out_steps:
                 continue
@@ -200,17 +225,8 @@ class NewtonSolver:
                 t_new = min(t_cur + h, t_target)
                 dt = (t_new - t_cur) if viscous_time else None
                 saved = self.problem.save_state()
-                # extrapolate the last increment as the first guess (keeps elements upright)
-                guess = self.dofmap.scatter(u, np.zeros(self.dofmap.n_unknowns))
-                scale = (t_new - t_cur) / max(self._last_h, 1e-300) if hasattr(self, "_last_h") else 0.0
-                guess = guess + scale * u_prev_inc
                 try:
-                    try:
-                        u_new, its, norm = self.increment(u, t_new, dt, guess)
-                    except (SolverError, InvertedElementError):
-                        if scale == 0.0:
-                            raise
-                        u_new, its, norm = self.increment(u, t_new, dt, None)
+                    u_new, its, norm = self.increment(u, t_new, dt)
                 except (SolverError, InvertedElementError) as exc:
                     self.problem.restore_state(saved)
                     cuts += 1
@@ -221,8 +237,6 @@ class NewtonSolver:
                     continue
                 if viscous_time:
                     self.problem.commit(u_new, t_new - t_cur)
-                u_prev_inc = u_new - u
-                self._last_h = t_new - t_cur
                 u = u_new
                 t_cur = t_new
             out_u.append(u.copy())
@@ -231,7 +245,7 @@ class NewtonSolver:
                 progress(t_target)
             t_prev = t_target
         return Solution(np.array(times), np.array(out_u), out_steps, self.timings, self.dofmap,
-                        self.last_factor)
+                        self.linear)
 
 
 def solve(problem: Problem, bc: BoundaryConditions, times: Sequence[float] = (1.0,),

@@ -14,11 +14,12 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from skinkit.sysid.checks import Signals, SysidError, check_signals
+from skinkit.sysid.checks import Signals, SysidError
 from skinkit.sysid.linear import LinearModel, identify_signals
 from skinkit.sysid.lti import SecondOrder, simulate
 from skinkit.sysid.metrics import vaf
 from skinkit.sysid.nonlinearity import StaticNonlinearity
+from skinkit.sysid.record import as_signals
 
 
 @dataclass
@@ -68,10 +69,8 @@ def identify_hammerstein_signals(sig: Signals, memory_s: float | None = None, *,
     powers = np.vander(fs, degree + 1)  # highest power first, constant last
 
     def basis(q: np.ndarray) -> np.ndarray:
-        b, a = SecondOrder.from_scaled(*np.exp(q)).tf()
-        cols = [simulate(SecondOrder.from_scaled(*np.exp(q)), powers[:, j], rate, hold)
-                for j in range(degree)]
-        del b, a
+        dyn = SecondOrder.from_scaled(*np.exp(q))
+        cols = [simulate(dyn, powers[:, j], rate, hold) for j in range(degree)]
         return np.column_stack([*cols, np.ones(f.size)])[burn:]
 
     def resid(q: np.ndarray) -> np.ndarray:
@@ -79,10 +78,10 @@ def identify_hammerstein_signals(sig: Signals, memory_s: float | None = None, *,
         c, *_ = np.linalg.lstsq(X, yy, rcond=None)
         return X @ c - yy
 
+    if not lin.valid:
+        raise SysidError("the linear model is not a stable under-damped system, so no "
+                         "Hammerstein model can start from it (see its warnings)")
     q0 = np.log([lin.total.Is_s2, lin.total.Bs_s])
-    if not np.all(np.isfinite(q0)):
-        raise SysidError("the linear model has no positive scaled inertia and damping to start "
-                         "a Hammerstein model from")
     sol = least_squares(resid, q0, method="lm")
     X = basis(sol.x)
     c, *_ = np.linalg.lstsq(X, yy, rcond=None)
@@ -96,12 +95,12 @@ def identify_hammerstein_signals(sig: Signals, memory_s: float | None = None, *,
     return HammersteinModel(Is, Bs, g, lin, v, rate, hold, sig.issues)
 
 
-def identify_hammerstein(force_N: Any, position_m: Any, rate_hz: float | None = None,
+def identify_hammerstein(force_N: Any, position_m: Any = None, rate_hz: float | None = None,
                          memory_s: float | None = None, *, time_s: Any = None, degree: int = 3,
                          hold: str = "foh", flags: Any = None,
                          force_limit_N: float | None = None,
+                    axis: int | str = 2,
                          **linear_kw: Any) -> HammersteinModel:
     """Identify a Hammerstein model; arguments as :func:`identify_wiener`."""
-    sig = check_signals(force_N, position_m, rate_hz=rate_hz, time_s=time_s, memory_s=memory_s,
-                        flags=flags, force_limit_N=force_limit_N)
+    sig = as_signals(force_N, position_m, rate_hz, time_s, memory_s, flags, force_limit_N, axis)
     return identify_hammerstein_signals(sig, memory_s, degree=degree, hold=hold, **linear_kw)

@@ -14,13 +14,13 @@ from skinkit.sysid.checks import (
     PoorFitWarning,
     Signals,
     SysidError,
-    check_signals,
     warn,
 )
 from skinkit.sysid.damped import DampedFit, fit_damped_sinusoid
 from skinkit.sysid.irf import IRF, estimate_irf
 from skinkit.sysid.lti import HOLDS, SecondOrder, simulate
 from skinkit.sysid.metrics import vaf
+from skinkit.sysid.record import as_signals
 from skinkit.sysid.robot import RobotDynamics
 
 #: longest memory tried by the automatic choice [s] (skin IRFs last < 0.25 s, thesis 4.2.1)
@@ -70,12 +70,21 @@ class LinearModel:
     def predict(self, force_N: np.ndarray) -> np.ndarray:
         """Position [m] ``(N,)`` for force ``(N,)`` [N], simulated with :mod:`scipy.signal`
         from equilibrium under the first force sample."""
+        if not self.valid:
+            raise SysidError("this linear model is not a stable under-damped system (see its "
+                             "warnings); it cannot be simulated")
         h = self.hold if self.hold != "impulse" else "foh"
         return simulate(self.total, np.asarray(force_N, float), self.rate_hz, h) + self.offset_m
 
+    @property
+    def valid(self) -> bool:
+        """True when the fit is a stable, under-damped mass-spring-damper."""
+        t = self.total
+        return bool(self.damped.underdamped and t.K > 0 and t.B > 0 and t.I > 0)
+
     def to_dict(self) -> dict[str, Any]:
         return {
-            "model": "linear",
+            "model": "linear", "valid": self.valid,
             "K_N_per_m": self.skin.K, "B_Ns_per_m": self.skin.B, "I_kg": self.skin.I,
             "K_se_N_per_m": self.se["K"], "B_se_Ns_per_m": self.se["B"], "I_se_kg": self.se["I"],
             "gain_m_per_N": self.skin.gain_m_per_N if self.skin.K > 0 else float("nan"),
@@ -186,13 +195,16 @@ def identify_signals(sig: Signals, memory_s: float | None = None, *, two_sided: 
     if refine:
         total = refine_output_error(total, f, y, rate, sim_hold, burn)
     fm, ym = float(f.mean()), float(y.mean())
-    y_sim = simulate(total, f, rate, sim_hold)
-    offset = float(np.mean(y[burn:] - y_sim[burn:]))
-    resid = y[burn:] - y_sim[burn:] - offset
-    vaf_lin = vaf(y[burn:], y_sim[burn:])
     y_irf = irf.predict(f - fm)
     vaf_irf = vaf(y[burn:], y_irf[burn:])
-    se_total = _se(total, f, float(np.var(resid)), rate, sim_hold, burn)
+    if total.K > 0 and total.B > 0 and total.I > 0:
+        y_sim = simulate(total, f, rate, sim_hold)
+        offset = float(np.mean(y[burn:] - y_sim[burn:]))
+        resid = y[burn:] - y_sim[burn:] - offset
+        vaf_lin = vaf(y[burn:], y_sim[burn:])
+        se_total = _se(total, f, float(np.var(resid)), rate, sim_hold, burn)
+    else:  # an unstable or non-physical fit cannot be simulated; the warning above says why
+        offset, vaf_lin, se_total = float("nan"), float("nan"), np.full(3, np.nan)
     if robot is not None:
         skin = robot.remove(total, ym)
         se_total = se_total * robot.factor(ym)
@@ -205,15 +217,16 @@ def identify_signals(sig: Signals, memory_s: float | None = None, *, two_sided: 
                        robot=robot, refined=refine, issues=sig.issues)
 
 
-def identify_linear(force_N: Any, position_m: Any, rate_hz: float | None = None,
+def identify_linear(force_N: Any, position_m: Any = None, rate_hz: float | None = None,
                     memory_s: float | None = None, *, time_s: Any = None, two_sided: bool = False,
                     hold: str = "foh", robot: RobotDynamics | None = None, refine: bool = False,
                     rank: int | None = None, flags: Any = None,
-                    force_limit_N: float | None = None) -> LinearModel:
+                    force_limit_N: float | None = None, axis: int | str = 2) -> LinearModel:
     """Identify K, B, I from a stochastic force record.
 
     Args:
-        force_N: ``(N,)`` input force [N].
+        force_N: ``(N,)`` input force [N], or a :class:`~skinkit.schemas.RobotRecord` (then
+            its ``tip_force`` and ``tip_position`` along ``axis``, times and flags are used).
         position_m: ``(N,)`` output position [m].
         rate_hz: sampling rate [Hz] (or give ``time_s``, ``(N,)`` [s]).
         memory_s: IRF memory [s]; ``None`` chooses it from the IRF's decay.
@@ -225,11 +238,11 @@ def identify_linear(force_N: Any, position_m: Any, rate_hz: float | None = None,
         refine: after the damped-sinusoid fit, refine K, B, I by output-error least squares.
         rank: number of pseudo-inverse terms (default: minimum description length).
         flags: ``(N,)`` RobotRecord flags (saturation); force_limit_N: actuator limit [N].
+        axis: tip axis of a RobotRecord (0/1/2 or "x"/"y"/"z"; default z, the normal).
 
     Returns:
         LinearModel; its ``issues`` list the warnings raised.
     """
-    sig = check_signals(force_N, position_m, rate_hz=rate_hz, time_s=time_s, memory_s=memory_s,
-                        flags=flags, force_limit_N=force_limit_N)
+    sig = as_signals(force_N, position_m, rate_hz, time_s, memory_s, flags, force_limit_N, axis)
     return identify_signals(sig, memory_s, two_sided=two_sided, hold=hold, robot=robot,
                             refine=refine, rank=rank)

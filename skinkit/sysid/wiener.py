@@ -19,11 +19,12 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from skinkit.sysid.checks import Signals, SysidError, check_signals
+from skinkit.sysid.checks import Signals, SysidError
 from skinkit.sysid.linear import LinearModel, identify_signals
 from skinkit.sysid.lti import SecondOrder, simulate
 from skinkit.sysid.metrics import vaf
 from skinkit.sysid.nonlinearity import StaticNonlinearity, fit_exponential, fit_polynomial
+from skinkit.sysid.record import as_signals
 
 
 @dataclass
@@ -98,10 +99,10 @@ def identify_wiener_signals(sig: Signals, memory_s: float | None = None, *,
     hold = lin.hold if lin.hold != "impulse" else "foh"
     burn = lin.burn_in
     yy = y[burn:]
+    if not lin.valid:
+        raise SysidError("the linear model is not a stable under-damped system, so no Wiener "
+                         "model can start from it (see its warnings)")
     q = np.log([lin.total.Is_s2, lin.total.Bs_s])
-    if not np.all(np.isfinite(q)):
-        raise SysidError("the linear model has no positive scaled inertia and damping to start "
-                         "a Wiener model from (see the linear model's warnings)")
 
     def x_of(qq: np.ndarray) -> np.ndarray:
         return simulate(SecondOrder.from_scaled(*np.exp(qq)), f, rate, hold)
@@ -155,11 +156,12 @@ def _joint(q: np.ndarray, g: StaticNonlinearity, x_of: Any, yy: np.ndarray, burn
                                                      float(p[4]) if n_nl == 3 else 0.0))
 
 
-def identify_wiener(force_N: Any, position_m: Any, rate_hz: float | None = None,
+def identify_wiener(force_N: Any, position_m: Any = None, rate_hz: float | None = None,
                     memory_s: float | None = None, *, time_s: Any = None,
                     nonlinearity: str = "exponential", degree: int = 3, fit_offset: bool = False,
                     max_iter: int = 20, tol_pct: float = 1e-3, joint: bool = True,
                     hold: str = "foh", flags: Any = None, force_limit_N: float | None = None,
+                    axis: int | str = 2,
                     **linear_kw: Any) -> WienerModel:
     """Identify a Wiener model (thesis Eq. 4.9 nonlinearity by default).
 
@@ -174,8 +176,7 @@ def identify_wiener(force_N: Any, position_m: Any, rate_hz: float | None = None,
         joint: finish with a joint least-squares pass over dynamics and nonlinearity.
         **linear_kw: passed to the linear identification (``two_sided``, ``rank``, ...).
     """
-    sig = check_signals(force_N, position_m, rate_hz=rate_hz, time_s=time_s, memory_s=memory_s,
-                        flags=flags, force_limit_N=force_limit_N)
+    sig = as_signals(force_N, position_m, rate_hz, time_s, memory_s, flags, force_limit_N, axis)
     return identify_wiener_signals(sig, memory_s, nonlinearity=nonlinearity, degree=degree,
                                    fit_offset=fit_offset, max_iter=max_iter, tol_pct=tol_pct,
                                    joint=joint, hold=hold, **linear_kw)

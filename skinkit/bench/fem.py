@@ -1,0 +1,144 @@
+"""``skinkit bench fem``: skinkit's Newton iteration against sfepy's on the same problem.
+
+The same ~10,000-dof block of 27-node hexahedra (7 x 7 x 7 elements), the same
+nearly incompressible neo-Hookean law split as sfepy does it (``dw_tl_he_neohook`` +
+``dw_tl_bulk_penalty``: W = μ/2 (Ī1 - 3) + K/2 (J - 1)²), the same boundary conditions
+(floor fixed, top face moved by a shear and a compression) and the same quadrature degree,
+solved in one load step by both in one process, total Lagrangian, ``approx_order=2``.
+Seconds per Newton iteration = solve wall time / number of tangent factorisations.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import click
+import numpy as np
+
+from skinkit.fem.assembly import DEFAULT_INTORDER
+from skinkit.fem.bcs import BoundaryConditions
+from skinkit.fem.mesh import block_mesh
+from skinkit.fem.problem import Material, Problem
+from skinkit.fem.solver import NewtonSolver, SolverOptions
+
+MU = 1.0e4       # Pa
+BULK = 1.0e5     # Pa (ν ≈ 0.45)
+TOP_U = (0.02, 0.0, -0.04)  # m, on a 1 m cube (sfepy, without load steps, fails at larger loads)
+
+
+def _law():
+    from skinkit import registry
+    return registry.create("skinkit.laws", "neo-hookean-ni")
+
+
+def run_skinkit(n: int = 7, linear: str = "auto") -> dict:
+    """Solve with skinkit; returns displacement at vertices and timings."""
+    mesh = block_mesh((1.0, 1.0, 1.0), (n, n, n))
+    t0 = time.perf_counter()
+    prob = Problem(mesh, [Material("body", _law(), {"mu": MU, "K": BULK})], intorder=DEFAULT_INTORDER)
+    bc = BoundaryConditions(mesh.n_dof).fix(mesh.node_sets["bottom"])
+    for c, v in enumerate(TOP_U):
+        bc.prescribe(mesh.node_sets["top"], c, lambda t, v=v: v * t)
+    solver = NewtonSolver(prob, bc, SolverOptions(linear=linear, rtol=1e-10))
+    setup = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sol = solver.run([1.0])
+    wall = time.perf_counter() - t0
+    tm = sol.timings
+    n_fact = tm.iterations + 1  # Newton iterations + the tangent predictor
+    return {"mesh": mesh, "u": sol.u[-1].reshape(-1, 3), "wall": wall, "setup": setup,
+            "factorisations": n_fact, "assembly_s": tm.assembly / n_fact, "solve_s": tm.solve / n_fact,
+            "s_per_newton": wall / n_fact, "dof": mesh.n_dof, "linear": linear}
+
+
+def run_sfepy(mesh) -> dict:
+    """Solve the same problem with sfepy (linear hex mesh, approx_order=2)."""
+    from sfepy.base.base import IndexedStruct, output
+    from sfepy.discrete import Equation, Equations, FieldVariable, Integral
+    from sfepy.discrete import Material as SfMaterial
+    from sfepy.discrete import Problem as SfProblem
+    from sfepy.discrete.conditions import Conditions, EssentialBC
+    from sfepy.discrete.fem import FEDomain, Field, Mesh
+    from sfepy.solvers.ls import ScipyDirect
+    from sfepy.solvers.nls import Newton
+    from sfepy.terms import Term
+    output.set_output(quiet=True)
+
+    nv = int(mesh.t.max()) + 1
+    coors = mesh.nodes[:nv]
+    conn = mesh.t.T.astype(np.int32)
+    # sfepy wants the VTK hexahedron order: bottom quad then top quad, counter-clockwise
+    X = coors[conn]
+    c = X.mean(axis=1, keepdims=True)
+    rel = X - c
+    order = np.lexsort((np.arctan2(rel[0, :, 1], rel[0, :, 0]), rel[0, :, 2] > 0))
+    conn = conn[:, order]
+    sm = Mesh.from_data("block", coors, None, [conn], [np.zeros(len(conn), dtype=np.int32)], ["3_8"])
+    domain = FEDomain("domain", sm)
+    omega = domain.create_region("Omega", "all")
+    zmin, zmax = coors[:, 2].min(), coors[:, 2].max()
+    eps = 1e-8
+    bottom = domain.create_region("Bottom", f"vertices in (z < {zmin + eps})", "facet")
+    top = domain.create_region("Top", f"vertices in (z > {zmax - eps})", "facet")
+    field = Field.from_args("displacement", np.float64, "vector", omega, approx_order=2)
+    u = FieldVariable("u", "unknown", field)
+    v = FieldVariable("v", "test", field, primary_var_name="u")
+    m = SfMaterial("m", mu=MU, bulk=BULK)
+    integral = Integral("i", order=DEFAULT_INTORDER)
+    t1 = Term.new("dw_tl_he_neohook(m.mu, v, u)", integral, omega, m=m, v=v, u=u)
+    t2 = Term.new("dw_tl_bulk_penalty(m.bulk, v, u)", integral, omega, m=m, v=v, u=u)
+    eqs = Equations([Equation("balance", t1 + t2)])
+    ebcs = Conditions([EssentialBC("fix", bottom, {"u.all": 0.0}),
+                       EssentialBC("move", top, {"u.0": TOP_U[0], "u.1": TOP_U[1], "u.2": TOP_U[2]})])
+    pb = SfProblem("bench", equations=eqs)
+    pb.set_bcs(ebcs=ebcs)
+    status = IndexedStruct()
+    nls = Newton({"i_max": 30, "eps_a": 1e-10 * MU, "eps_r": 1e-10}, lin_solver=ScipyDirect({}),
+                 status=status)
+    pb.set_solver(nls)
+    t0 = time.perf_counter()
+    state = pb.solve(save_results=False)
+    wall = time.perf_counter() - t0
+    uv = state.get_state_parts()["u"].reshape(-1, 3) if hasattr(state, "get_state_parts") \
+        else pb.get_variables()["u"]().reshape(-1, 3)
+    n_it = max(int(status.nls_status.n_iter if hasattr(status, "nls_status") else status.n_iter), 1)
+    stats = getattr(status.nls_status if hasattr(status, "nls_status") else status, "time_stats", {})
+    return {"u": uv[:nv], "wall": wall, "iterations": n_it, "s_per_newton": wall / n_it,
+            "time_stats": {k: float(v) for k, v in dict(stats).items()}}
+
+
+def run(n: int = 7, linear: str = "auto") -> dict:
+    """Both solvers; the JSON-ready summary."""
+    sk = run_skinkit(n, linear)
+    sf = run_sfepy(sk["mesh"])
+    nv = sf["u"].shape[0]
+    # vertices are the first nodes of a MeshHex2 in both numberings
+    du = np.abs(sk["u"][:nv] - sf["u"])
+    scale = float(np.abs(sf["u"]).max())
+    return {"dof": sk["dof"], "elements": sk["mesh"].n_elements, "linear_solver": sk["linear"],
+            "skinkit_s_per_newton": sk["s_per_newton"], "sfepy_s_per_newton": sf["s_per_newton"],
+            "speedup": sf["s_per_newton"] / sk["s_per_newton"],
+            "max_rel_disp_diff": float(du.max() / scale),
+            "assembly_s": sk["assembly_s"], "solve_s": sk["solve_s"],
+            "skinkit_factorisations": sk["factorisations"], "sfepy_iterations": sf["iterations"],
+            "skinkit_wall_s": sk["wall"], "sfepy_wall_s": sf["wall"],
+            "sfepy_time_stats": sf["time_stats"]}
+
+
+@click.command("fem")
+@click.option("--n", default=7, show_default=True, help="elements per side (7 -> 10,125 dofs)")
+@click.option("--linear", default="auto", show_default=True, help="linear solver: auto, pardiso, splu")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+def bench_fem(n: int, linear: str, as_json: bool) -> None:
+    """Seconds per Newton iteration, skinkit against sfepy, same mesh and law."""
+    res = run(n, linear)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    click.echo(f"{res['dof']} dofs, {res['elements']} 27-node hexahedra, linear solver {res['linear_solver']}")
+    click.echo(f"skinkit {res['skinkit_s_per_newton']:.3f} s/iteration "
+               f"(assembly {res['assembly_s']:.3f} s, solve {res['solve_s']:.3f} s)")
+    click.echo(f"sfepy   {res['sfepy_s_per_newton']:.3f} s/iteration")
+    click.echo(f"speedup {res['speedup']:.2f}x; max relative displacement difference "
+               f"{res['max_rel_disp_diff']:.2e}")

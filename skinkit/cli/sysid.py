@@ -1,0 +1,163 @@
+"""``skinkit sysid``: identify skin dynamics from a stochastic force record."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import click
+
+from skinkit.errors import SkinkitError
+
+
+def _load(record: Path, protocol: str | None, axis: str) -> Any:
+    """A RobotRecord from a CSV file or from an experiment file's protocol."""
+    from skinkit.sysid.checks import SysidError
+
+    if record.suffix.lower() == ".csv":
+        from skinkit.store import read_robot_csv
+
+        if protocol is not None:
+            raise SysidError("--protocol names a record inside an experiment file, not a CSV")
+        return read_robot_csv(record, axis=axis)
+    from skinkit.store import open_experiment
+
+    with open_experiment(record) as exp:
+        names = exp.record_names()
+        if protocol is None:
+            if len(names) != 1:
+                raise SysidError(f"{record} holds {len(names)} records; choose one with "
+                                 f"--protocol ({', '.join(names) or 'none'})")
+            protocol = names[0]
+        elif protocol not in names:
+            raise SysidError(f"{record} has no record {protocol!r} (records: "
+                             f"{', '.join(names) or 'none'})")
+        return exp.read_record(protocol)
+
+
+def _clean(obj: Any) -> Any:
+    """JSON-safe: NaN and infinities become null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+@click.command()
+@click.argument("record", type=click.Path(path_type=Path, dir_okay=False))
+@click.option("--model", type=click.Choice(["linear", "wiener", "hammerstein"]),
+              default="linear", show_default=True, help="Model to identify.")
+@click.option("--memory", "memory_s", type=float, default=None,
+              help="IRF memory in seconds (default: from the IRF's decay).")
+@click.option("--protocol", default=None, help="Record name inside an experiment file.")
+@click.option("--axis", type=click.Choice(["x", "y", "z"]), default="z", show_default=True,
+              help="Tip axis to identify along (z: normal indentation).")
+@click.option("--robot-mass", "robot_mass", type=float, default=0.0, show_default=True,
+              help="Robot moving mass to remove [kg].")
+@click.option("--robot-damping", "robot_damping", type=float, default=0.0, show_default=True,
+              help="Robot damping to remove [N s/m].")
+@click.option("--robot-stiffness", "robot_stiffness", type=float, default=0.0, show_default=True,
+              help="Robot stiffness to remove [N/m].")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+@click.option("--plot", "plot_dir", type=click.Path(path_type=Path, file_okay=False),
+              default=None, help="Write figures (identification, residuals) into this folder.")
+def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None, axis: str,
+          robot_mass: float, robot_damping: float, robot_stiffness: float, as_json: bool,
+          plot_dir: Path | None) -> None:
+    """Identify K, B, I (and a Wiener or Hammerstein nonlinearity) from RECORD.
+
+    RECORD is an experiment file (choose the record with --protocol) or a CSV file with
+    header time_s,force_N,position_m (uniform sampling; the rate comes from the time column).
+    Warnings about the record (gaps, NaNs, clipping, ...) go to stderr and into the JSON.
+    """
+    from skinkit.sysid import RobotDynamics
+    from skinkit.sysid.hammerstein import identify_hammerstein_signals
+    from skinkit.sysid.linear import identify_signals
+    from skinkit.sysid.record import record_signals
+    from skinkit.sysid.wiener import identify_wiener_signals
+
+    rec = _load(record, protocol, axis)
+    robot = None
+    if robot_mass or robot_damping or robot_stiffness:
+        robot = RobotDynamics(mass_kg=robot_mass, damping_Ns_per_m=robot_damping,
+                              stiffness_N_per_m=robot_stiffness)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            sig = record_signals(rec, axis, memory_s)
+            lin = identify_signals(sig, memory_s, robot=robot)
+            if model == "linear":
+                result: Any = lin
+            elif model == "wiener":
+                result = identify_wiener_signals(sig, memory_s, linear=lin)
+            else:
+                result = identify_hammerstein_signals(sig, memory_s, linear=lin)
+        finally:  # the warnings explain an error too
+            for w in caught:
+                if issubclass(w.category, UserWarning):
+                    click.echo(f"warning: {w.category.__name__}: {w.message}", err=True)
+    out = _clean(result.to_dict())
+    out["record"] = str(record)
+    out["protocol"] = rec.protocol.name
+    if plot_dir is not None:
+        out["plots"] = _plots(result, sig, lin, plot_dir)
+    if as_json:
+        click.echo(json.dumps(out, indent=2))
+        return
+    _table(out, model)
+
+
+def _plots(result: Any, sig: Any, lin: Any, plot_dir: Path) -> list[str]:
+    from skinkit.sysid.diagnostics import diagnose
+    from skinkit.sysid.plots import plot_identification, plot_residuals
+
+    try:
+        plot_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SkinkitError(f"--plot {plot_dir}: cannot create folder ({exc.strerror})") from None
+    if not lin.valid:
+        raise SkinkitError("no plots: the linear model is not a stable under-damped system")
+    files = [plot_identification(result, sig.force_N, sig.position_m, plot_dir / "sysid.png")]
+    diag = diagnose(result, sig.force_N, sig.position_m, sig.rate_hz, lin.burn_in)
+    files.append(plot_residuals(diag, plot_dir / "sysid_residuals.png",
+                                title=f"{type(result).__name__} residuals"))
+    return [str(f) for f in files]
+
+
+def _table(out: dict[str, Any], model: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    def fmt(v: Any, scale: float = 1.0, digits: int = 4) -> str:
+        return "-" if v is None else f"{v * scale:.{digits}g}"
+
+    t = Table(title=f"sysid {model}: {out['record']} ({out['protocol']})")
+    t.add_column("quantity")
+    t.add_column("value", justify="right")
+    t.add_column("unit")
+    rows = [("K", fmt(out["K_N_per_m"]), "N/m"), ("B", fmt(out["B_Ns_per_m"]), "N s/m"),
+            ("I", fmt(out["I_kg"], 1e3), "g"), ("VAF linear", fmt(out["vaf_linear_pct"]), "%"),
+            ("IRF memory", fmt(out["irf_memory_s"], 1e3), "ms"),
+            ("IRF rank", str(out["irf_rank"]), "")]
+    if model == "wiener":
+        rows += [("Is", fmt(out["Is_s2"]), "s²"), ("Bs", fmt(out["Bs_s"]), "s")]
+        if "C1_m" in out:
+            rows += [("C1", fmt(out["C1_m"], 1e3), "mm"), ("C2", fmt(out["C2_per_N"]), "1/N")]
+        rows += [("VAF Wiener", fmt(out["vaf_wiener_pct"]), "%")]
+    if model == "hammerstein":
+        rows += [("VAF Hammerstein", fmt(out["vaf_hammerstein_pct"]), "%")]
+    for r in rows:
+        t.add_row(*r)
+    con = Console()
+    con.print(t)
+    if not out.get("valid", True):
+        con.print("[bold red]the fit is not a stable under-damped system: K, B, I are not "
+                  "meaningful (see warnings)[/]")
+    for p in out.get("plots", []):
+        con.print(f"plot: {p}")

@@ -1,0 +1,85 @@
+"""3D tracks of profiled material points: project, track in every camera, triangulate."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from skinkit.schemas import CameraRig, ImageSequence, SurfaceTrack
+from skinkit.vision import VisionError
+from skinkit.vision import camera as cam_ops
+from skinkit.vision.triangulation import triangulate
+
+
+def camera_order(rig: CameraRig, names: Sequence[str]) -> list[int]:
+    """Rig index of each named camera; a camera missing from the rig is an error."""
+    missing = [n for n in names if n not in rig.names]
+    if missing:
+        raise VisionError(f"camera(s) {missing} in the images are missing from the rig "
+                          f"(rig cameras: {rig.names})")
+    return [rig.names.index(n) for n in names]
+
+
+def reference_pixels(rig: CameraRig, points: np.ndarray, subset_px: int) -> np.ndarray:
+    """``(P, C, 2)`` projections of ``(P, 3)`` points [m]; NaN where a subset would not fit."""
+    pts = np.asarray(points, float)
+    out = np.full((len(pts), len(rig), 2), np.nan)
+    half = subset_px // 2 + 1
+    for c, cam in enumerate(rig.cameras):
+        px = cam_ops.project(cam, pts)
+        w, h = cam.image_size
+        ok = np.all(np.isfinite(px), axis=1) & (px[:, 0] >= half) & (px[:, 1] >= half) & \
+            (px[:, 0] <= w - 1 - half) & (px[:, 1] <= h - 1 - half)
+        out[ok, c] = px[ok]
+    return out
+
+
+def track_3d(rig: CameraRig, images: ImageSequence, points: np.ndarray, tracker: Any,
+             subset_px: int = 41, masks: np.ndarray | None = None, max_reprojection_px: float = 1.0,
+             progress: bool = False) -> tuple[SurfaceTrack, np.ndarray]:
+    """Track ``points`` ``(P, 3)`` [m] (e.g. a surface profile, seen in frame 0) through
+    ``images`` and triangulate them in every frame.
+
+    Every frame is tracked against frame 0 (no drift). A view is dropped where the tracker
+    marks it invalid; a point is valid in a frame when at least two views remain and its
+    RMS reprojection error is at most ``max_reprojection_px``. ``masks``: optional
+    ``(F, C, H, W)`` bool, usable pixels (e.g. False over the indenter).
+    Returns the :class:`SurfaceTrack` and the ``(P, F)`` reprojection errors [px].
+    """
+    order = camera_order(rig, images.camera_names)
+    sub = CameraRig(tuple(rig.cameras[i] for i in order))
+    for cam in sub.cameras:
+        if tuple(cam.image_size) != images.image_size:
+            raise VisionError(f"camera {cam.name} is {cam.image_size[0]}x{cam.image_size[1]} px in the "
+                              f"rig but the images are {images.image_size[0]}x{images.image_size[1]}")
+    ref_px = reference_pixels(sub, points, subset_px)
+    F, C = images.frames.shape[:2]
+    P = len(ref_px)
+    cur = np.full((P, F, C, 2), np.nan)
+    cur[:, 0] = ref_px
+    frames = range(1, F)
+    if progress:
+        from rich.progress import track as rich_track
+
+        frames = rich_track(frames, description="tracking frames")
+    for f in frames:
+        for c in range(C):
+            seen = np.flatnonzero(np.all(np.isfinite(ref_px[:, c]), axis=1))
+            if len(seen) == 0:
+                continue
+            m = None if masks is None else masks[f, c]
+            res = tracker.track(images.frames[0, c], images.frames[f, c], ref_px[seen, c], subset_px, m)
+            ok = np.asarray(res.valid, bool)
+            cur[seen[ok], f, c] = ref_px[seen[ok], c] + np.asarray(res.displacement_px)[ok]
+    X = np.full((P, F, 3), np.nan)
+    err = np.full((P, F), np.nan)
+    valid = np.zeros((P, F), bool)
+    for f in range(F):
+        tri = triangulate(sub, cur[:, f])
+        X[:, f] = tri.points
+        err[:, f] = tri.reprojection_px
+        valid[:, f] = tri.valid & (tri.reprojection_px <= max_reprojection_px)
+    X[~valid] = np.nan
+    return SurfaceTrack(X, valid, images.time_s, np.arange(P)), err

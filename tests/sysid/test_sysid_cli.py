@@ -1,0 +1,93 @@
+"""``skinkit sysid`` and ``skinkit bench sysid`` end to end, on real files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import C1_M, C2_PER_N, ROBOT, SKIN
+
+from skinkit.cli import cli
+from skinkit.sysid.simulate import simulate_record
+
+REAL = Path("/work/shared/data/real/healthy_skin_extension_relaxation.csv")
+
+
+def _csv(path: Path, rec) -> Path:
+    np.savetxt(path, np.column_stack([rec.time_s, rec.force_N, rec.position_m]), delimiter=",",
+               header="time_s,force_N,position_m", comments="", fmt="%.12g")
+    return path
+
+
+@pytest.fixture(scope="module")
+def wiener_csv(tmp_path_factory, total):
+    rec = simulate_record(total, seed=41, wiener=(C1_M, C2_PER_N), mean_N=1.0, rms_N=0.5)
+    return _csv(tmp_path_factory.mktemp("sysid") / "w.csv", rec)
+
+
+def test_cli_wiener_json_and_plots(wiener_csv, tmp_path):
+    r = CliRunner().invoke(cli, ["sysid", str(wiener_csv), "--model", "wiener", "--json",
+                                 "--plot", str(tmp_path / "plots")])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.stdout)
+    for key in ("K_N_per_m", "B_Ns_per_m", "I_kg", "vaf_linear_pct", "irf_memory_s", "C1_m",
+                "C2_per_N", "Is_s2", "Bs_s", "vaf_wiener_pct"):
+        assert isinstance(d[key], float), key
+    assert d["C1_m"] == pytest.approx(C1_M, rel=0.05)
+    assert d["C2_per_N"] == pytest.approx(C2_PER_N, rel=0.05)
+    assert all(Path(p).stat().st_size > 10_000 for p in d["plots"])
+
+
+def test_cli_linear_experiment_file_with_protocol(tmp_path, total):
+    from skinkit.store import create_experiment
+
+    rec = simulate_record(total, seed=42).to_robot_record(name="stochastic_normal")
+    path = tmp_path / "session.h5"
+    with create_experiment(path) as exp:
+        exp.write_record(rec, rate_hz=2000.0)
+    r = CliRunner().invoke(cli, ["sysid", str(path), "--protocol", "stochastic_normal", "--json",
+                                 "--robot-mass", str(ROBOT.mass_kg), "--memory", "0.12"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.stdout)
+    assert d["K_N_per_m"] == pytest.approx(SKIN.K, rel=0.03)
+    assert d["I_kg"] == pytest.approx(SKIN.I, rel=0.03)
+    assert d["irf_memory_s"] == pytest.approx(0.12)
+    r = CliRunner().invoke(cli, ["sysid", str(path), "--protocol", "nope"])
+    assert r.exit_code == 2 and "no record 'nope'" in r.stderr
+    r = CliRunner().invoke(cli, ["sysid", str(path)])  # the only record is chosen
+    assert r.exit_code == 0 and "VAF linear" in r.stdout
+
+
+def test_cli_errors_are_one_line(tmp_path, total):
+    rec = simulate_record(total, seed=43)
+    rec.force_N[:] = 1.0
+    bad = _csv(tmp_path / "const.csv", rec)
+    r = CliRunner().invoke(cli, ["sysid", str(bad)])
+    assert r.exit_code == 2
+    assert r.stderr.strip().splitlines()[-1].startswith("error: force_N is constant")
+    r = CliRunner().invoke(cli, ["sysid", str(tmp_path / "missing.csv")])
+    assert r.exit_code == 2 and "no such file" in r.stderr
+
+
+@pytest.mark.skipif(not REAL.exists(), reason="real data file not present")
+def test_cli_real_relaxation_data_warns(tmp_path):
+    r = CliRunner().invoke(cli, ["sysid", str(REAL), "--json"])
+    assert r.exit_code == 0, r.output
+    assert "warning: NarrowbandInputWarning" in r.stderr
+    d = json.loads(r.stdout)
+    assert d["valid"] is False
+    assert any(w.startswith("PoorFitWarning") for w in d["warnings"])
+
+
+def test_bench_sysid_json():
+    r = CliRunner().invoke(cli, ["bench", "sysid", "--json", "--repeat", "1"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.stdout)
+    assert d["record"]["samples"] == 10000
+    assert d["wiener_identification_s"] > 0 and d["irf_full_toeplitz_lstsq_s"] > 0
+    # the rank-reduced pseudo-inverse is accurate where plain least squares on an input
+    # with no power above 200 Hz is not
+    assert d["irf_error_svd_rel"] < 0.05 < d["irf_error_lstsq_rel"]
