@@ -166,14 +166,16 @@ class SerialLinkServer:
                 pass
 
 
-def serve(device: Device, link: Any, speed: float, announce: str, max_s: float | None = None) -> None:
-    """Run ``device`` behind ``link`` until killed (or ``max_s`` of wall time)."""
-    print(announce, flush=True)
+def serve(device: Device, link: Any, speed: float, announce: str | None, max_s: float | None = None,
+          stop: Any = None) -> None:
+    """Run ``device`` behind ``link`` until killed, ``max_s`` of wall time, or ``stop.is_set()``."""
+    if announce:
+        print(announce, flush=True)
     rate = device.params.control_rate_hz
     t0 = time.monotonic()
     wall_ref, tick_ref = t0, device.tick
     chunk = 100  # ticks per physics step: 10 ms of device time
-    while max_s is None or time.monotonic() - t0 < max_s:
+    while (max_s is None or time.monotonic() - t0 < max_s) and not (stop is not None and stop.is_set()):
         active = device.mode in (RUNNING, HOMING) or device.post_fault_left > 0
         commands = link.poll(0.0 if active else 0.005)
         # commands (heartbeats) are read before the watchdog is checked, so a descheduled
@@ -253,7 +255,7 @@ def main(argv: list[str] | None = None) -> int:
 
         link = CanLinkServer(args.port, args.bitrate, args.buffer_bytes, args.drop_rate, args.corrupt_rate,
                              rng, device.params)
-        announce = f"can: skinkit_loopback {link.address}"
+        announce = f"can: skinkit_loopback:{link.address}"
     try:
         serve(device, link, args.speed, announce, args.max_s)
     except KeyboardInterrupt:

@@ -25,6 +25,9 @@ _COMMANDS: dict[str, str] = {
     "recover": "skinkit.cli.recover:recover",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",
+    "solve": "skinkit.cli.fem:solve",
+    "verify": "skinkit.cli.fem:verify",
+    "convergence": "skinkit.cli.fem:convergence",
     "sysid": "skinkit.cli.sysid:sysid",
     "vision": "skinkit.cli.vision:vision",
 }

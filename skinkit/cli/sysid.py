@@ -64,12 +64,22 @@ def _clean(obj: Any) -> Any:
               help="Robot damping to remove [N s/m].")
 @click.option("--robot-stiffness", "robot_stiffness", type=float, default=0.0, show_default=True,
               help="Robot stiffness to remove [N/m].")
+@click.option("--hold", type=click.Choice(["foh", "zoh", "impulse"]), default="foh",
+              show_default=True, help="Force between samples: linear (foh, a measured force), "
+              "held (zoh, a commanded force) or plain sampling of h(t) (impulse).")
+@click.option("--refine", is_flag=True,
+              help="Refine K, B, I by output-error least squares after the damped-sinusoid fit.")
+@click.option("--two-sided", "two_sided", is_flag=True,
+              help="Estimate the IRF at negative lags too (a causality check).")
+@click.option("--fit-offset", "fit_offset", is_flag=True,
+              help="Wiener: also fit a position offset (when position 0 is not the unloaded "
+              "skin surface).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @click.option("--plot", "plot_dir", type=click.Path(path_type=Path, file_okay=False),
               default=None, help="Write figures (identification, residuals) into this folder.")
 def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None, axis: str,
-          robot_mass: float, robot_damping: float, robot_stiffness: float, as_json: bool,
-          plot_dir: Path | None) -> None:
+          robot_mass: float, robot_damping: float, robot_stiffness: float, hold: str,
+          refine: bool, two_sided: bool, fit_offset: bool, as_json: bool, plot_dir: Path | None) -> None:
     """Identify K, B, I (and a Wiener or Hammerstein nonlinearity) from RECORD.
 
     RECORD is an experiment file (choose the record with --protocol) or a CSV file with
@@ -91,11 +101,12 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
         warnings.simplefilter("always")
         try:
             sig = record_signals(rec, axis, memory_s)
-            lin = identify_signals(sig, memory_s, robot=robot)
+            lin = identify_signals(sig, memory_s, robot=robot, hold=hold, two_sided=two_sided,
+                                   refine=refine)
             if model == "linear":
                 result: Any = lin
             elif model == "wiener":
-                result = identify_wiener_signals(sig, memory_s, linear=lin)
+                result = identify_wiener_signals(sig, memory_s, linear=lin, fit_offset=fit_offset)
             else:
                 result = identify_hammerstein_signals(sig, memory_s, linear=lin)
         finally:  # the warnings explain an error too

@@ -15,9 +15,9 @@ import scipy.sparse as sp
 from skfem import Basis, ElementHex2
 
 from skinkit.fem.errors import InvertedElementError
-from skinkit.fem.threads import single_threaded_blas
 from skinkit.fem.mesh import FEMesh
 from skinkit.fem.tensors import I3
+from skinkit.fem.threads import single_threaded_blas
 
 #: default quadrature degree: 3 Gauss points per direction integrate the 27-node element's
 #: stiffness exactly in the linear limit (degree 4 per direction)
@@ -54,7 +54,7 @@ def geometry(mesh: FEMesh, intorder: int = DEFAULT_INTORDER) -> Geometry:
     for a in range(nb):
         f = basis.basis[a][0]
         dN[:, :, a, :] = np.moveaxis(np.asarray(f.grad), 0, -1)
-        N[:, a] = np.asarray(f.value)[0]
+        N[:, a] = np.asarray(f)[0]
     w = np.asarray(basis.dx)
     if np.any(w <= 0):
         e = int(np.argmin(w.min(axis=1)))
@@ -92,7 +92,7 @@ def voigt_tangent(CC: np.ndarray) -> np.ndarray:
 
 def _selector() -> np.ndarray:
     P = np.zeros((6, 3, 3))
-    for v, (I, J) in enumerate(zip(_VI, _VJ)):
+    for v, (I, J) in enumerate(zip(_VI, _VJ, strict=True)):
         P[v, I, J] += 1.0
         if I != J:
             P[v, J, I] += 1.0
@@ -115,7 +115,8 @@ def strain_operator(dNT: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def element_tangent(dN: np.ndarray, w: np.ndarray, F: np.ndarray, S: np.ndarray,
-                    CC: np.ndarray, dNT: np.ndarray | None = None) -> np.ndarray:
+                    CC: np.ndarray, dNT: np.ndarray | None = None,
+                    out: np.ndarray | None = None) -> np.ndarray:
     """``(n_el, 81, 81)`` consistent tangents [N/m]: material plus geometric stiffness.
 
     Material: ``Σ_q w Bᵀ D B`` with the Voigt tangent D, the quadrature points stacked into
@@ -124,17 +125,18 @@ def element_tangent(dN: np.ndarray, w: np.ndarray, F: np.ndarray, S: np.ndarray,
     ``δ_ik Σ_q w dNₐ_J S_JL dN_b_L``.
     """
     with single_threaded_blas():
-        return _element_tangent(dN, w, F, S, CC, dNT)
+        return _element_tangent(dN, w, F, S, CC, dNT, out)
 
 
-def _element_tangent(dN, w, F, S, CC, dNT):
+def _element_tangent(dN, w, F, S, CC, dNT, out):
     ne, nq, nb, _ = dN.shape
     if dNT is None:
         dNT = np.ascontiguousarray(np.swapaxes(dN, -1, -2))
     B = strain_operator(dNT, F)                                      # (e, q, 6, 81)
     D = voigt_tangent(CC) * w[:, :, None, None]                      # (e, q, 6, 6)
     DB = np.matmul(D, B)                                             # (e, q, 6, 81)
-    K = np.matmul(B.reshape(ne, nq * 6, nb * 3).transpose(0, 2, 1), DB.reshape(ne, nq * 6, nb * 3))
+    K = np.matmul(B.reshape(ne, nq * 6, nb * 3).transpose(0, 2, 1), DB.reshape(ne, nq * 6, nb * 3),
+                  out=out)
     dNS = np.matmul(dN, S * w[:, :, None, None])                     # (e, q, a, L)
     G = np.matmul(dNS.transpose(0, 2, 1, 3).reshape(ne, nb, nq * 3),
                   dNT.reshape(ne, nq * 3, nb))                       # (e, a, b)

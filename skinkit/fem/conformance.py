@@ -115,15 +115,20 @@ def check_law(law: Any, p: Mapping[str, Any] | None = None, n: int = 12,
     rep.checks.append(CheckResult("stress", err <= DERIVATIVE_RTOL, err, DERIVATIVE_RTOL,
                                   "vs central differences of the energy"))
 
-    # tangent against the stress
-    CC_fd = np.zeros_like(CC)
-    for K, L in VOIGT:
-        E = sym_direction(K, L)
-        dS = (lawkit.stress(law, C + _H * E, p) - lawkit.stress(law, C - _H * E, p)) / (2 * _H)
-        CC_fd[..., K, L] = CC_fd[..., L, K] = 2 * dS
+    # tangent against the stress (its own), or the energy's second differences (when the
+    # stress itself is a difference, differencing it again would square the rounding)
+    if lawkit.has_own(law, "stress"):
+        CC_fd = np.zeros_like(CC)
+        for K, L in VOIGT:
+            E = sym_direction(K, L)
+            dS = (lawkit.stress(law, C + _H * E, p) - lawkit.stress(law, C - _H * E, p)) / (2 * _H)
+            CC_fd[..., K, L] = CC_fd[..., L, K] = 2 * dS
+        how = "vs central differences of the stress"
+    else:
+        CC_fd = lawkit._energy_hessian(law, C, p)
+        how = "vs second differences of the energy"
     err = _rel(CC, CC_fd, scale_CC)
-    rep.checks.append(CheckResult("tangent", err <= DERIVATIVE_RTOL, err, DERIVATIVE_RTOL,
-                                  "vs central differences of the stress"))
+    rep.checks.append(CheckResult("tangent", err <= DERIVATIVE_RTOL, err, DERIVATIVE_RTOL, how))
     sym_err = max(_rel(CC, CC.transpose(0, 2, 1, 3, 4), scale_CC),
                   _rel(CC, CC.transpose(0, 1, 2, 4, 3), scale_CC),
                   _rel(CC, CC.transpose(0, 3, 4, 1, 2), scale_CC))
@@ -140,8 +145,10 @@ def check_law(law: Any, p: Mapping[str, Any] | None = None, n: int = 12,
     s1 = cauchy(F)
     QF = np.einsum("nij,njK->niK", Q, F)
     err = _rel(cauchy(QF), np.einsum("nij,njk,nlk->nil", Q, s1, Q), scale_S)
-    # the same arithmetic in a rotated frame: rounding-level agreement
-    rep.checks.append(CheckResult("objectivity", err <= 1e-9, err, 1e-9,
+    # the same arithmetic in a rotated frame: rounding-level agreement, amplified by 1/h
+    # when the stress is a central difference of the energy
+    tol = 1e-9 if lawkit.has_own(law, "stress") or lawkit.is_complex_safe(law) else 1e-7
+    rep.checks.append(CheckResult("objectivity", err <= tol, err, tol,
                                   "sigma(QF) = Q sigma(F) Q^T"))
     asym = _rel(S, S.transpose(0, 2, 1), scale_S)
     rep.checks.append(CheckResult("stress symmetry", asym <= 1e-12, asym, 1e-12, ""))
@@ -149,5 +156,6 @@ def check_law(law: Any, p: Mapping[str, Any] | None = None, n: int = 12,
     # reference state
     S0 = lawkit.stress(law, np.eye(3)[None], p)
     err = float(np.max(np.abs(S0)) / scale_S)
-    rep.checks.append(CheckResult("reference", err <= 1e-9, err, 1e-9, "S(I) = 0"))
+    tol = 1e-9 if lawkit.has_own(law, "stress") or lawkit.is_complex_safe(law) else 1e-7
+    rep.checks.append(CheckResult("reference", err <= tol, err, tol, "S(I) = 0"))
     return rep

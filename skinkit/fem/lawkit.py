@@ -106,8 +106,38 @@ def _stress_is_complex_safe(law: Any) -> bool:
     return has_own(law, "stress") and is_complex_safe(law)
 
 
+#: second-difference step of the energy Hessian: truncation ~h² and rounding ~eps/h² meet
+#: near 1e-4 (both about 1e-8 of the tangent)
+_FD2_STEP = 1e-4
+
+
+def _energy_hessian(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    """CC = 4 ∂²W/∂C∂C by second central differences of a real-only energy."""
+    C = np.asarray(C, dtype=float)
+    CC = np.zeros(C.shape + (3, 3), dtype=float)
+    h = _FD2_STEP
+    dirs = [sym_direction(K, L) for K, L in VOIGT]
+    for a, (I, J) in enumerate(VOIGT):
+        for b in range(a, 6):
+            K, L = VOIGT[b]
+            Ea, Eb = dirs[a], dirs[b]
+            d2 = (law.energy(C + h * Ea + h * Eb, p) - law.energy(C + h * Ea - h * Eb, p)
+                  - law.energy(C - h * Ea + h * Eb, p) + law.energy(C - h * Ea - h * Eb, p)) / (4 * h * h)
+            for (i, j) in {(I, J), (J, I)}:
+                for (k, l) in {(K, L), (L, K)}:
+                    CC[..., i, j, k, l] = 4 * d2
+                    CC[..., k, l, i, j] = 4 * d2
+    return CC
+
+
 def tangent_from_stress(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
-    """``(..., 3, 3, 3, 3)`` tangent 2 ∂S/∂C by differentiating :func:`stress`."""
+    """``(..., 3, 3, 3, 3)`` tangent 2 ∂S/∂C by differentiating :func:`stress`.
+
+    For a law with only a real (not complex-safe) energy, the second differences of the
+    energy are used instead: differencing a differenced stress would square the rounding.
+    """
+    if not has_own(law, "stress") and not is_complex_safe(law):
+        return _energy_hessian(law, C, p)
     C = np.asarray(C, dtype=float)
     CC = np.zeros(C.shape + (3, 3), dtype=float)
     cs = _stress_is_complex_safe(law)

@@ -80,7 +80,8 @@ class SuperLUSolver:
         try:
             self.lu = spla.splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A")
         except RuntimeError as exc:
-            raise SolverError(f"the tangent is singular ({exc}); is the body held against rigid motion?") from exc
+            raise SolverError(f"the tangent is singular ({exc}); "
+                              "is the body held against rigid motion?") from exc
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.lu.solve(np.asarray(b, dtype=float))

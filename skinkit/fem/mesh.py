@@ -89,7 +89,7 @@ def _near(a: np.ndarray, b: float, scale: float) -> np.ndarray:
 def _layer_coords(thicknesses: Sequence[float], n_layers: Sequence[int]) -> np.ndarray:
     """z coordinates of element boundaries, top (z = 0) down, returned ascending."""
     zs = [0.0]
-    for t, n in zip(thicknesses, n_layers):
+    for t, n in zip(thicknesses, n_layers, strict=True):
         if t <= 0 or n < 1:
             raise ModelError("mesh.layers", f"thickness {t} m and element count {n} must be positive")
         zs.extend(list(zs[-1] - t * np.arange(1, n + 1) / n))
@@ -134,36 +134,47 @@ def block_mesh(size: Sequence[float] = (1.0, 1.0, 1.0), n: Sequence[int] = (2, 2
 
 def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
               layers: Sequence[tuple[str, float, int]] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2)),
-              n_across: int = 9, grading: float = 0.4) -> FEMesh:
+              n_inner: int = 3, n_ring: int = 3, grading: float = 1.6) -> FEMesh:
     """The in vivo geometry: a layered disc under the support plate's hole.
 
-    A square grid of ``n_across`` x ``n_across`` elements is mapped onto the disc (elliptical
-    square-to-disc map, applied to every node so the element edges follow the circle) and
-    graded radially, ``r -> R s (a + (1 - a) s)`` with ``s = r/R`` and ``a = grading``, so
-    that elements near the centre are about ``grading`` times the average size. Layers are
-    ``(name, thickness [m], element layers)`` from the top (z = 0) down.
+    One square grid of ``n_inner + 2 n_ring`` elements across is mapped onto the disc so
+    that the square ring at the edge of the central ``n_inner`` x ``n_inner`` block lands
+    exactly on the indenter's circle (the indenter footprint is resolved, not cut by
+    elements), the central block fills the indenter disc, and the ``n_ring`` rings of
+    elements outside it are circles graded towards the centre, ``r = a + (R - a) s^grading``.
+    Every node (edge, face and centre nodes too) is mapped, so element edges follow the
+    circles. Layers are ``(name, thickness [m], element layers)`` from the top (z = 0) down.
 
     Node sets: ``top``, ``bottom``, ``outer`` (the rim, r = R), ``indenter`` (top nodes
     with r <= indenter radius).
     """
     R = 0.5 * float(diameter)
-    r_ind = 0.5 * float(indenter_diameter)
-    if R <= 0 or not 0 < r_ind < R:
+    a = 0.5 * float(indenter_diameter)
+    if R <= 0 or not 0 < a < R:
         raise ModelError("mesh", f"need 0 < indenter diameter {indenter_diameter} < diameter {diameter}")
-    if not 0 < grading <= 1:
-        raise ModelError("mesh.grading", f"must be in (0, 1], got {grading}")
-    if n_across < 2:
-        raise ModelError("mesh.n_across", f"must be at least 2, got {n_across}")
+    if grading < 1:
+        raise ModelError("mesh.grading", f"must be at least 1 (1 is uniform), got {grading}")
+    if n_inner < 1 or n_ring < 1:
+        raise ModelError("mesh", f"n_inner {n_inner} and n_ring {n_ring} must be at least 1")
     z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
-    s = np.linspace(-1.0, 1.0, n_across + 1)
+    n = n_inner + 2 * n_ring
+    s = np.linspace(-1.0, 1.0, n + 1)
     m = MeshHex.init_tensor(s, s, z)
     nodes, t, el = _from_linear(m)
     u, v = nodes[:, 0], nodes[:, 1]
-    x = u * np.sqrt(1 - v ** 2 / 2)
-    y = v * np.sqrt(1 - u ** 2 / 2)
-    r = np.hypot(x, y)
-    g = grading + (1 - grading) * r  # r is already in units of R here
-    nodes = np.column_stack([R * x * g, R * y * g, nodes[:, 2]])
+    rho = np.maximum(np.abs(u), np.abs(v))
+    rho_c = n_inner / n
+    safe = np.where(rho > 0, rho, 1.0)
+    d = np.column_stack([u, v]) / safe[:, None]          # on the unit square's boundary
+    c = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)  # on the unit circle
+    inner = rho <= rho_c + 1e-12
+    # inside: squares morph into the indenter's circle; outside: graded circles
+    wgt = np.where(inner, rho / rho_c, 1.0)
+    r = np.where(inner, a * rho / rho_c,
+                 a + (R - a) * np.clip((rho - rho_c) / (1 - rho_c), 0, 1) ** grading)
+    xy = r[:, None] * ((1 - wgt)[:, None] * d + wgt[:, None] * c)
+    xy[rho == 0] = 0.0
+    nodes = np.column_stack([xy, nodes[:, 2]])
     ifaces = list(np.cumsum([-th for _, th, _ in layers])[:-1])
     region = _region_by_z(nodes, el, ifaces)
     rr = np.hypot(nodes[:, 0], nodes[:, 1])
@@ -171,8 +182,6 @@ def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
     top = _near(nodes[:, 2], 0.0, H)
     sets = {"top": top, "bottom": _near(nodes[:, 2], -H, H),
             "outer": np.abs(rr - R) <= 1e-9 * R,
-            "indenter": top & (rr <= r_ind * (1 + 1e-9))}
-    if not sets["indenter"].any():
-        raise ModelError("mesh.indenter_diameter", "no top node lies under the indenter; refine the mesh")
+            "indenter": top & (rr <= a * (1 + 1e-9))}
     return FEMesh(nodes, t, el, region, [nm for nm, _, _ in layers],
                   {k: np.flatnonzero(v) for k, v in sets.items()})

@@ -74,7 +74,8 @@ class Problem:
         names = [m.region for m in materials]
         for r in mesh.regions:
             if names.count(r) != 1:
-                raise ModelError("materials", f"region {r!r} needs exactly one material, has {names.count(r)}")
+                raise ModelError("materials", f"region {r!r} needs exactly one material, "
+                                 f"has {names.count(r)}")
         for m in materials:
             if m.region not in mesh.regions:
                 raise ModelError("materials", f"no region {m.region!r} in the mesh ({mesh.regions})")
@@ -144,7 +145,7 @@ class Problem:
             S, CC = self.material_response(k, F, with_tangent, dt)
             re[el] = element_residual(g.dN[el], g.w[el], F, S)
             if with_tangent:
-                Ke[el] = element_tangent(g.dN[el], g.w[el], F, S, CC, g.dNT[el])
+                element_tangent(g.dN[el], g.w[el], F, S, CC, g.dNT[el], out=Ke[el])
         return re, Ke
 
     def _F(self, u: np.ndarray, k: int) -> np.ndarray:

@@ -195,8 +195,12 @@ class NewtonSolver:
             alpha = float(np.clip(a_new, 0.1 * alpha, alpha))
         return best
 
-    def step_result(self, u: np.ndarray, t: float, its: int, norm: float, dt: float | None) -> StepResult:
-        re = self._last_re if dt is None or not self.problem.viscous else self.problem.evaluate(u, False, dt)[0]
+    def step_result(self, u: np.ndarray, t: float, its: int, norm: float,
+                    dt: float | None) -> StepResult:
+        if dt is None or not self.problem.viscous:
+            re = self._last_re  # the residual of the converged iterate
+        else:
+            re = self.problem.evaluate(u, False, dt)[0]
         rf = full_vector(self.problem.geom.edofs, re, self.problem.n_dof)
         return StepResult(t, its, norm, self.dofmap.rigid_displacement(u),
                           self.dofmap.rigid_force(rf), rf)
@@ -209,7 +213,7 @@ class NewtonSolver:
         they are load factors and viscous laws answer elastically.
         """
         times = [float(x) for x in times]
-        if any(b <= a for a, b in zip(times, times[1:])):
+        if any(b <= a for a, b in zip(times, times[1:], strict=False)):
             raise SolverError("load programme times must increase")
         u = np.zeros(self.problem.n_dof) if u0 is None else np.asarray(u0, dtype=float).copy()
         t_prev = 0.0 if not times or times[0] > 0 else times[0]

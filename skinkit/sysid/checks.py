@@ -8,6 +8,8 @@ turns each of these into a :class:`SysidError` (one line naming what is wrong) o
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -100,9 +102,20 @@ class Signals:
         return int(self.force_N.size)
 
 
+def _user_stacklevel() -> int:
+    """Stack level of the first caller outside skinkit.sysid (warnings point at user code)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    frame = sys._getframe(2)
+    level = 2
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(here):
+        frame = frame.f_back
+        level += 1
+    return level
+
+
 def warn(category: type[SysidWarning], message: str, issues: list[str] | None = None) -> None:
     """Emit a named warning and remember it in ``issues`` (so results can carry it)."""
-    warnings.warn(message, category, stacklevel=3)
+    warnings.warn(message, category, stacklevel=_user_stacklevel())
     if issues is not None:
         issues.append(f"{category.__name__}: {message}")
 

@@ -105,9 +105,14 @@ def residual_diagnostics(force_N: np.ndarray, position_m: np.ndarray, predicted_
         raise SysidError(f"max_lag_s {max_lag_s!r} does not fit a record of {n} samples")
     fc = f - f.mean()
     ree, _ = correlations(e, e, L + 1)
-    auto = np.concatenate([ree[:0:-1], ree]) / ree[0]
     _, rfe = correlations(fc, e, L + 1, L)
-    cross = rfe / np.sqrt(np.mean(fc * fc) * ree[0])
+    if ree[0] > 0:
+        auto = np.concatenate([ree[:0:-1], ree]) / ree[0]
+        cross = rfe / np.sqrt(np.mean(fc * fc) * ree[0])
+    else:  # a perfect prediction: nothing left to correlate
+        auto = np.zeros(2 * L + 1)
+        auto[L] = 1.0
+        cross = np.zeros(2 * L + 1)
     lags = np.arange(-L, L + 1) / rate_hz
 
     edges = default_bands(rate_hz) if band_edges_hz is None else np.asarray(band_edges_hz, float)

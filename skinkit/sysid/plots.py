@@ -21,7 +21,7 @@ def _plt() -> Any:
 
 
 def plot_identification(model: Any, force_N: np.ndarray, position_m: np.ndarray,
-                        path: str | Path, window_s: float = 1.0) -> Path:
+                        path: str | Path, window_s: float = 0.5) -> Path:
     """Four panels like thesis Fig. 4-12: (a) input force, (b) IRF measured (95 % band) and
     fitted, (c) static nonlinearity (Wiener/Hammerstein) or predicted-vs-measured (linear),
     (d) predicted and measured output. ``model`` is a Linear, Wiener or Hammerstein model.
@@ -87,7 +87,9 @@ def plot_residuals(diag: ResidualDiagnostics, path: str | Path, title: str = "")
                        (ax[0, 1], diag.crosscorr, "input-residual cross-correlation")):
         a.plot(diag.lags_s, c, lw=0.8)
         a.axhspan(-diag.bound, diag.bound, color="0.8", alpha=0.6, label="95 % white band")
-        a.set(title=name, xlabel="lag [s]")
+        nz = diag.lags_s != 0
+        top = 1.3 * max(3 * diag.bound, float(np.max(np.abs(c[nz]))))
+        a.set(title=name, xlabel="lag [s]", ylim=(-top, top))  # lag 0 of the autocorrelation is 1
         a.legend(fontsize=8)
     e = diag.band_edges_hz
     labels = [f"{lo:g}-{hi:g}" for lo, hi in zip(e[:-1], e[1:], strict=True)]

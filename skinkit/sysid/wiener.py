@@ -39,6 +39,8 @@ class WienerModel:
         linear: the linear model the iteration started from (its VAF is ``vaf_linear_pct``).
         vaf_wiener_pct: VAF of the Wiener model's simulated output [%].
         vaf_history: VAF after each iteration [%]; iterations: how many were run.
+        se: standard errors of Is, Bs, C1, C2 from the joint fit's Jacobian (white-noise
+            approximation; NaN without the joint pass).
     """
 
     Is_s2: float
@@ -50,6 +52,7 @@ class WienerModel:
     rate_hz: float
     hold: str
     converged: bool
+    se: dict[str, float] = field(default_factory=dict)
     issues: list[str] = field(default_factory=list)
 
     @property
@@ -74,8 +77,10 @@ class WienerModel:
                   "vaf_wiener_pct": self.vaf_wiener_pct, "iterations": self.iterations,
                   "vaf_history_pct": list(self.vaf_history), "converged": self.converged,
                   "nonlinearity": self.nonlinearity.to_dict(), "warnings": list(self.issues)})
+        d["Is_se_s2"], d["Bs_se_s"] = self.se.get("Is", np.nan), self.se.get("Bs", np.nan)
         if self.nonlinearity.kind == "exponential":
             d["C1_m"], d["C2_per_N"] = self.nonlinearity.params[:2]
+            d["C1_se_m"], d["C2_se_per_N"] = self.se.get("C1", np.nan), self.se.get("C2", np.nan)
         return d
 
 
@@ -121,19 +126,34 @@ def identify_wiener_signals(sig: Signals, memory_s: float | None = None, *,
         sol = least_squares(lambda qq, g_now=g_now: g_now(x_of(qq)[burn:]) - yy, q, method="lm")
         q = sol.x
     assert g is not None
+    se = {"Is": float("nan"), "Bs": float("nan"), "C1": float("nan"), "C2": float("nan")}
     if joint:
-        q, g = _joint(q, g, x_of, yy, burn, nonlinearity, degree)
+        q, g, se_j = _joint(q, g, x_of, yy, burn, nonlinearity, degree, fit_offset)
+        se.update(se_j)
         history.append(vaf(yy, g(x_of(q)[burn:])))
     Is, Bs = (float(v) for v in np.exp(q))
     return WienerModel(Is_s2=Is, Bs_s=Bs, nonlinearity=g, linear=lin,
                        vaf_wiener_pct=history[-1], vaf_history=history, rate_hz=rate, hold=hold,
-                       converged=converged, issues=sig.issues)
+                       converged=converged, se=se, issues=sig.issues)
+
+
+def _se(sol: Any, n_par: int) -> np.ndarray:
+    """Standard errors sigma^2 (J^T J)^-1 of a least-squares solution (white residual)."""
+    r = sol.fun
+    dof = max(r.size - n_par, 1)  # n_par may exceed the Jacobian's columns (projected ones)
+    try:
+        cov = float(r @ r) / dof * np.linalg.inv(sol.jac.T @ sol.jac)
+    except np.linalg.LinAlgError:
+        return np.full(n_par, np.nan)
+    return np.sqrt(np.abs(np.diag(cov)))
 
 
 def _joint(q: np.ndarray, g: StaticNonlinearity, x_of: Any, yy: np.ndarray, burn: int,
-           kind: str, degree: int) -> tuple[np.ndarray, StaticNonlinearity]:
+           kind: str, degree: int, fit_offset: bool
+           ) -> tuple[np.ndarray, StaticNonlinearity, dict[str, float]]:
     """Joint least squares over the dynamics and the nonlinearity (polynomial coefficients,
-    being linear, are solved exactly inside each residual)."""
+    being linear, are solved exactly inside each residual). Returns the log scaled
+    parameters, the nonlinearity and standard errors (Is, Bs, and C1, C2)."""
     if kind == "polynomial":
         def resid(qq: np.ndarray) -> np.ndarray:
             x = x_of(qq)[burn:]
@@ -141,19 +161,24 @@ def _joint(q: np.ndarray, g: StaticNonlinearity, x_of: Any, yy: np.ndarray, burn
 
         sol = least_squares(resid, q, method="lm")
         x = x_of(sol.x)[burn:]
-        return sol.x, fit_polynomial(x, yy, degree)
-    n_nl = 3 if g.params[2] != 0.0 else 2
+        # variable projection: the Jacobian covers Is, Bs; the dof also pay for the coefficients
+        e = _se(sol, 2 + degree + 1)[:2] * np.exp(sol.x)
+        return sol.x, fit_polynomial(x, yy, degree), {"Is": float(e[0]), "Bs": float(e[1])}
+    n_nl = 3 if fit_offset else 2
     p0 = np.concatenate([q, g.params[:n_nl]])
 
     def resid_e(p: np.ndarray) -> np.ndarray:
-        gg = StaticNonlinearity("exponential", (p[2], p[3], p[4] if n_nl == 3 else 0.0))
+        gg = StaticNonlinearity("exponential", (p[2], p[3], p[4] if fit_offset else 0.0))
         return gg(x_of(p[:2])[burn:]) - yy
 
     scale = np.concatenate([[1.0, 1.0], np.abs(p0[2:]) + 1e-12])
     sol = least_squares(resid_e, p0, method="lm", x_scale=scale)
     p = sol.x
+    e = _se(sol, p.size)
+    se = {"Is": float(e[0] * np.exp(p[0])), "Bs": float(e[1] * np.exp(p[1])),
+          "C1": float(e[2]), "C2": float(e[3])}
     return p[:2], StaticNonlinearity("exponential", (float(p[2]), float(p[3]),
-                                                     float(p[4]) if n_nl == 3 else 0.0))
+                                                     float(p[4]) if fit_offset else 0.0)), se
 
 
 def identify_wiener(force_N: Any, position_m: Any = None, rate_hz: float | None = None,

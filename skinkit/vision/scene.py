@@ -294,6 +294,21 @@ def render_view(cam: CameraModel, objects: Sequence[object], sensor: Sensor,
     return sensor.expose(radiance(cam, objects, supersample), rng)
 
 
+def hit_mask(cam: CameraModel, objects: Sequence[object], which: int) -> np.ndarray:
+    """``(H, W)`` bool: pixels whose centre ray hits ``objects[which]`` first (e.g. the
+    region of interest around the indenter cone)."""
+    origin, dirs = _camera_rays(cam, 1)
+    depth = np.full(len(dirs), np.inf)
+    owner = np.full(len(dirs), -1)
+    for k, obj in enumerate(objects):
+        d, _ = obj.hit(origin, dirs)  # type: ignore[attr-defined]
+        nearer = d < depth
+        depth = np.where(nearer, d, depth)
+        owner = np.where(nearer, k, owner)
+    w, h = cam.image_size
+    return (owner == which).reshape(h, w)
+
+
 def visible(cam: CameraModel, objects: Sequence[object], X: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:
     """``(N,)`` bool: world points ``X`` [m] that are in the image and not hidden by ``objects``."""
     X = np.asarray(X, float)

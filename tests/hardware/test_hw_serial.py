@@ -131,7 +131,7 @@ def test_silent_host_trips_the_watchdog() -> None:
             for b in d.run(proto(periods=3)):
                 blocks.append(b)
                 if len(blocks) == 2:
-                    time.sleep(1.0)  # the host stops talking (and reading)
+                    time.sleep(3 * Limits().watchdog_s)  # the host stops talking (and reading)
         d.disconnect()
     flags, cur = stack(blocks, "flags"), stack(blocks, "motor_current")
     k = int(np.argmax(flags & FLAG_LIMIT > 0))
@@ -153,6 +153,7 @@ def test_limits_over_serial_refused_before_motion_and_stopped_in_motion() -> Non
         assert np.all(np.abs(cur[k + 1:]) < I_OFF)
         # the firmware refuses an over-travel programme even when the host does not check
         t = d.transport
+        t.send("clear")
         t.send("load", mode="position", rate_hz=100.0, setpoints=np.full((10, 3), 0.0125))
         events = []
         t_end = time.monotonic() + 10

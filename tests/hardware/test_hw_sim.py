@@ -200,7 +200,7 @@ def test_watchdog_deenergises_a_silent_host() -> None:
     dev.hold()
     events = run_device_until(dev, lambda e: False, 0.1)  # with heartbeats: no trip
     assert dev.energised and not events
-    dev.advance(int(0.3 * P.control_rate_hz))  # host silent for 0.3 s > 0.25 s watchdog
+    dev.advance(int(1.2 * Limits().watchdog_s * P.control_rate_hz))  # silent beyond the watchdog
     dev.advance(10)
     ev = dev.take_events()
     assert not dev.energised and ev and ev[0].fault.code == F.WATCHDOG

@@ -106,6 +106,7 @@ def test_bad_shapes_and_arguments(rec):
         identify_linear(rec.force_N, rec.position_m, 2000.0, hold="cubic")
 
 
+@pytest.mark.filterwarnings("ignore::skinkit.sysid.PoorFitWarning")
 def test_position_leading_force_warns(rec):
     # swap cause and effect: a "force" that follows the position by 10 ms
     y = rec.position_m
@@ -127,5 +128,6 @@ def test_real_relaxation_test_is_flagged_not_fitted():
     assert NarrowbandInputWarning.__name__ in names
     assert PoorFitWarning.__name__ in names
     assert not m.valid and m.to_dict()["valid"] is False
-    with pytest.raises(SysidError, match="not a stable under-damped"):
+    with pytest.raises(SysidError, match="not a stable under-damped"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
         identify_wiener(record)

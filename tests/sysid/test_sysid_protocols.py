@@ -91,9 +91,19 @@ def test_incremental_stiffness_follows_wiener_slope(total):
     ups = [r["K_N_per_m"] for r in table if r["direction"] == "up"]
     assert ups == sorted(ups)  # stiffening with indentation
     # the truth has no hysteresis: down and up agree at each level
+    assert len(res.hysteresis()) == 4
     for h in res.hysteresis():
         assert h["K_ratio"] == pytest.approx(1.0, abs=0.03)
         assert abs(h["position_offset_m"]) < 20e-6
+    # the same from a RobotRecord, segments found from the force alone
+    from skinkit.sysid.simulate import SimulatedRecord
+
+    rr = SimulatedRecord(prog.force_N, y, y, 1e-6, rate).to_robot_record()
+    auto = identify_incremental(rr, memory_s=0.12).table()
+    assert [r["direction"] for r in auto] == [r["direction"] for r in table]
+    for r in auto:
+        k_local = 1 / (C1_M * C2_PER_N * np.exp(-C2_PER_N * r["mean_force_N"]))
+        assert r["K_N_per_m"] == pytest.approx(k_local, rel=0.03)
 
 
 def test_incremental_keeps_going_after_a_bad_increment(total):
@@ -170,3 +180,20 @@ def test_cv_table_thesis_definition(tmp_path):
     assert (tmp_path / "cv.csv").read_text().startswith("site,direction,parameter")
     with pytest.raises(SysidError, match="lacks"):
         cv_table([{"subject": "s1"}])
+
+
+@pytest.mark.parametrize("protocol", ["A", "B"])
+def test_detect_segments_finds_the_stochastic_steps(protocol):
+    from skinkit.sysid.incremental import detect_segments
+
+    p = incremental(protocol, 3.0, 2000.0, n_steps=4, step_s=3.0, precondition_s=1.0, seed=5)
+    found = detect_segments(p.force_N, 2000.0)
+    true = p.identify_segments()
+    assert len(found) == len(true)
+    for a, b in zip(found, true, strict=True):
+        # inside the true step, and covering most of it (trim 0.25 s + window at each end)
+        assert b.start <= a.start < a.stop <= b.stop
+        assert (a.stop - a.start) > 0.6 * (b.stop - b.start)
+        assert a.direction == b.direction
+    with pytest.raises(SysidError, match="cutoff"):
+        detect_segments(p.force_N, 2000.0, cutoff_hz=5000.0)

@@ -73,3 +73,18 @@ def test_wiener_on_linear_system_has_nearly_linear_nonlinearity(total):
     # curvature over the force range is a small fraction of the slope
     assert abs(a2) * 3.0 < 0.03 * a1
     assert w.vaf_wiener_pct - w.linear.vaf_linear_pct < 0.05
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_wiener_errors_within_noise_standard_errors(total, seed):
+    # standard errors from the joint fit's Jacobian and the residual (~ the 30 dB noise);
+    # 5 sigma keeps the false-alarm rate below 1e-6 per parameter
+    rec = simulate_record(total, seed=100 + seed, wiener=(C1_M, C2_PER_N), **FORCE)
+    w = identify_wiener(rec.force_N, rec.position_m, 2000.0)
+    c1, c2 = w.nonlinearity.params[:2]
+    assert abs(c1 - C1_M) < 5 * w.se["C1"]
+    assert abs(c2 - C2_PER_N) < 5 * w.se["C2"]
+    assert abs(w.Is_s2 - total.Is_s2) < 5 * w.se["Is"]
+    assert abs(w.Bs_s - total.Bs_s) < 5 * w.se["Bs"]
+    # and the standard errors themselves are far inside the 5 % acceptance band
+    assert w.se["C1"] < 0.01 * C1_M and w.se["C2"] < 0.01 * C2_PER_N

@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+
 from skinkit.fem.hyper import VOLUMETRIC_KINDS, volumetric_energy
 from skinkit.schemas import Parameter
 

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+
 from skinkit import registry
 from skinkit.fem import lawkit
 from skinkit.schemas import Parameter

@@ -19,22 +19,32 @@ from skinkit.vision.subsets import IntegerMatch
 from skinkit_plugins.trackers.base import SubsetTracker
 
 
+_GRIDS: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _freq_grid(shape: tuple[int, int], omega_max: float) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
+    key = (shape[0], shape[1], omega_max)
+    if key not in _GRIDS:
+        ny, nx = shape
+        wy = 2 * np.pi * np.fft.fftfreq(ny)[:, None] * np.ones((1, nx))
+        wx = 2 * np.pi * np.fft.fftfreq(nx)[None, :] * np.ones((ny, 1))
+        use = (wx**2 + wy**2 <= omega_max**2) & ((wx != 0) | (wy != 0))
+        _GRIDS[key] = (use, wx[use], wy[use], np.column_stack([wx[use], wy[use]]))
+    return _GRIDS[key]
+
+
 def phase_slope(f: np.ndarray, g: np.ndarray, window: np.ndarray, omega_max: float) -> np.ndarray:
     """Subpixel shift ``(dx, dy)`` [px] with ``g(x) = f(x - d)`` from the phase slope."""
     fw = (f - f.mean()) * window
     gw = (g - g.mean()) * window
     q = np.fft.fft2(fw) * np.conj(np.fft.fft2(gw))
-    ny, nx = f.shape
-    wy = 2 * np.pi * np.fft.fftfreq(ny)[:, None] * np.ones((1, nx))
-    wx = 2 * np.pi * np.fft.fftfreq(nx)[None, :] * np.ones((ny, 1))
-    use = (wx**2 + wy**2 <= omega_max**2) & ((wx != 0) | (wy != 0))
-    wgt = np.abs(q)[use]
-    phi = np.angle(q)[use]
-    ax, ay = wx[use], wy[use]
-    A = np.array([[np.sum(wgt * ax * ax), np.sum(wgt * ax * ay)],
-                  [np.sum(wgt * ax * ay), np.sum(wgt * ay * ay)]])
-    b = np.array([np.sum(wgt * ax * phi), np.sum(wgt * ay * phi)])
-    return np.linalg.solve(A, b)
+    use, ax, ay, W = _freq_grid(f.shape, omega_max)
+    qu = q[use]
+    wgt = np.abs(qu)
+    phi = np.angle(qu)
+    Ww = W * wgt[:, None]
+    return np.linalg.solve(Ww.T @ W, Ww.T @ phi)
 
 
 class PhaseCorrelationTracker(SubsetTracker):

@@ -1,0 +1,120 @@
+"""``can``: the robot on a CAN bus through python-can's bus abstraction, so any python-can
+interface works (``socketcan``, ``pcan``, ``virtual``, ``skinkit_loopback`` to reach the
+emulator in another process). Messages are defined in ``skinkit_robot.dbc``."""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import can
+import numpy as np
+
+from skinkit_hardware import faults as F
+from skinkit_hardware.device import Event
+from skinkit_hardware.host import HostDriver
+from skinkit_hardware.params import RobotParameters
+from skinkit_hardware.wire import can_codec as C
+
+
+class CanTransport:
+    """Host side of the CAN protocol on a python-can bus (heartbeats as in the serial driver)."""
+
+    def __init__(self, bus: can.BusABC, params: RobotParameters, heartbeat_thread: bool = True,
+                 heartbeat_s: float = 0.05) -> None:
+        self.bus = bus
+        self.asm = C.SampleAssembler(params)
+        self.lock = threading.Lock()
+        self.heartbeat_s = heartbeat_s
+        self.last_sent = 0.0
+        self.stats: dict[str, Any] = {}
+        self._stop = threading.Event()
+        self._thread = None
+        if heartbeat_thread:
+            self._thread = threading.Thread(target=self._beat, name="skinkit-can-heartbeat", daemon=True)
+            self._thread.start()
+
+    @property
+    def info(self) -> dict[str, Any]:
+        return self.asm.info
+
+    def _beat(self) -> None:
+        while not self._stop.wait(self.heartbeat_s):
+            try:
+                self.send("heartbeat")
+            except F.DeviceFault:
+                return
+
+    def send(self, command: str, **args: Any) -> None:
+        msgs = C.encode_command(command, **args)
+        with self.lock:
+            try:
+                for m in msgs:
+                    self.bus.send(m, timeout=2.0)
+            except (can.CanError, OSError) as exc:
+                raise F.DeviceFault(f"can: link lost while sending {command}: {exc}", F.Fault(F.LINK)) from None
+            self.last_sent = time.monotonic()
+
+    def receive(self, timeout_s: float) -> tuple[np.ndarray, list[Event]]:
+        if time.monotonic() - self.last_sent > self.heartbeat_s:
+            self.send("heartbeat")
+        msgs = []
+        try:
+            msg = self.bus.recv(timeout_s)
+            while msg is not None and len(msgs) < 20000:  # drain what has arrived
+                msgs.append(msg)
+                msg = self.bus.recv(0)
+        except (can.CanError, OSError) as exc:
+            raise F.DeviceFault(f"can: link lost: {exc}", F.Fault(F.LINK)) from None
+        rows, events = self.asm.feed(msgs)
+        self.stats = {"corrupted_frames": 0, "incomplete_samples": self.asm.incomplete}
+        return rows, events
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(1.0)
+        try:
+            self.bus.shutdown()
+        except Exception:  # noqa: BLE001 - closing a dead bus must not mask the real error
+            pass
+
+
+class CanDriver(HostDriver):
+    """``connect(interface="skinkit_loopback", channel="127.0.0.1:PORT", bitrate=1_000_000,
+    heartbeat_thread=True, decimation=10)``, or ``port="INTERFACE:CHANNEL"`` (CLI form), or
+    ``bus=`` an open python-can bus."""
+
+    name = "can"
+
+    def _open(self, **options: Any) -> CanTransport:
+        bus = options.pop("bus", None)
+        port = options.pop("port", None)
+        interface = options.pop("interface", None)
+        channel = options.pop("channel", None)
+        bitrate = int(options.pop("bitrate", 1_000_000))
+        hb = bool(options.pop("heartbeat_thread", True))
+        if options:
+            raise F.DeviceFault(f"can driver: unknown option(s) {sorted(options)}")
+        if bus is None:
+            if port:
+                interface, _, channel = str(port).partition(":")
+                if not channel:
+                    raise F.DeviceFault(f"can driver: --port must be INTERFACE:CHANNEL (e.g. "
+                                        f"skinkit_loopback:127.0.0.1:29536 or socketcan:can0), got {port!r}")
+            if not interface or channel is None:
+                raise F.DeviceFault("can driver: give interface and channel (or --port INTERFACE:CHANNEL)")
+            try:
+                bus = can.Bus(interface=interface, channel=channel, bitrate=bitrate)
+            except Exception as exc:  # noqa: BLE001 - python-can interfaces raise many types
+                raise F.DeviceFault(f"can: cannot open {interface}:{channel} at {bitrate} bit/s: {exc}") from None
+        t = CanTransport(bus, self.params, heartbeat_thread=hb)
+        t.send("hello")
+        t_end = time.monotonic() + 3.0
+        while not t.info and time.monotonic() < t_end:
+            t.receive(0.05)
+        if not t.info:
+            t.close()
+            raise F.DeviceFault(f"can: no answer from a device on {interface}:{channel} within 3 s")
+        return t

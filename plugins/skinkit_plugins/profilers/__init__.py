@@ -1,0 +1,1 @@
+"""Built-in surface profilers (entry-point group ``skinkit.profilers``)."""

@@ -1,0 +1,132 @@
+"""``skinkit solve``, ``skinkit verify`` and ``skinkit convergence``: the finite-element engine."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import click
+
+
+def _progress(total: float, label: str):
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    prog = Progress(TextColumn(label), BarColumn(), TextColumn("t = {task.completed:.4g} / {task.total:.4g}"),
+                    TimeElapsedColumn(), transient=True)
+    return prog
+
+
+@click.command("solve")
+@click.argument("model_file", type=click.Path(dir_okay=False))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="output directory (default: MODEL_FILE without .toml)")
+@click.option("--json", "as_json", is_flag=True, help="print the JSON summary")
+@click.option("--no-vtu", is_flag=True, help="skip the VTU series")
+def solve(model_file: str, out_dir: str | None, as_json: bool, no_vtu: bool) -> None:
+    """Solve MODEL_FILE (TOML); write result.h5, summary.json and a VTU series."""
+    from skinkit.fem.model import load_model
+    from skinkit.fem.run import solve_model, write_outputs
+    model = load_model(model_file)
+    out = Path(out_dir) if out_dir else Path(model_file).with_suffix("")
+    times = model.load.times
+    prog = _progress(float(times[-1]), f"solving {model.name} ({model.mesh.n_dof} dofs)")
+    with prog:
+        task = prog.add_task("solve", total=float(times[-1]))
+        sol, info = solve_model(model, progress=lambda t: prog.update(task, completed=t))
+    info["files"] = write_outputs(model, sol, info, out, vtu=not no_vtu)
+    if as_json:
+        click.echo(json.dumps(info, indent=2))
+        return
+    last = info["steps"][-1]
+    click.echo(f"{model.name}: {info['dof']} dofs, {len(info['steps'])} steps, "
+               f"{info['newton_iterations']} Newton iterations, {info['wall_s']:.2f} s")
+    if last["tip_force_N"] is not None:
+        click.echo(f"final tip displacement {last['tip_displacement_m']} m, force {last['tip_force_N']} N")
+    click.echo(f"wrote {out}")
+
+
+@click.command("verify")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+@click.option("--case", "cases", multiple=True, help="run only these cases (repeatable)")
+def verify(as_json: bool, cases: tuple[str, ...]) -> None:
+    """Run the finite-element verification suite (closed forms, patch test, Sneddon, ...)."""
+    from skinkit.errors import SkinkitError
+    from skinkit.fem import verify as V
+    unknown = [c for c in cases if c not in V.names()]
+    if unknown:
+        raise SkinkitError(f"unknown verification case(s) {unknown}; cases are {V.names()}")
+    res = V.run(list(cases) or None,
+                progress=None if as_json else (lambda n: click.echo(f"  running {n} ...", err=True)))
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+    else:
+        for c in res["cases"]:
+            click.echo(f"{'PASS' if c['passed'] else 'FAIL'} {c['name']}: error {c['error']:.3g} "
+                       f"(tolerance {c['tolerance']:.3g}) {c['note']}")
+    if not res["passed"]:
+        raise SystemExit(1)
+
+
+def _refined(spec: dict, level: int) -> dict:
+    s = copy.deepcopy(spec)
+    g = s.setdefault("geometry", {})
+    if g.get("kind", "disc") == "disc":
+        g["n_inner"] = int(g.get("n_inner", 3)) * level
+        g["n_ring"] = int(g.get("n_ring", 3)) * level
+    else:
+        g["n"] = [int(x) * level for x in g.get("n", [4, 4])]
+    for L in s["layers"]:
+        L["elements"] = int(L.get("elements", 2)) * level
+    return s
+
+
+@click.command("convergence")
+@click.argument("model_file", type=click.Path(dir_okay=False))
+@click.option("--levels", default=3, show_default=True, help="refinement levels (1 = as given)")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="directory for convergence.json and convergence.png")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+def convergence(model_file: str, levels: int, out_dir: str | None, as_json: bool) -> None:
+    """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count."""
+    from skinkit.fem.model import build_model, read_model
+    from skinkit.fem.run import solve_model
+    spec = read_model(model_file)
+    rows = []
+    for lev in range(1, levels + 1):
+        model = build_model(_refined(spec, lev))
+        _, info = solve_model(model)
+        last = info["steps"][-1]
+        f = last["tip_force_N"]
+        d = last["tip_displacement_m"]
+        rows.append({"level": lev, "dof": info["dof"], "elements": info["elements"],
+                     "tip_force_N": f, "tip_displacement_m": d, "wall_s": info["wall_s"]})
+        if not as_json:
+            click.echo(f"level {lev}: {info['dof']} dofs, tip force {f} N, displacement {d} m, "
+                       f"{info['wall_s']:.1f} s", err=True)
+    key = "tip_force_N" if spec.get("indenter", {}).get("mode", "displacement") == "displacement" \
+        else "tip_displacement_m"
+    finest = rows[-1][key]
+    for r in rows:
+        if r[key] is not None and finest is not None:
+            r["change_vs_finest"] = abs(r[key][2] - finest[2]) / max(abs(finest[2]), 1e-300)
+    res = {"model": spec.get("model", {}).get("name", "model"), "quantity": key, "levels": rows}
+    out = Path(out_dir) if out_dir else Path(model_file).with_suffix("").with_name(
+        Path(model_file).stem + "_convergence")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "convergence.json").write_text(json.dumps(res, indent=2))
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    ax.plot([r["dof"] for r in rows], [abs(r[key][2]) for r in rows], "o-")
+    ax.set_xlabel("degrees of freedom")
+    ax.set_ylabel("|tip force| [N]" if key == "tip_force_N" else "|tip displacement| [m]")
+    ax.set_xscale("log")
+    ax.set_title("mesh convergence")
+    fig.tight_layout()
+    fig.savefig(out / "convergence.png", dpi=120)
+    plt.close(fig)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+    else:
+        click.echo(f"wrote {out / 'convergence.json'} and {out / 'convergence.png'}")

@@ -1,0 +1,72 @@
+"""Writing a solved model: HDF5 result, a VTU series ParaView opens, a JSON summary."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from skinkit.fem.mesh import FEMesh
+from skinkit.fem.solver import Solution
+
+#: VTK hexahedron corner order (0,0,0),(1,0,0),(1,1,0),(0,1,0),(0,0,1),(1,0,1),(1,1,1),(0,1,1)
+#: as positions in scikit-fem's hexahedron vertex order
+VTK_HEX_ORDER = np.array([7, 4, 1, 5, 6, 2, 0, 3])
+
+
+def summary(model_name: str, mesh: FEMesh, sol: Solution, fixed_nodes: np.ndarray,
+            wall_s: float) -> dict[str, Any]:
+    """JSON-ready summary: per step tip displacement [m], tip force [N], reaction [N], iterations."""
+    steps = []
+    for st in sol.steps:
+        reac = st.reaction.reshape(-1, 3)[fixed_nodes].sum(axis=0) if fixed_nodes.size else np.zeros(3)
+
+        def lst(x):
+            return None if x is None else [None if not np.isfinite(v) else float(v) for v in x]
+        steps.append({"t": float(st.t), "tip_displacement_m": lst(st.tip_displacement),
+                      "tip_force_N": lst(st.tip_force), "reaction_force_N": lst(reac),
+                      "newton_iterations": int(st.iterations)})
+    return {"model": model_name, "dof": mesh.n_dof, "elements": mesh.n_elements,
+            "wall_s": wall_s, "newton_iterations": int(sol.timings.iterations),
+            "assembly_s": sol.timings.assembly, "solve_s": sol.timings.solve, "steps": steps}
+
+
+def write_hdf5(path: Path, mesh: FEMesh, sol: Solution, info: dict[str, Any]) -> None:
+    """``/mesh/nodes`` (N, 3) [m], ``/mesh/elements`` (E, 27), ``/times`` [s or 1],
+    ``/displacement`` (steps, N, 3) [m], ``/tip_displacement``, ``/tip_force``, ``/iterations``."""
+    with h5py.File(path, "w") as f:
+        f.attrs["model"] = info["model"]
+        f.attrs["summary"] = json.dumps(info)
+        f["mesh/nodes"] = mesh.nodes
+        f["mesh/elements"] = mesh.elements
+        f["mesh/region"] = mesh.region
+        f["mesh"].attrs["regions"] = json.dumps(mesh.regions)
+        f["times"] = sol.times
+        f["displacement"] = sol.u.reshape(len(sol.times), -1, 3)
+        tip = [s.tip_displacement if s.tip_displacement is not None else np.full(3, np.nan) for s in sol.steps]
+        frc = [s.tip_force if s.tip_force is not None else np.full(3, np.nan) for s in sol.steps]
+        f["tip_displacement"] = np.array(tip)
+        f["tip_force"] = np.array(frc)
+        f["iterations"] = np.array([s.iterations for s in sol.steps])
+
+
+def write_vtu_series(out: Path, mesh: FEMesh, sol: Solution, stem: str = "step") -> Path:
+    """One ``.vtu`` per step (linear hexahedra on the vertices, displacement as point data)
+    plus a ``.pvd`` collection; returns the ``.pvd`` path."""
+    import meshio
+    nv = int(mesh.t.max()) + 1
+    cells = [("hexahedron", mesh.t.T[:, VTK_HEX_ORDER])]
+    entries = []
+    for k, t in enumerate(sol.times):
+        u = sol.u[k].reshape(-1, 3)[:nv]
+        name = f"{stem}_{k:04d}.vtu"
+        meshio.write(out / name, meshio.Mesh(mesh.nodes[:nv], cells, point_data={"displacement": u},
+                                             cell_data={"region": [mesh.region.astype(np.int32)]}))
+        entries.append(f'    <DataSet timestep="{t:.9g}" part="0" file="{name}"/>')
+    pvd = out / f"{stem}.pvd"
+    pvd.write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+                   + "\n".join(entries) + "\n  </Collection>\n</VTKFile>\n")
+    return pvd

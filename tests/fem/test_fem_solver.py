@@ -1,0 +1,104 @@
+"""Solver behaviour: force control, step cutting, clear failures, mesh geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from skinkit import registry
+from skinkit.fem.assembly import geometry
+from skinkit.fem.bcs import BoundaryConditions, Rigid
+from skinkit.fem.errors import InvertedElementError, ModelError, SolverError
+from skinkit.fem.mesh import block_mesh, disc_mesh
+from skinkit.fem.problem import Material, Problem
+from skinkit.fem.solver import NewtonSolver, SolverOptions
+
+pytestmark = pytest.mark.needs_plugins
+
+
+def _nh():
+    return registry.create("skinkit.laws", "neo-hookean-ni")
+
+
+def test_disc_mesh_geometry():
+    m = disc_mesh()
+    g = geometry(m)
+    # the isoparametric quadratic map represents the circle to O(h^3) per edge; with
+    # 9 edges per quarter rim the area error is below 1e-4 relative
+    vol = np.pi * 0.02 ** 2 * 0.005
+    assert abs(g.w.sum() - vol) <= 1e-4 * vol
+    r = np.hypot(*m.nodes[m.node_sets["indenter"], :2].T)
+    assert r.max() <= 0.002 * (1 + 1e-9) and m.node_sets["indenter"].size > 9
+    assert m.regions == ["skin", "subdermal"]
+    skin = m.region_elements("skin")
+    assert np.all(m.nodes[m.elements[skin], 2] >= -0.0015 - 1e-12)
+
+
+def _indent_problem(mode, value):
+    m = disc_mesh(0.02, 0.004, layers=(("skin", 0.0015, 1), ("subdermal", 0.0035, 1)),
+                  n_inner=2, n_ring=2)
+    law = _nh()
+    p = {"mu": 1e4, "K": 2e5}
+    prob = Problem(m, [Material("skin", law, p), Material("subdermal", law, dict(p, mu=3e3))])
+    bc = BoundaryConditions(m.n_dof).fix(m.node_sets["bottom"]).fix(m.node_sets["outer"])
+    bc.rigid = Rigid(m.node_sets["indenter"], mode, lambda t: t * np.asarray(value))
+    return prob, bc
+
+
+def test_force_control_reproduces_displacement_control():
+    prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.0003])
+    sd = NewtonSolver(prob, bc, SolverOptions(rtol=1e-10)).run([0.5, 1.0])
+    F = sd.steps[-1].tip_force
+    prob2, bc2 = _indent_problem("force", F)
+    sf = NewtonSolver(prob2, bc2, SolverOptions(rtol=1e-10)).run([0.5, 1.0])
+    # the same equilibrium reached from either side: agreement to the Newton tolerance,
+    # amplified by the tangent's condition (1e-10 -> 1e-7 relative is generous)
+    np.testing.assert_allclose(sf.steps[-1].tip_displacement, [0, 0, -0.0003], atol=3e-11 + 1e-7 * 3e-4)
+    np.testing.assert_allclose(sf.u[-1], sd.u[-1], atol=1e-7 * 3e-4)
+
+
+def test_inverting_load_is_cut_then_reported():
+    prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.02])  # 4x the thickness
+    with pytest.raises(SolverError, match=r"gave up at load t = .* step cuts"):
+        NewtonSolver(prob, bc, SolverOptions(max_cuts=3)).run([1.0])
+
+
+def test_step_cutting_recovers():
+    """A load too large for one increment converges after cuts (the history shows it)."""
+    m = block_mesh((0.01, 0.01, 0.01), (2, 2, 2))
+    prob = Problem(m, [Material("body", _nh(), {"mu": 1e4, "K": 1e6})])
+    s = m.node_sets
+    bc = BoundaryConditions(m.n_dof).fix(s["bottom"]).prescribe(s["top"], 2, lambda t: -0.006 * t)
+    sol = NewtonSolver(prob, bc, SolverOptions(max_iter=6)).run([1.0])
+    assert sol.timings.iterations > 6
+    assert np.isclose(sol.u[-1].reshape(-1, 3)[s["top"], 2], -0.006).all()
+
+
+def test_inverted_element_error_names_the_element():
+    m = block_mesh((1, 1, 1), (1, 1, 1))
+    prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 10.0})])
+    u = np.zeros(m.n_dof)
+    u[2::3] = -2.0 * (m.nodes[:, 2] + 1)  # flips the element through its floor
+    with pytest.raises(InvertedElementError, match="element 0 is inverted"):
+        prob.evaluate(u)
+
+
+def test_material_errors():
+    m = block_mesh()
+    with pytest.raises(ModelError, match="region 'body' needs exactly one material"):
+        Problem(m, [])
+    with pytest.raises(ModelError, match=r"materials\[body\]\.mu.*outside"):
+        Problem(m, [Material("body", _nh(), {"mu": -1.0, "K": 1.0})])
+
+
+@pytest.mark.parametrize("linear", ["splu", "auto"])
+def test_linear_solvers_agree(linear):
+    m = block_mesh((1, 1, 1), (2, 2, 2))
+    prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 20.0})])
+    s = m.node_sets
+    bc = BoundaryConditions(m.n_dof).fix(s["bottom"])
+    bc.prescribe(s["top"], 0, lambda t: 0.1 * t).prescribe(s["top"], 2, lambda t: -0.1 * t)
+    u_ref = NewtonSolver(prob, bc, SolverOptions(linear="splu", rtol=1e-12)).run([1.0]).u[-1]
+    u = NewtonSolver(prob, bc, SolverOptions(linear=linear, rtol=1e-12)).run([1.0]).u[-1]
+    # two direct solvers on the same converged Newton problem: rounding-level agreement
+    np.testing.assert_allclose(u, u_ref, atol=1e-10)
