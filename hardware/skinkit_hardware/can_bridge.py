@@ -41,12 +41,16 @@ def parse_loopback(channel: str) -> tuple[str, int]:
     except ValueError:
         raise BridgeError(f"CAN bridge: channel must be 'HOST:PORT' on loopback, got {channel!r}") from None
     if not ip.is_loopback:
-        raise BridgeError(f"CAN bridge: {host} is not a loopback address (only 127.0.0.0/8 and ::1 are allowed)")
+        raise BridgeError(
+            f"CAN bridge: {host} is not a loopback address (only 127.0.0.0/8 and ::1 are allowed)"
+        )
     return str(ip), port_n
 
 
 def pack(msg: can.Message) -> bytes:
-    return RECORD.pack(msg.arbitration_id, msg.dlc, 1 if msg.is_extended_id else 0, bytes(msg.data).ljust(8, b"\0"))
+    return RECORD.pack(
+        msg.arbitration_id, msg.dlc, 1 if msg.is_extended_id else 0, bytes(msg.data).ljust(8, b"\0")
+    )
 
 
 def unpack(buf: bytes) -> can.Message:
@@ -85,8 +89,8 @@ class LoopbackBus(can.BusABC):
                 if data != b"-":
                     self.buf += data
         if len(self.buf) >= RECORD.size:
-            msg = unpack(bytes(self.buf[:RECORD.size]))
-            del self.buf[:RECORD.size]
+            msg = unpack(bytes(self.buf[: RECORD.size]))
+            del self.buf[: RECORD.size]
             return msg, False
         return None, False
 
@@ -157,8 +161,8 @@ class BridgeServer:
                         return
                     buf += data
                     while len(buf) >= RECORD.size:  # host -> device
-                        self.bus.send(unpack(bytes(buf[:RECORD.size])))
-                        del buf[:RECORD.size]
+                        self.bus.send(unpack(bytes(buf[: RECORD.size])))
+                        del buf[: RECORD.size]
         except OSError:
             return
         finally:

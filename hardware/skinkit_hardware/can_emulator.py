@@ -22,8 +22,17 @@ class CanLinkServer:
     """``port`` > 0 or 0 (any free port) serves the loopback bridge; ``port`` None keeps the
     bus in-process on the virtual ``channel`` (tests)."""
 
-    def __init__(self, port: int | None, bitrate: int, buffer_bytes: int, drop_rate: float, corrupt_rate: float,
-                 rng: np.random.Generator, params: RobotParameters, channel: str | None = None) -> None:
+    def __init__(
+        self,
+        port: int | None,
+        bitrate: int,
+        buffer_bytes: int,
+        drop_rate: float,
+        corrupt_rate: float,
+        rng: np.random.Generator,
+        params: RobotParameters,
+        channel: str | None = None,
+    ) -> None:
         self.channel = channel or f"skinkit-{uuid.uuid4().hex[:8]}"
         self.bus = can.Bus(interface="virtual", channel=self.channel, receive_own_messages=False)
         self.bridge = None

@@ -39,8 +39,7 @@ from skinkit_hardware.params import Limits, RobotParameters
 from skinkit_hardware.safety import check_programme
 from skinkit_hardware.skin import KelvinVoigtSkin, SkinLoad
 
-COLUMNS = ("index", "tick", "q1", "q2", "q3", "i1", "i2", "i3", "fx", "fy", "fz", "tx", "ty", "tz",
-           "flags")
+COLUMNS = ("index", "tick", "q1", "q2", "q3", "i1", "i2", "i3", "fx", "fy", "fz", "tx", "ty", "tz", "flags")
 
 IDLE, HOLD, HOMING, RUNNING, FAULTED = "idle", "hold", "homing", "running", "fault"
 
@@ -140,8 +139,9 @@ class Device:
         """The host is alive (every command counts as one)."""
         self.last_host = self._now()
 
-    def configure(self, decimation: int | None = None, watchdog_s: float | None = None,
-                  tip_force_N: float | None = None) -> None:
+    def configure(
+        self, decimation: int | None = None, watchdog_s: float | None = None, tip_force_N: float | None = None
+    ) -> None:
         """Streaming decimation, watchdog time and tip-force limit (a host may only lower the
         firmware's tip-force limit, never raise it)."""
         self.heartbeat()
@@ -184,7 +184,9 @@ class Device:
         self.home_speed = float(speed_m_s)
         self._home_phase = 0
 
-    def load(self, mode: str, rate_hz: float, setpoints: np.ndarray, trigger_period_s: float = 0.0) -> Event | None:
+    def load(
+        self, mode: str, rate_hz: float, setpoints: np.ndarray, trigger_period_s: float = 0.0
+    ) -> Event | None:
         """Store a programme; returns a ``refused`` event (and keeps nothing) if it breaks a limit."""
         self.heartbeat()
         setpoints = np.asarray(setpoints, dtype=float)
@@ -199,7 +201,9 @@ class Device:
         self.prog_mode = mode
         self.prog_rate = float(rate_hz)
         dec = self.decimation
-        period = round(trigger_period_s * self.params.control_rate_hz / dec) * dec if trigger_period_s > 0 else 0
+        period = (
+            round(trigger_period_s * self.params.control_rate_hz / dec) * dec if trigger_period_s > 0 else 0
+        )
         self.trigger_period = int(period)
         return None
 
@@ -289,7 +293,9 @@ class Device:
         """De-energise when the host has been silent longer than the watchdog time."""
         silent = self._now() - self.last_host
         if self.energised and silent > self.limits.watchdog_s:
-            self._trip(F.Fault(F.WATCHDOG, value=silent, limit=self.limits.watchdog_s, time_s=self._run_time()))
+            self._trip(
+                F.Fault(F.WATCHDOG, value=silent, limit=self.limits.watchdog_s, time_s=self._run_time())
+            )
 
     # -- the control loop -------------------------------------------------------------
     def advance(self, n_ticks: int) -> None:
@@ -307,7 +313,7 @@ class Device:
         kp, ki, kd = p.kp_N_per_m, p.ki_N_per_m_s, p.kd_Ns_per_m
         alpha = 1.0 - math.exp(-2 * math.pi * p.derivative_filter_hz * dt)
         th_a = dt / p.thermal_time_constant_s
-        cont2 = lim.continuous_force_N ** 2
+        cont2 = lim.continuous_force_N**2
         t_lo, t_hi = lim.travel_m
         stop_lo, stop_hi = t_lo - 5e-4, t_hi + 5e-4
         a_lo, a_hi = p.adc_span_m
@@ -316,7 +322,7 @@ class Device:
         ilsb = p.current_lsb_A
         fres, tres = p.ft_force_resolution_N, p.ft_torque_resolution_Nm
         plen = p.probe_length_m
-        tip_lim2 = lim.tip_force_N ** 2
+        tip_lim2 = lim.tip_force_N**2
         noise = self.rng.standard_normal((n_ticks, 6)).tolist()
         sig_q, sig_i = p.pot_sigma_m, p.current_noise_A
         x, v, integ, xf, th = self.x, self.v, self.integ, self.xf, self.th
@@ -330,12 +336,16 @@ class Device:
             tr, qr = self.tip_ref, self.q_ref
             nz = noise[n]
             dq0, dq1, dq2 = x[0] - qr[0], x[1] - qr[1], x[2] - qr[2]
-            u = (tr[0] + j00 * dq0 + j01 * dq1 + j02 * dq2 - so[0],
-                 tr[1] + j10 * dq0 + j11 * dq1 + j12 * dq2 - so[1],
-                 tr[2] + j20 * dq0 + j21 * dq1 + j22 * dq2 - so[2])
-            vt = (j00 * v[0] + j01 * v[1] + j02 * v[2],
-                  j10 * v[0] + j11 * v[1] + j12 * v[2],
-                  j20 * v[0] + j21 * v[1] + j22 * v[2])
+            u = (
+                tr[0] + j00 * dq0 + j01 * dq1 + j02 * dq2 - so[0],
+                tr[1] + j10 * dq0 + j11 * dq1 + j12 * dq2 - so[1],
+                tr[2] + j20 * dq0 + j21 * dq1 + j22 * dq2 - so[2],
+            )
+            vt = (
+                j00 * v[0] + j01 * v[1] + j02 * v[2],
+                j10 * v[0] + j11 * v[1] + j12 * v[2],
+                j20 * v[0] + j21 * v[1] + j22 * v[2],
+            )
             fs = skin.reaction(u, vt, dt)
             run_k = self.tick - self.run_tick0
             # setpoint for this tick
@@ -358,8 +368,11 @@ class Device:
                 else:
                     fr = pos - i0
                     r0, r1 = prog[i0], prog[i0 + 1]
-                    sp = [r0[0] + fr * (r1[0] - r0[0]), r0[1] + fr * (r1[1] - r0[1]),
-                          r0[2] + fr * (r1[2] - r0[2])]
+                    sp = [
+                        r0[0] + fr * (r1[0] - r0[0]),
+                        r0[1] + fr * (r1[1] - r0[1]),
+                        r0[2] + fr * (r1[2] - r0[2]),
+                    ]
                     force_mode = self.prog_mode == "force"
             elif mode == HOMING:
                 sp = self._homing_setpoint(sp)
@@ -402,9 +415,11 @@ class Device:
                         c, flags = -imax, flags | FLAG_SATURATED
                     cur[i] = c
             # physics
-            jt = (j00 * fs[0] + j10 * fs[1] + j20 * fs[2],
-                  j01 * fs[0] + j11 * fs[1] + j21 * fs[2],
-                  j02 * fs[0] + j12 * fs[1] + j22 * fs[2])
+            jt = (
+                j00 * fs[0] + j10 * fs[1] + j20 * fs[2],
+                j01 * fs[0] + j11 * fs[1] + j21 * fs[2],
+                j02 * fs[0] + j12 * fs[1] + j22 * fs[2],
+            )
             for i in range(3):
                 kf = kf0 * (1.0 - droop * min(((x[i] - mid) / half) ** 2, 1.5))
                 fm = kf * cur[i]
@@ -435,13 +450,17 @@ class Device:
                         self._trip(F.Fault(F.TRAVEL, i + 1, meas[i], t_lo if meas[i] < t_lo else t_hi, tnow))
                         break
                     if th[i] > cont2:
-                        self._trip(F.Fault(F.CONTINUOUS_FORCE, i + 1, math.sqrt(th[i]),
-                                           lim.continuous_force_N, tnow))
+                        self._trip(
+                            F.Fault(F.CONTINUOUS_FORCE, i + 1, math.sqrt(th[i]), lim.continuous_force_N, tnow)
+                        )
                         break
                 else:
                     if fx * fx + fy * fy + fz * fz > tip_lim2:
-                        self._trip(F.Fault(F.TIP_FORCE, 0, math.sqrt(fx * fx + fy * fy + fz * fz),
-                                           lim.tip_force_N, tnow))
+                        self._trip(
+                            F.Fault(
+                                F.TIP_FORCE, 0, math.sqrt(fx * fx + fy * fy + fz * fz), lim.tip_force_N, tnow
+                            )
+                        )
                 if not self.energised:
                     self.off_tick = self.tick  # the next tick computes zero current
             elif self.off_tick < 0 and self.fault_tick >= 0:
@@ -455,9 +474,25 @@ class Device:
                 if self.mode == FAULTED:
                     fl |= FLAG_ESTOP if self.fault and self.fault.code == F.ESTOP else FLAG_LIMIT
                 ci = [round((cur[i] + sig_i * nz[3 + i]) / ilsb) * ilsb for i in range(3)]
-                self.rows.append((self.sample_index, self.tick - 1 - self.run_tick0, meas[0], meas[1], meas[2],
-                                  ci[0], ci[1], ci[2], fx, fy, fz,
-                                  round(-plen * fy / tres) * tres, round(plen * fx / tres) * tres, 0.0, fl))
+                self.rows.append(
+                    (
+                        self.sample_index,
+                        self.tick - 1 - self.run_tick0,
+                        meas[0],
+                        meas[1],
+                        meas[2],
+                        ci[0],
+                        ci[1],
+                        ci[2],
+                        fx,
+                        fy,
+                        fz,
+                        round(-plen * fy / tres) * tres,
+                        round(plen * fx / tres) * tres,
+                        0.0,
+                        fl,
+                    )
+                )
                 self.sample_index += 1
                 self.generated += 1
                 self.flags_acc = 0
@@ -474,7 +509,8 @@ class Device:
             step = 0.01 * dt
             new = [s + max(-step, min(step, self.home_target - s)) for s in sp]
             if all(abs(nv - self.home_target) < 1e-12 for nv in new) and all(
-                    abs(xi - self.home_target) < 20e-6 for xi in self.xf):
+                abs(xi - self.home_target) < 20e-6 for xi in self.xf
+            ):
                 self._home_phase = 1
             self.setpoint = new
             return new
@@ -492,9 +528,9 @@ class Device:
         return new
 
 
-
-def run_device_until(device: Device, done: Callable[[list[Event]], bool], max_s: float,
-                     block_ticks: int = 100) -> list[Event]:
+def run_device_until(
+    device: Device, done: Callable[[list[Event]], bool], max_s: float, block_ticks: int = 100
+) -> list[Event]:
     """Advance ``device`` in blocks until ``done(events)`` or ``max_s`` of device time; returns events."""
     events: list[Event] = []
     t_end = device.time_s + max_s

@@ -44,8 +44,15 @@ class LinkStats:
 class SerialLinkServer:
     """Device side of the serial protocol on the master end of a pty."""
 
-    def __init__(self, baud: int, buffer_bytes: int, drop_rate: float, corrupt_rate: float,
-                 rng: np.random.Generator, params: RobotParameters) -> None:
+    def __init__(
+        self,
+        baud: int,
+        buffer_bytes: int,
+        drop_rate: float,
+        corrupt_rate: float,
+        rng: np.random.Generator,
+        params: RobotParameters,
+    ) -> None:
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
         os.set_blocking(self.master, False)
@@ -92,13 +99,19 @@ class SerialLinkServer:
             return "home", {"contact_N": c, "speed_m_s": v}
         if kind == S.LOAD_BEGIN:
             mode, n, rate, trig = S.LOAD_BEGIN_S.unpack(payload)
-            self._load = {"mode": "position" if mode == 0 else "force", "n": n, "rate_hz": rate,
-                          "trigger_period_s": trig, "data": np.zeros((n, 3), "<i4"), "got": 0}
+            self._load = {
+                "mode": "position" if mode == 0 else "force",
+                "n": n,
+                "rate_hz": rate,
+                "trigger_period_s": trig,
+                "data": np.zeros((n, 3), "<i4"),
+                "got": 0,
+            }
             return "heartbeat", {}
         if kind == S.LOAD_DATA and self._load is not None:
             (off,) = S.LOAD_DATA_HEAD.unpack_from(payload)
             chunk = np.frombuffer(payload, "<i4", offset=S.LOAD_DATA_HEAD.size).reshape(-1, 3)
-            self._load["data"][off: off + chunk.shape[0]] = chunk
+            self._load["data"][off : off + chunk.shape[0]] = chunk
             self._load["got"] += chunk.shape[0]
             return "heartbeat", {}
         if kind == S.LOAD_END and self._load is not None:
@@ -107,8 +120,12 @@ class SerialLinkServer:
             if ld["got"] != ld["n"] or zlib.crc32(ld["data"].tobytes()) != crc:
                 return "load_corrupt", {}
             unit = S.POSITION_UNIT_M if ld["mode"] == "position" else S.FORCE_UNIT_N
-            return "load", {"mode": ld["mode"], "rate_hz": ld["rate_hz"], "setpoints": ld["data"] * unit,
-                            "trigger_period_s": ld["trigger_period_s"]}
+            return "load", {
+                "mode": ld["mode"],
+                "rate_hz": ld["rate_hz"],
+                "setpoints": ld["data"] * unit,
+                "trigger_period_s": ld["trigger_period_s"],
+            }
         if kind == S.HELLO:
             return "hello", {}
         if kind in names:
@@ -166,8 +183,14 @@ class SerialLinkServer:
                 pass
 
 
-def serve(device: Device, link: Any, speed: float, announce: str | None, max_s: float | None = None,
-          stop: Any = None) -> None:
+def serve(
+    device: Device,
+    link: Any,
+    speed: float,
+    announce: str | None,
+    max_s: float | None = None,
+    stop: Any = None,
+) -> None:
     """Run ``device`` behind ``link`` until killed, ``max_s`` of wall time, or ``stop.is_set()``."""
     if announce:
         print(announce, flush=True)
@@ -183,8 +206,14 @@ def serve(device: Device, link: Any, speed: float, announce: str | None, max_s: 
         for cmd, args in commands:
             device.heartbeat()
             if cmd == "hello":
-                link.info({"control_rate_hz": rate, "decimation": device.decimation,
-                           "limits": device.limits.to_dict(), "firmware": "skinkit-emulator 1"})
+                link.info(
+                    {
+                        "control_rate_hz": rate,
+                        "decimation": device.decimation,
+                        "limits": device.limits.to_dict(),
+                        "firmware": "skinkit-emulator 1",
+                    }
+                )
             elif cmd == "load":
                 device.load(**args)
             elif cmd == "load_corrupt":
@@ -228,13 +257,19 @@ def build_device(args: argparse.Namespace) -> Device:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m skinkit_hardware.emulator",
-                                 description="Emulate the microrobot behind its serial or CAN protocol.")
+    ap = argparse.ArgumentParser(
+        prog="python -m skinkit_hardware.emulator",
+        description="Emulate the microrobot behind its serial or CAN protocol.",
+    )
     ap.add_argument("link", choices=["serial", "can"])
-    ap.add_argument("--baud", type=int, default=921600, help="serial: bytes drained at baud/10 per s (0: unlimited)")
+    ap.add_argument(
+        "--baud", type=int, default=921600, help="serial: bytes drained at baud/10 per s (0: unlimited)"
+    )
     ap.add_argument("--bitrate", type=int, default=1_000_000, help="CAN: bit rate (0: unlimited)")
     ap.add_argument("--port", type=int, default=0, help="CAN bridge TCP port on 127.0.0.1 (0: any free)")
-    ap.add_argument("--speed", type=float, default=1.0, help="real-time factor; 0 = as fast as the link drains")
+    ap.add_argument(
+        "--speed", type=float, default=1.0, help="real-time factor; 0 = as fast as the link drains"
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skin", default="kelvin-voigt")
     ap.add_argument("--buffer-bytes", type=int, default=65536, help="device transmit buffer")
@@ -247,14 +282,16 @@ def main(argv: list[str] | None = None) -> int:
     device = build_device(args)
     rng = np.random.default_rng(args.seed + 1)
     if args.link == "serial":
-        link = SerialLinkServer(args.baud, args.buffer_bytes, args.drop_rate, args.corrupt_rate, rng,
-                                device.params)
+        link = SerialLinkServer(
+            args.baud, args.buffer_bytes, args.drop_rate, args.corrupt_rate, rng, device.params
+        )
         announce = f"serial: {link.port}"
     else:
         from skinkit_hardware.can_emulator import CanLinkServer
 
-        link = CanLinkServer(args.port, args.bitrate, args.buffer_bytes, args.drop_rate, args.corrupt_rate,
-                             rng, device.params)
+        link = CanLinkServer(
+            args.port, args.bitrate, args.buffer_bytes, args.drop_rate, args.corrupt_rate, rng, device.params
+        )
         announce = f"can: skinkit_loopback:{link.address}"
     try:
         serve(device, link, args.speed, announce, args.max_s)

@@ -30,8 +30,15 @@ NAMES = {
     BAD_COMMAND: "bad command",
     LINK: "link lost",
 }
-UNITS = {TRAVEL: "m", CONTINUOUS_FORCE: "N", TIP_FORCE: "N", WATCHDOG: "s", STUCK_SENSOR: "m",
-         PEAK_FORCE: "N", NO_CONTACT: "m"}
+UNITS = {
+    TRAVEL: "m",
+    CONTINUOUS_FORCE: "N",
+    TIP_FORCE: "N",
+    WATCHDOG: "s",
+    STUCK_SENSOR: "m",
+    PEAK_FORCE: "N",
+    NO_CONTACT: "m",
+}
 
 
 @dataclass(frozen=True)
@@ -56,9 +63,9 @@ class Fault:
         detail = ""
         if self.value == self.value:  # not NaN
             if unit == "m":
-                detail = f": {self.value * 1e3:.3f} mm"
+                detail = f": {self.value * 1e3:.4f} mm"
                 if self.limit == self.limit:
-                    detail += f" (limit {self.limit * 1e3:.3f} mm)"
+                    detail += f" (limit {self.limit * 1e3:.4f} mm)"
             else:
                 detail = f": {self.value:.4g} {unit}"
                 if self.limit == self.limit:

@@ -62,9 +62,17 @@ class RunStats:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"protocol": self.protocol, "received": self.received, "lost": self.lost,
-                "duplicates": self.duplicates, "corrupted_frames": self.corrupted_frames,
-                "generated": self.generated, "fault": self.fault, "wall_s": self.wall_s, **self.extra}
+        return {
+            "protocol": self.protocol,
+            "received": self.received,
+            "lost": self.lost,
+            "duplicates": self.duplicates,
+            "corrupted_frames": self.corrupted_frames,
+            "generated": self.generated,
+            "fault": self.fault,
+            "wall_s": self.wall_s,
+            **self.extra,
+        }
 
 
 class HostDriver:
@@ -74,8 +82,12 @@ class HostDriver:
     #: seconds without any data from the device during a run before the link is declared dead
     link_timeout_s = 3.0
 
-    def __init__(self, geometry: Geometry | None = None, params: RobotParameters | None = None,
-                 limits: Limits | None = None) -> None:
+    def __init__(
+        self,
+        geometry: Geometry | None = None,
+        params: RobotParameters | None = None,
+        limits: Limits | None = None,
+    ) -> None:
         self.geometry = geometry or Geometry()
         self.params = params or RobotParameters()
         self.limits = limits or Limits()
@@ -92,8 +104,12 @@ class HostDriver:
         """Open the link; ``decimation`` (control ticks per streamed sample) is common to all."""
         self.decimation = int(options.pop("decimation", self.decimation))
         self.transport = self._open(**options)
-        self.transport.send("configure", decimation=self.decimation, watchdog_s=self.limits.watchdog_s,
-                            tip_force_N=self.limits.tip_force_N)
+        self.transport.send(
+            "configure",
+            decimation=self.decimation,
+            watchdog_s=self.limits.watchdog_s,
+            tip_force_N=self.limits.tip_force_N,
+        )
 
     def _open(self, **options: Any) -> Transport:
         raise NotImplementedError
@@ -110,8 +126,9 @@ class HostDriver:
         link.send("home", contact_N=float(contact_force_N), speed_m_s=0.002)
         for ev in self._wait(lambda e: e.kind in ("home_done", "fault"), timeout_s, "homing"):
             if ev.kind == "fault":
-                raise F.DeviceFault(f"{self.name}: homing failed: {ev.fault.message()}; motors de-energised",
-                                    ev.fault)
+                raise F.DeviceFault(
+                    f"{self.name}: homing failed: {ev.fault.message()}; motors de-energised", ev.fault
+                )
             self.q_zero = np.array(ev.q)
             self.tip_zero = forward(self.q_zero, self.geometry)
 
@@ -140,9 +157,12 @@ class HostDriver:
             self.transport = None
 
     def status(self) -> dict[str, Any]:
-        return {"driver": self.name, "connected": self.transport is not None,
-                "homed": self.q_zero is not None,
-                "last_run": self.last_run.to_dict() if self.last_run else None}
+        return {
+            "driver": self.name,
+            "connected": self.transport is not None,
+            "homed": self.q_zero is not None,
+            "last_run": self.last_run.to_dict() if self.last_run else None,
+        }
 
     def run(self, protocol: MeasurementProtocol) -> Iterator[RobotRecord]:
         """Run a built-in protocol (see :mod:`skinkit.acquisition.library`)."""
@@ -171,14 +191,20 @@ class HostDriver:
         mode, sp = self.setpoints(prog, protocol)  # raises before the generator starts
         return self._stream(mode, sp, prog, protocol)
 
-    def _stream(self, mode: str, sp: np.ndarray, prog: Programme,
-                protocol: MeasurementProtocol) -> Iterator[RobotRecord]:
+    def _stream(
+        self, mode: str, sp: np.ndarray, prog: Programme, protocol: MeasurementProtocol
+    ) -> Iterator[RobotRecord]:
         link = self._link()
         stats = RunStats(protocol=protocol.name)
         self.last_run = stats
         t0 = time.monotonic()
-        link.send("load", mode=mode, rate_hz=prog.rate_hz, setpoints=sp,
-                  trigger_period_s=1.0 / prog.camera_rate_hz if prog.camera_rate_hz > 0 else 0.0)
+        link.send(
+            "load",
+            mode=mode,
+            rate_hz=prog.rate_hz,
+            setpoints=sp,
+            trigger_period_s=1.0 / prog.camera_rate_hz if prog.camera_rate_hz > 0 else 0.0,
+        )
         link.send("start")
         expect = 0
         last_data = time.monotonic()
@@ -207,7 +233,9 @@ class HostDriver:
                             stats.fault = ev.fault.message()
                             raise F.DeviceFault(
                                 f"{self.name}: {protocol.name} stopped by the device: {ev.fault.message()}; "
-                                f"motors de-energised; {stats.received} samples received", ev.fault)
+                                f"motors de-energised; {stats.received} samples received",
+                                ev.fault,
+                            )
                         done = True
                 if not done and now - last_data > self.link_timeout_s:
                     stats.fault = "link timeout"
@@ -215,7 +243,8 @@ class HostDriver:
                     raise F.DeviceFault(
                         f"{self.name}: no data from the device for {self.link_timeout_s:.1f} s during "
                         f"{protocol.name}; emergency stop sent; {stats.received} samples received",
-                        F.Fault(F.LINK))
+                        F.Fault(F.LINK),
+                    )
             stats.extra.update(self._link_stats())
         finally:
             stats.wall_s = time.monotonic() - t0
@@ -237,23 +266,30 @@ class HostDriver:
                 continue
             keep[k] = True
             lost_before[k] = i - nxt
-            nxt = i + 1
+            nxt = int(i) + 1
         rows = rows[keep].copy()
         gaps = lost_before[keep]
         if gaps.any():
             rows[gaps > 0, 14] = rows[gaps > 0, 14].astype(np.int64) | FLAG_SAMPLES_LOST
             stats.lost += int(gaps.sum())
         stats.received += rows.shape[0]
-        return rows, nxt
+        return rows, int(nxt)
 
     def _record(self, rows: np.ndarray, protocol: MeasurementProtocol) -> RobotRecord:
         q = rows[:, 2:5]
         cur = rows[:, 5:8]
         tip = forward(q, self.geometry) - self.tip_zero
-        return RobotRecord(time_s=rows[:, 1] / self.params.control_rate_hz, motor_position=q, motor_current=cur,
-                           motor_force=self.force_constant(q) * cur, tip_position=tip,
-                           tip_force=rows[:, 8:11], tip_torque=rows[:, 11:14],
-                           flags=rows[:, 14].astype(np.uint32), protocol=protocol)
+        return RobotRecord(
+            time_s=rows[:, 1] / self.params.control_rate_hz,
+            motor_position=q,
+            motor_current=cur,
+            motor_force=self.force_constant(q) * cur,
+            tip_position=tip,
+            tip_force=rows[:, 8:11],
+            tip_torque=rows[:, 11:14],
+            flags=rows[:, 14].astype(np.uint32),
+            protocol=protocol,
+        )
 
     def _wait(self, pred, timeout_s: float, what: str) -> list[Event]:  # noqa: ANN001
         link = self._link()
@@ -266,5 +302,8 @@ class HostDriver:
                 if ev.kind == "refused":
                     raise F.DeviceFault(f"{self.name}: device refused {what}: {ev.fault.message()}", ev.fault)
         self.emergency_stop()
-        raise F.DeviceFault(f"{self.name}: no answer from the device within {timeout_s:.0f} s while {what}; "
-                            "emergency stop sent", F.Fault(F.LINK))
+        raise F.DeviceFault(
+            f"{self.name}: no answer from the device within {timeout_s:.0f} s while {what}; "
+            "emergency stop sent",
+            F.Fault(F.LINK),
+        )

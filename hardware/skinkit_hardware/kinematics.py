@@ -125,7 +125,9 @@ def _newton(fun, x0: np.ndarray, tol: float = 1e-14, max_iter: int = 30) -> np.n
         try:
             x = x - np.linalg.solve(jac, f[..., None])[..., 0]
         except np.linalg.LinAlgError:
-            raise KinematicsError("kinematics: singular constraint Jacobian (pose outside the workspace)") from None
+            raise KinematicsError(
+                "kinematics: singular constraint Jacobian (pose outside the workspace)"
+            ) from None
     f = fun(x)
     if not np.all(np.abs(f) < 1e-10):
         raise KinematicsError(f"kinematics: solver did not converge (residual {np.max(np.abs(f)):.3g} m)")
@@ -133,7 +135,8 @@ def _newton(fun, x0: np.ndarray, tol: float = 1e-14, max_iter: int = 30) -> np.n
 
 
 def platform_pose(q: np.ndarray, geometry: Geometry | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Platform centre ``(..., 3)`` [m] and rotation ``(..., 3, 3)`` for arm positions ``q`` ``(..., 3)`` [m]."""
+    """Platform centre ``(..., 3)`` [m] and rotation ``(..., 3, 3)`` for arm positions
+    ``q`` ``(..., 3)`` [m]."""
     g = geometry or Geometry()
     q = np.asarray(q, dtype=float)
     x0 = np.zeros(q.shape[:-1] + (6,))
@@ -185,8 +188,9 @@ def jacobian(q: np.ndarray, geometry: Geometry | None = None, step_m: float = 1e
     return forward_and_jacobian(q, geometry, step_m)[1]
 
 
-def forward_and_jacobian(q: np.ndarray, geometry: Geometry | None = None,
-                         step_m: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+def forward_and_jacobian(
+    q: np.ndarray, geometry: Geometry | None = None, step_m: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray]:
     """Tip ``(..., 3)`` [m] and Jacobian ``(..., 3, 3)`` in one batched solve (7 poses per ``q``)."""
     g = geometry or Geometry()
     q = np.asarray(q, dtype=float)

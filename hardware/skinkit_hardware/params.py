@@ -108,6 +108,11 @@ class Limits:
     post_fault_s: float = 0.02
 
     def to_dict(self) -> dict[str, float]:
-        return {"peak_force_N": self.peak_force_N, "continuous_force_N": self.continuous_force_N,
-                "travel_min_m": self.travel_m[0], "travel_max_m": self.travel_m[1],
-                "tip_force_N": self.tip_force_N, "watchdog_s": self.watchdog_s}
+        return {
+            "peak_force_N": self.peak_force_N,
+            "continuous_force_N": self.continuous_force_N,
+            "travel_min_m": self.travel_m[0],
+            "travel_max_m": self.travel_m[1],
+            "tip_force_N": self.tip_force_N,
+            "watchdog_s": self.watchdog_s,
+        }

@@ -18,8 +18,9 @@ class SkinLoad(Protocol):
 
     glued: bool
 
-    def reaction(self, u: tuple[float, float, float], v: tuple[float, float, float],
-                 dt: float) -> tuple[float, float, float]:
+    def reaction(
+        self, u: tuple[float, float, float], v: tuple[float, float, float], dt: float
+    ) -> tuple[float, float, float]:
         """Force on the probe [N] for displacement ``u`` [m] and velocity ``v`` [m/s]."""
 
 
@@ -42,8 +43,12 @@ class KelvinVoigtSkin:
             if u[2] <= 0.0:
                 return (0.0, 0.0, 0.0)
             self.glued = True
-        kt, kn, bt, bn = (self.k_tangential_N_per_m, self.k_normal_N_per_m,
-                          self.b_tangential_Ns_per_m, self.b_normal_Ns_per_m)
+        kt, kn, bt, bn = (
+            self.k_tangential_N_per_m,
+            self.k_normal_N_per_m,
+            self.b_tangential_Ns_per_m,
+            self.b_normal_Ns_per_m,
+        )
         return (-(kt * u[0] + bt * v[0]), -(kt * u[1] + bt * v[1]), -(kn * u[2] + bn * v[2]))
 
 
@@ -64,9 +69,11 @@ class WienerSkin:
     _k: tuple = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self._k = ((self.k1_tangential_N_per_m, self.k3_tangential_N_per_m3),
-                   (self.k1_tangential_N_per_m, self.k3_tangential_N_per_m3),
-                   (self.k1_normal_N_per_m, self.k3_normal_N_per_m3))
+        self._k = (
+            (self.k1_tangential_N_per_m, self.k3_tangential_N_per_m3),
+            (self.k1_tangential_N_per_m, self.k3_tangential_N_per_m3),
+            (self.k1_normal_N_per_m, self.k3_normal_N_per_m3),
+        )
 
     def reaction(self, u, v, dt):  # noqa: ANN001 - hot path, plain floats
         if not self.glued:
@@ -75,7 +82,7 @@ class WienerSkin:
             self.glued = True
         tau = self.tau_s
         out = []
-        for (k1, k3), ui, vi in zip(self._k, u, v):
+        for (k1, k3), ui, vi in zip(self._k, u, v, strict=True):
             w = ui + tau * vi
             out.append(-(k1 * w + k3 * w * w * w))
         return (out[0], out[1], out[2])

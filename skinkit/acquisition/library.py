@@ -44,8 +44,15 @@ class _Entry:
     build: Callable[[dict[str, Any]], Programme]
 
 
-_SINE_UNITS = {"theta": "deg", "phi": "deg", "peak_to_peak": "m", "frequency": "Hz", "periods": "1",
-               "setpoint_rate": "Hz", "camera_rate": "Hz"}
+_SINE_UNITS = {
+    "theta": "deg",
+    "phi": "deg",
+    "peak_to_peak": "m",
+    "frequency": "Hz",
+    "periods": "1",
+    "setpoint_rate": "Hz",
+    "camera_rate": "Hz",
+}
 
 
 def _sine(p: dict[str, Any]) -> Programme:
@@ -53,8 +60,12 @@ def _sine(p: dict[str, Any]) -> Programme:
     duration = float(p["periods"]) / float(p["frequency"])
     t = np.arange(int(round(duration * rate)) + 1) / rate
     s = one_sided_sine(t, float(p["peak_to_peak"]), float(p["frequency"]))
-    return Programme("trajectory", rate, s[:, None] * direction(float(p["theta"]), float(p["phi"])),
-                     float(p["camera_rate"]))
+    return Programme(
+        "trajectory",
+        rate,
+        s[:, None] * direction(float(p["theta"]), float(p["phi"])),
+        float(p["camera_rate"]),
+    )
 
 
 def _precondition(p: dict[str, Any]) -> Programme:
@@ -80,8 +91,16 @@ def _motor_columns(f: np.ndarray, p: dict[str, Any]) -> np.ndarray:
     return out
 
 
-_FORCE_UNITS = {"force_max": "N", "duration": "s", "cutoff": "Hz", "setpoint_rate": "Hz", "axis": "1",
-                "hold_force": "N", "seed": "1", "camera_rate": "Hz"}
+_FORCE_UNITS = {
+    "force_max": "N",
+    "duration": "s",
+    "cutoff": "Hz",
+    "setpoint_rate": "Hz",
+    "axis": "1",
+    "hold_force": "N",
+    "seed": "1",
+    "camera_rate": "Hz",
+}
 
 
 def _full_scale(p: dict[str, Any]) -> Programme:
@@ -119,7 +138,7 @@ def _incremental(variant: str) -> Callable[[dict[str, Any]], Programme]:
                 pre = fmax * (1 - np.abs(np.linspace(-1, 1, n_pre)))
             else:  # hold the step's mean
                 pre = np.full(n_pre, fmax * m)
-            parts += [pre, fmax * (m + scale * u[j * n_inc:(j + 1) * n_inc] / 6.0)]
+            parts += [pre, fmax * (m + scale * u[j * n_inc : (j + 1) * n_inc] / 6.0)]
         parts.append(np.array([fmax * means[-1]]))
         return Programme("force", rate, _motor_columns(np.concatenate(parts), p), float(p["camera_rate"]))
 
@@ -127,48 +146,98 @@ def _incremental(variant: str) -> Callable[[dict[str, Any]], Programme]:
 
 
 def _catalogue() -> dict[str, _Entry]:
-    sine = {"peak_to_peak": 1.5e-3, "frequency": 0.1, "periods": 3, "setpoint_rate": 100.0,
-            "camera_rate": 1.0}
+    sine = {
+        "peak_to_peak": 1.5e-3,
+        "frequency": 0.1,
+        "periods": 3,
+        "setpoint_rate": 100.0,
+        "camera_rate": 1.0,
+    }
     out: dict[str, _Entry] = {
         "preconditioning": _Entry(
-            "trajectory", "2 mm normal indentation held 30 s after contact (thesis 7.2.1)",
+            "trajectory",
+            "2 mm normal indentation held 30 s after contact (thesis 7.2.1)",
             {"depth": 2e-3, "hold": 30.0, "ramp": 1.0, "setpoint_rate": 100.0, "camera_rate": 0.0},
             {"depth": "m", "hold": "s", "ramp": "s", "setpoint_rate": "Hz", "camera_rate": "Hz"},
-            _precondition),
+            _precondition,
+        ),
         "normal_indentation": _Entry(
-            "trajectory", "1.5 mm p-p sinusoid into the skin, 0.1 Hz, 3 periods (Table 12)",
-            {"theta": 0.0, "phi": 90.0, **sine}, _SINE_UNITS, _sine),
+            "trajectory",
+            "1.5 mm p-p sinusoid into the skin, 0.1 Hz, 3 periods (Table 12)",
+            {"theta": 0.0, "phi": 90.0, **sine},
+            _SINE_UNITS,
+            _sine,
+        ),
     }
     for theta in range(0, 360, 30):
         out[f"in_plane_{theta:03d}"] = _Entry(
-            "trajectory", f"1.5 mm p-p in-plane stretch at theta={theta} deg (Table 12)",
-            {"theta": float(theta), "phi": 0.0, **sine}, _SINE_UNITS, _sine)
+            "trajectory",
+            f"1.5 mm p-p in-plane stretch at theta={theta} deg (Table 12)",
+            {"theta": float(theta), "phi": 0.0, **sine},
+            _SINE_UNITS,
+            _sine,
+        )
     out["normal_retraction"] = _Entry(
-        "trajectory", "1.5 mm p-p sinusoid pulling the skin out along the normal (Table 12)",
-        {"theta": 0.0, "phi": -90.0, **sine}, _SINE_UNITS, _sine)
+        "trajectory",
+        "1.5 mm p-p sinusoid pulling the skin out along the normal (Table 12)",
+        {"theta": 0.0, "phi": -90.0, **sine},
+        _SINE_UNITS,
+        _sine,
+    )
     for theta in (330, 285, 240):
         out[f"out_of_plane_{theta:03d}"] = _Entry(
-            "trajectory", f"1.5 mm p-p at 45 deg out of plane, theta={theta} deg (Table 12)",
-            {"theta": float(theta), "phi": 45.0, **sine}, _SINE_UNITS, _sine)
-    force = {"force_max": 3.5, "cutoff": 200.0, "setpoint_rate": 1000.0, "axis": 0, "hold_force": 1.0,
-             "seed": 0, "camera_rate": 0.0}
+            "trajectory",
+            f"1.5 mm p-p at 45 deg out of plane, theta={theta} deg (Table 12)",
+            {"theta": float(theta), "phi": 45.0, **sine},
+            _SINE_UNITS,
+            _sine,
+        )
+    force = {
+        "force_max": 3.5,
+        "cutoff": 200.0,
+        "setpoint_rate": 1000.0,
+        "axis": 0,
+        "hold_force": 1.0,
+        "seed": 0,
+        "camera_rate": 0.0,
+    }
     out["stochastic_preconditioning"] = _Entry(
-        "force", "0.5 Hz ramp to full force x3, 10 s hold, 100 s stochastic (thesis 4.1.3)",
-        {**force, "hold": 10.0, "duration": 100.0}, {**_FORCE_UNITS, "hold": "s"}, _stoch_precondition)
+        "force",
+        "0.5 Hz ramp to full force x3, 10 s hold, 100 s stochastic (thesis 4.1.3)",
+        {**force, "hold": 10.0, "duration": 100.0},
+        {**_FORCE_UNITS, "hold": "s"},
+        _stoch_precondition,
+    )
     out["stochastic_full_scale"] = _Entry(
-        "force", "Gaussian force 0..3.5 N per motor, low-passed at 200 Hz, 100 s (thesis 4.1.3)",
-        {**force, "duration": 100.0}, _FORCE_UNITS, _full_scale)
-    inc = {**force, "increments": 15, "scale": 0.2, "increment_duration": 10.0,
-           "precondition_duration": 2.0}
-    inc_units = {**_FORCE_UNITS, "increments": "1", "scale": "1", "increment_duration": "s",
-                 "precondition_duration": "s"}
+        "force",
+        "Gaussian force 0..3.5 N per motor, low-passed at 200 Hz, 100 s (thesis 4.1.3)",
+        {**force, "duration": 100.0},
+        _FORCE_UNITS,
+        _full_scale,
+    )
+    inc = {**force, "increments": 15, "scale": 0.2, "increment_duration": 10.0, "precondition_duration": 2.0}
+    inc_units = {
+        **_FORCE_UNITS,
+        "increments": "1",
+        "scale": "1",
+        "increment_duration": "s",
+        "precondition_duration": "s",
+    }
     inc_units.pop("duration")
     out["incremental_a"] = _Entry(
-        "force", "20 % stochastic input stepped up then down 15x, triangle preconditioning (Protocol A)",
-        inc, inc_units, _incremental("a"))
+        "force",
+        "20 % stochastic input stepped up then down 15x, triangle preconditioning (Protocol A)",
+        inc,
+        inc_units,
+        _incremental("a"),
+    )
     out["incremental_b"] = _Entry(
-        "force", "20 % stochastic input stepped up then down 15x, mean-hold preconditioning (Protocol B)",
-        inc, inc_units, _incremental("b"))
+        "force",
+        "20 % stochastic input stepped up then down 15x, mean-hold preconditioning (Protocol B)",
+        inc,
+        inc_units,
+        _incremental("b"),
+    )
     return out
 
 
@@ -188,19 +257,29 @@ def make_protocol(name: str, **parameters: Any) -> Protocol:
         raise ProtocolError(f"unknown protocol {name!r}; known: {', '.join(_CATALOGUE)}")
     unknown = sorted(set(parameters) - set(entry.defaults))
     if unknown:
-        raise ProtocolError(f"protocol {name!r} has no parameter(s) {unknown}; "
-                            f"parameters: {sorted(entry.defaults)}")
+        raise ProtocolError(
+            f"protocol {name!r} has no parameter(s) {unknown}; parameters: {sorted(entry.defaults)}"
+        )
     params = dict(entry.defaults)
     for key, value in parameters.items():
         try:
             params[key] = type(entry.defaults[key])(value)
         except (TypeError, ValueError):
-            raise ProtocolError(f"protocol {name!r}: parameter {key!r} must be a number, got {value!r}") from None
-    proto = Protocol(name, kind=entry.kind, parameters=params, units=dict(entry.units),
-                     description=entry.description)
+            raise ProtocolError(
+                f"protocol {name!r}: parameter {key!r} must be a number, got {value!r}"
+            ) from None
+    proto = Protocol(
+        name, kind=entry.kind, parameters=params, units=dict(entry.units), description=entry.description
+    )
     prog = programme(proto)
-    return Protocol(name, kind=entry.kind, parameters=params, units=dict(entry.units),
-                    duration_s=prog.duration_s, description=entry.description)
+    return Protocol(
+        name,
+        kind=entry.kind,
+        parameters=params,
+        units=dict(entry.units),
+        duration_s=prog.duration_s,
+        description=entry.description,
+    )
 
 
 def programme(protocol: Protocol) -> Programme:
@@ -211,7 +290,9 @@ def programme(protocol: Protocol) -> Programme:
     params = {**entry.defaults, **protocol.parameters}
     for key in ("setpoint_rate", "frequency", "periods"):
         if key in params and not float(params[key]) > 0:
-            raise ProtocolError(f"protocol {protocol.name!r}: parameter {key!r} must be > 0, got {params[key]}")
+            raise ProtocolError(
+                f"protocol {protocol.name!r}: parameter {key!r} must be > 0, got {params[key]}"
+            )
     try:
         return entry.build(params)
     except (ValueError, ZeroDivisionError) as exc:

@@ -15,8 +15,14 @@ from skinkit.errors import SkinkitError
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit.schemas.robot import FLAG_SAMPLES_LOST
 
-DEFAULT_CHANNELS = ("motor_position", "motor_current", "motor_force", "tip_position", "tip_force",
-                    "tip_torque")
+DEFAULT_CHANNELS = (
+    "motor_position",
+    "motor_current",
+    "motor_force",
+    "tip_position",
+    "tip_force",
+    "tip_torque",
+)
 
 
 @dataclass
@@ -32,9 +38,15 @@ class RunSummary:
     driver_stats: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"protocol": self.protocol, "samples": self.samples, "lost": self.lost,
-                "duration_s": self.duration_s, "wall_s": self.wall_s, "fault": self.fault,
-                "driver": self.driver_stats}
+        return {
+            "protocol": self.protocol,
+            "samples": self.samples,
+            "lost": self.lost,
+            "duration_s": self.duration_s,
+            "wall_s": self.wall_s,
+            "fault": self.fault,
+            "driver": self.driver_stats,
+        }
 
 
 def _progress(enabled: bool):  # noqa: ANN202
@@ -42,15 +54,25 @@ def _progress(enabled: bool):  # noqa: ANN202
         return None
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    return Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                    TextColumn("{task.completed:.1f}/{task.total:.1f} s"),
-                    TextColumn("{task.fields[samples]} samples, {task.fields[lost]} lost"),
-                    TimeRemainingColumn(), transient=False)
+    return Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed:.1f}/{task.total:.1f} s"),
+        TextColumn("{task.fields[samples]} samples, {task.fields[lost]} lost"),
+        TimeRemainingColumn(),
+        transient=False,
+    )
 
 
-def run_protocol(driver: Any, protocol: Protocol, experiment: Any, *,
-                 channels: tuple[str, ...] = DEFAULT_CHANNELS, progress: bool = False,
-                 rate_hz: float | None = None) -> RunSummary:
+def run_protocol(
+    driver: Any,
+    protocol: Protocol,
+    experiment: Any,
+    *,
+    channels: tuple[str, ...] = DEFAULT_CHANNELS,
+    progress: bool = False,
+    rate_hz: float | None = None,
+) -> RunSummary:
     """Execute ``protocol`` through a connected, homed ``driver`` into ``experiment``.
 
     ``experiment`` is an open, writable :class:`skinkit.store.Experiment`. Returns a
@@ -58,6 +80,8 @@ def run_protocol(driver: Any, protocol: Protocol, experiment: Any, *,
     sample received and emergency-stopping the driver) when the run faults.
     """
     summary = RunSummary(protocol.name)
+    # drivers check the programme against their limits here, before any record is created
+    blocks = driver.run(protocol)
     total = protocol.duration_s or 0.0
     bar = _progress(progress)
     t0 = time.monotonic()
@@ -68,17 +92,23 @@ def run_protocol(driver: Any, protocol: Protocol, experiment: Any, *,
     try:
         with experiment.record_writer(protocol, channels=list(channels), rate_hz=rate_hz) as writer:
             try:
-                for block in driver.run(protocol):
+                for block in blocks:
                     if not isinstance(block, RobotRecord):
-                        raise SkinkitError(f"driver {getattr(driver, 'name', '?')} yielded "
-                                           f"{type(block).__name__}, not a RobotRecord")
+                        raise SkinkitError(
+                            f"driver {getattr(driver, 'name', '?')} yielded "
+                            f"{type(block).__name__}, not a RobotRecord"
+                        )
                     writer.append(block)
                     summary.samples = writer.n_samples
                     summary.lost += int((block.flags & FLAG_SAMPLES_LOST).astype(bool).sum())
                     summary.duration_s = float(block.time_s[-1])
                     if bar is not None:
-                        bar.update(task, completed=min(summary.duration_s, total or summary.duration_s),
-                                   samples=summary.samples, lost=summary.lost)
+                        bar.update(
+                            task,
+                            completed=min(summary.duration_s, total or summary.duration_s),
+                            samples=summary.samples,
+                            lost=summary.lost,
+                        )
             except BaseException as exc:
                 summary.fault = str(exc) or type(exc).__name__
                 try:

@@ -25,6 +25,7 @@ _COMMANDS: dict[str, str] = {
     "recover": "skinkit.cli.recover:recover",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",
+    "robot": "skinkit.cli.robot:robot",
     "solve": "skinkit.cli.fem:solve",
     "verify": "skinkit.cli.fem:verify",
     "convergence": "skinkit.cli.fem:convergence",

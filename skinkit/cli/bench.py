@@ -12,6 +12,7 @@ import click
 #: benchmark name -> "module:command"
 _BENCHES: dict[str, str] = {
     "store": "skinkit.bench.store:bench_store",
+    "robot": "skinkit.bench.robot:bench_robot",
     "sysid": "skinkit.bench.sysid:bench_sysid",
     "fem": "skinkit.bench.fem:bench_fem",
     "vision": "skinkit.bench.vision:bench_vision",

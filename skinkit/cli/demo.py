@@ -14,7 +14,8 @@ import click
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the virtual session.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def demo(out_dir: Path, seed: int, as_json: bool) -> None:
-    """Run every pipeline step that exists on a virtual-lab session whose truth is known."""
+    """Run every pipeline step that exists on a virtual-lab session whose truth is known:
+    simulate, stream into an experiment file, identify lumped models, compare with the truth."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from skinkit.pipelines.demo import run_demo
@@ -32,12 +33,23 @@ def demo(out_dir: Path, seed: int, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
-    rec = summary["store"]["records"][0]
     click.echo(f"experiment file: {summary['experiment_file']}")
-    click.echo(f"  record {rec['protocol']!r}: {rec['samples']} samples at {rec['rate_hz']:.0f} Hz, "
-               f"channels {', '.join(rec['channels'])}, complete={rec['complete']}")
-    click.echo(f"truth: K={summary['truth']['K']:.4g} N/m, B={summary['truth']['B']:.4g} N s/m, "
-               f"I={summary['truth']['I'] * 1e3:.4g} g")
+    for rec in summary["store"]["records"]:
+        click.echo(f"  record {rec['protocol']!r}: {rec['samples']} samples at {rec['rate_hz']:.0f} Hz, "
+                   f"channels {', '.join(rec['channels'])}, complete={rec['complete']}")
+    t, lin, wie = summary["truth"], summary["linear"], summary["wiener"]
+    le, we = summary["linear_error_pct"], summary["wiener_error_pct"]
+    click.echo("linear skin (robot's mass removed)      identified        truth       error")
+    click.echo(f"  K [N/m]   {lin['K_N_per_m']:>30.5g} {t['K_N_per_m']:>12.5g} {le['K']:>+10.2f} %")
+    click.echo(f"  B [N s/m] {lin['B_Ns_per_m']:>30.5g} {t['B_Ns_per_m']:>12.5g} {le['B']:>+10.2f} %")
+    click.echo(f"  I [g]     {lin['I_kg'] * 1e3:>30.5g} {t['I_kg'] * 1e3:>12.5g} {le['I']:>+10.2f} %")
+    click.echo(f"  VAF {lin['vaf_linear_pct']:.2f} %")
+    click.echo("Wiener skin")
+    click.echo(f"  C1 [mm]   {wie['C1_m'] * 1e3:>30.5g} {t['C1_m'] * 1e3:>12.5g} {we['C1']:>+10.2f} %")
+    click.echo(f"  C2 [1/N]  {wie['C2_per_N']:>30.5g} {t['C2_per_N']:>12.5g} {we['C2']:>+10.2f} %")
+    click.echo(f"  VAF Wiener {wie['vaf_wiener_pct']:.2f} % vs linear {wie['vaf_linear_pct']:.2f} %")
+    for w in lin["warnings"] + wie["warnings"]:
+        click.echo(f"  warning: {w}")
     for p in summary["plots"]:
         click.echo(f"plot: {p}")
     click.echo(f"summary: {out_dir / 'summary.json'}")

@@ -74,12 +74,20 @@ def _clean(obj: Any) -> Any:
 @click.option("--fit-offset", "fit_offset", is_flag=True,
               help="Wiener: also fit a position offset (when position 0 is not the unloaded "
               "skin surface).")
+@click.option("--compare", is_flag=True,
+              help="Also identify the other models and compare their residuals.")
+@click.option("--incremental", is_flag=True,
+              help="Incremental protocol: find the stochastic steps and identify K, B, I in "
+              "each (ascending and descending).")
+@click.option("--probe-radius", "probe_radius_mm", type=float, default=None,
+              help="Probe radius [mm]; with --incremental adds E = (1 - nu^2) K / (2 Rp).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @click.option("--plot", "plot_dir", type=click.Path(path_type=Path, file_okay=False),
               default=None, help="Write figures (identification, residuals) into this folder.")
 def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None, axis: str,
           robot_mass: float, robot_damping: float, robot_stiffness: float, hold: str,
-          refine: bool, two_sided: bool, fit_offset: bool, as_json: bool, plot_dir: Path | None) -> None:
+          refine: bool, two_sided: bool, fit_offset: bool, compare: bool, incremental: bool,
+          probe_radius_mm: float | None, as_json: bool, plot_dir: Path | None) -> None:
     """Identify K, B, I (and a Wiener or Hammerstein nonlinearity) from RECORD.
 
     RECORD is an experiment file (choose the record with --protocol) or a CSV file with
@@ -97,6 +105,9 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
     if robot_mass or robot_damping or robot_stiffness:
         robot = RobotDynamics(mass_kg=robot_mass, damping_Ns_per_m=robot_damping,
                               stiffness_N_per_m=robot_stiffness)
+    if incremental:
+        _incremental(rec, record, axis, memory_s, robot, hold, probe_radius_mm, as_json, plot_dir)
+        return
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -109,6 +120,13 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
                 result = identify_wiener_signals(sig, memory_s, linear=lin, fit_offset=fit_offset)
             else:
                 result = identify_hammerstein_signals(sig, memory_s, linear=lin)
+            models = {}
+            if compare:
+                models = {"linear": lin,
+                          "wiener": result if model == "wiener" else identify_wiener_signals(
+                              sig, memory_s, linear=lin, fit_offset=fit_offset),
+                          "hammerstein": result if model == "hammerstein" else
+                          identify_hammerstein_signals(sig, memory_s, linear=lin)}
         finally:  # the warnings explain an error too
             for w in caught:
                 if issubclass(w.category, UserWarning):
@@ -116,26 +134,88 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
     out = _clean(result.to_dict())
     out["record"] = str(record)
     out["protocol"] = rec.protocol.name
+    if models:
+        from skinkit.sysid.diagnostics import compare as compare_models
+        from skinkit.sysid.diagnostics import default_bands
+
+        out["comparison"] = _clean(compare_models(models, sig.force_N, sig.position_m,
+                                                  sig.rate_hz, lin.burn_in))
+        out["comparison_band_edges_hz"] = default_bands(sig.rate_hz).tolist()
     if plot_dir is not None:
         out["plots"] = _plots(result, sig, lin, plot_dir)
+        if models:
+            from skinkit.sysid.plots import plot_comparison
+
+            out["plots"].append(str(plot_comparison(out["comparison"],
+                                                    default_bands(sig.rate_hz),
+                                                    plot_dir / "sysid_comparison.png")))
     if as_json:
         click.echo(json.dumps(out, indent=2))
         return
     _table(out, model)
 
 
+def _incremental(rec: Any, record: Path, axis: str, memory_s: float | None, robot: Any,
+                 hold: str, probe_radius_mm: float | None, as_json: bool,
+                 plot_dir: Path | None) -> None:
+    from skinkit.sysid.incremental import identify_incremental
+
+    radius = None if probe_radius_mm is None else probe_radius_mm * 1e-3
+    res = identify_incremental(rec, axis=axis, memory_s=memory_s, robot=robot, hold=hold,
+                               probe_radius_m=radius, progress=not as_json)
+    out: dict[str, Any] = {"record": str(record), "protocol": rec.protocol.name,
+                           "increments": res.table(), "hysteresis": res.hysteresis()}
+    if plot_dir is not None:
+        from skinkit.sysid.plots import plot_incremental
+
+        plot_dir.mkdir(parents=True, exist_ok=True)
+        out["plots"] = [str(plot_incremental(out["increments"], plot_dir / "incremental.png"))]
+    for row in out["increments"]:
+        for w in row["warnings"]:
+            click.echo(f"warning: increment {row['index']}: {w}", err=True)
+        if row["error"]:
+            click.echo(f"warning: increment {row['index']} not identified: {row['error']}",
+                       err=True)
+    out = _clean(out)
+    if as_json:
+        click.echo(json.dumps(out, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"sysid incremental: {record} ({rec.protocol.name})")
+    for col in ("#", "dir", "force [N]", "position [mm]", "K [N/m]", "B [N s/m]", "I [g]",
+                "VAF [%]") + (("E [kPa]",) if radius else ()):
+        t.add_column(col, justify="right")
+    for r in out["increments"]:
+        def g(v: Any, scale: float = 1.0) -> str:
+            return "-" if v is None else f"{v * scale:.4g}"
+
+        cells = [str(r["index"]), r["direction"], g(r["mean_force_N"]),
+                 g(r["position_mean_m"], 1e3), g(r["K_N_per_m"]), g(r["B_Ns_per_m"]),
+                 g(r["I_kg"], 1e3), g(r["vaf_linear_pct"])]
+        if radius:
+            cells.append(g(r.get("E_Pa"), 1e-3))
+        t.add_row(*cells)
+    Console().print(t)
+
+
 def _plots(result: Any, sig: Any, lin: Any, plot_dir: Path) -> list[str]:
-    from skinkit.sysid.diagnostics import diagnose
+    from skinkit.sysid.diagnostics import diagnose, residual_diagnostics
     from skinkit.sysid.plots import plot_identification, plot_residuals
 
     try:
         plot_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise SkinkitError(f"--plot {plot_dir}: cannot create folder ({exc.strerror})") from None
-    if not lin.valid:
-        raise SkinkitError("no plots: the linear model is not a stable under-damped system")
     files = [plot_identification(result, sig.force_N, sig.position_m, plot_dir / "sysid.png")]
-    diag = diagnose(result, sig.force_N, sig.position_m, sig.rate_hz, lin.burn_in)
+    if lin.valid:
+        diag = diagnose(result, sig.force_N, sig.position_m, sig.rate_hz, lin.burn_in)
+    else:  # diagnose what the non-parametric IRF leaves unexplained
+        pred = lin.irf.predict(sig.force_N - sig.force_N.mean()) + sig.position_m.mean()
+        diag = residual_diagnostics(sig.force_N, sig.position_m, pred, sig.rate_hz,
+                                    burn_in=lin.burn_in, max_lag_s=min(0.1, lin.irf.memory_s))
+        result = lin
     files.append(plot_residuals(diag, plot_dir / "sysid_residuals.png",
                                 title=f"{type(result).__name__} residuals"))
     return [str(f) for f in files]

@@ -46,7 +46,8 @@ def track(ref_image: str, cur_image: str, points_csv: str, subset_px: int, track
     res = tracker.track(ref, cur, pts, subset_px)
     rows = [{"x_px": float(p[0]), "y_px": float(p[1]), "dx_px": _num(d[0]), "dy_px": _num(d[1]),
              "quality": _num(q), "valid": bool(v), "reason": r}
-            for p, d, q, v, r in zip(pts, res.displacement_px, res.quality, res.valid, res.reason)]
+            for p, d, q, v, r in zip(pts, res.displacement_px, res.quality, res.valid, res.reason,
+                                     strict=True)]
     if as_json:
         click.echo(json.dumps({"points": rows}, indent=1))
         return
@@ -58,3 +59,123 @@ def track(ref_image: str, cur_image: str, points_csv: str, subset_px: int, track
             click.echo(f"({row['x_px']:.2f}, {row['y_px']:.2f}): invalid: {row['reason']}")
     n_ok = sum(r["valid"] for r in rows)
     click.echo(f"{n_ok} of {len(rows)} points tracked with {tracker_name}")
+
+
+def _parse_board(text: str) -> tuple[int, int]:
+    try:
+        cols, rows = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SkinkitError(f"--board {text!r}: expected COLSxROWS inner corners, e.g. 9x6") from None
+    return cols, rows
+
+
+def _images(exp: object, name: str | None) -> object:
+    names = exp.image_names()  # type: ignore[attr-defined]
+    if not names:
+        raise SkinkitError(f"{exp.path}: holds no image sequences")  # type: ignore[attr-defined]
+    if name is None:
+        if len(names) > 1:
+            raise SkinkitError(f"several image sequences ({', '.join(names)}): choose one with --images")
+        name = names[0]
+    if name not in names:
+        raise SkinkitError(f"no image sequence {name!r}; the file holds {', '.join(names)}")
+    return exp.read_images(name)  # type: ignore[attr-defined]
+
+
+@vision.command("calibrate")
+@click.argument("experiment", type=click.Path(dir_okay=False))
+@click.option("--images", "images_name", default=None, help="image sequence of board views")
+@click.option("--board", "board_text", default="9x6", show_default=True,
+              help="checkerboard: inner corners COLSxROWS (one even, one odd); "
+                   "ChArUco: squares COLSxROWS")
+@click.option("--square-mm", default=3.0, show_default=True, help="board square side [mm]")
+@click.option("--charuco", is_flag=True, help="the board is a ChArUco board (partial views allowed)")
+@click.option("--marker-mm", default=None, type=float, help="ChArUco marker side [mm] (default 0.75 square)")
+@click.option("--dictionary", default="DICT_4X4_50", show_default=True, help="ChArUco ArUco dictionary")
+@click.option("--min-views", default=4, show_default=True, help="board views each camera needs")
+def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, square_mm: float,
+                  charuco: bool, marker_mm: float | None, dictionary: str, min_views: int) -> None:
+    """Calibrate the rig from board views in EXPERIMENT and store it there."""
+    import cv2
+
+    from skinkit.store import open_experiment
+    from skinkit.vision.calibration import calibrate, calibrate_charuco
+    from skinkit.vision.scene import CharucoTarget
+
+    size = _parse_board(board_text)
+    with open_experiment(experiment, mode="a") as exp:
+        seq = _images(exp, images_name)
+        names = seq.camera_names  # type: ignore[attr-defined]
+        if charuco:
+            if not hasattr(cv2.aruco, dictionary):
+                raise SkinkitError(f"--dictionary {dictionary!r} is not an OpenCV ArUco dictionary")
+            marker = (marker_mm if marker_mm is not None else 0.75 * square_mm) * 1e-3
+            target = CharucoTarget(size, square_mm * 1e-3, marker, dictionary)
+            cal = calibrate_charuco(seq.frames, target, camera_names=names,  # type: ignore[attr-defined]
+                                    min_views=min_views)
+        else:
+            cal = calibrate(seq.frames, size, square_mm * 1e-3, camera_names=names,  # type: ignore[attr-defined]
+                            min_views=min_views)
+        exp.write_rig(cal.rig)
+    views = cal.detections.found.sum(axis=0)
+    for name, rms, n in zip(cal.rig.names, cal.per_camera_rms_px, views, strict=True):
+        click.echo(f"{name}: {n} board views, reprojection RMS {rms:.3f} px")
+    click.echo(f"overall reprojection RMS {cal.rms_px:.3f} px; rig stored in {experiment} "
+               f"(world frame: the board in frame {cal.world_view})")
+
+
+@vision.command("profile")
+@click.argument("experiment", type=click.Path(dir_okay=False))
+@click.option("--images", "images_name", default=None, help="image sequence to profile")
+@click.option("--frame", default=0, show_default=True, help="frame of the undeformed surface")
+@click.option("--profiler", "profiler_name", default="patchwork", show_default=True)
+@click.option("--spacing", "spacing_px", default=12, show_default=True, help="grid step [px]")
+@click.option("--subset", "subset_px", default=31, show_default=True, help="subset side [px]")
+@click.option("--name", "out_name", default="profile", show_default=True, help="name of the stored profile")
+def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_name: str,
+                spacing_px: int, subset_px: int, out_name: str) -> None:
+    """Profile the surface automatically and store the point cloud in EXPERIMENT."""
+    import numpy as np
+
+    from skinkit import registry
+    from skinkit.store import open_experiment
+
+    with open_experiment(experiment, mode="a") as exp:
+        rig = exp.read_rig()
+        seq = _images(exp, images_name)
+        kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}
+        prof = registry.create("skinkit.profilers", profiler_name, **kwargs)
+        sp = prof.profile(seq, rig, frame=frame)
+        exp.write_profile(out_name, sp)
+    isu = "" if sp.uncertainty_px is None else f", mean ISU {np.mean(sp.uncertainty_px):.2f} px"
+    click.echo(f"profile {out_name!r}: {sp.n_points} points{isu}; stored in {experiment}")
+
+
+@vision.command("track-3d")
+@click.argument("experiment", type=click.Path(dir_okay=False))
+@click.option("--images", "images_name", default=None, help="image sequence to track through")
+@click.option("--profile", "profile_name", default="profile", show_default=True)
+@click.option("--tracker", "tracker_name", default="gn", show_default=True)
+@click.option("--subset", "subset_px", default=41, show_default=True, help="subset side [px]")
+@click.option("--name", "out_name", default=None, help="name of the stored track (default: the images')")
+def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tracker_name: str,
+                subset_px: int, out_name: str | None) -> None:
+    """Track the profiled points through an image sequence in 3D; store the SurfaceTrack."""
+    from skinkit import registry
+    from skinkit.store import open_experiment
+    from skinkit.vision.tracking3d import track_3d
+
+    with open_experiment(experiment, mode="a") as exp:
+        rig = exp.read_rig()
+        seq = _images(exp, images_name)
+        if profile_name not in exp.profile_names():
+            raise SkinkitError(f"no profile {profile_name!r} in {experiment}; "
+                               "run `skinkit vision profile` first")
+        sp = exp.read_profile(profile_name)
+        tracker = registry.create("skinkit.trackers", tracker_name)
+        track, _ = track_3d(rig, seq, sp.points, tracker, subset_px, progress=True)  # type: ignore[arg-type]
+        name = out_name or seq.name  # type: ignore[attr-defined]
+        exp.write_track(name, track)
+    ok = track.valid.all(axis=1).sum()
+    click.echo(f"track {name!r}: {track.n_points} points x {track.n_frames} frames, "
+               f"{ok} valid in every frame; stored in {experiment}")

@@ -128,22 +128,33 @@ def element_tangent(dN: np.ndarray, w: np.ndarray, F: np.ndarray, S: np.ndarray,
         return _element_tangent(dN, w, F, S, CC, dNT, out)
 
 
+#: elements per chunk of the tangent products: keeps the strain operators (~0.1 MB per
+#: element) in cache instead of streaming ~70 MB per assembly through memory
+CHUNK = 24
+
+
 def _element_tangent(dN, w, F, S, CC, dNT, out):
     ne, nq, nb, _ = dN.shape
     if dNT is None:
         dNT = np.ascontiguousarray(np.swapaxes(dN, -1, -2))
-    B = strain_operator(dNT, F)                                      # (e, q, 6, 81)
+    if out is None:
+        out = np.empty((ne, nb * 3, nb * 3))
     D = voigt_tangent(CC) * w[:, :, None, None]                      # (e, q, 6, 6)
-    DB = np.matmul(D, B)                                             # (e, q, 6, 81)
-    K = np.matmul(B.reshape(ne, nq * 6, nb * 3).transpose(0, 2, 1), DB.reshape(ne, nq * 6, nb * 3),
-                  out=out)
-    dNS = np.matmul(dN, S * w[:, :, None, None])                     # (e, q, a, L)
-    G = np.matmul(dNS.transpose(0, 2, 1, 3).reshape(ne, nb, nq * 3),
-                  dNT.reshape(ne, nq * 3, nb))                       # (e, a, b)
-    K4 = K.reshape(ne, 3, nb, 3, nb)
-    for i in range(3):
-        K4[:, i, :, i, :] += G
-    return K
+    Sw = S * w[:, :, None, None]
+    for a in range(0, ne, CHUNK):
+        b = min(a + CHUNK, ne)
+        m = b - a
+        B = strain_operator(dNT[a:b], F[a:b])                        # (m, q, 6, 81)
+        DB = np.matmul(D[a:b], B)                                    # (m, q, 6, 81)
+        K = np.matmul(B.reshape(m, nq * 6, nb * 3).transpose(0, 2, 1), DB.reshape(m, nq * 6, nb * 3),
+                      out=out[a:b])
+        dNS = np.matmul(dN[a:b], Sw[a:b])                            # (m, q, a, L)
+        G = np.matmul(dNS.transpose(0, 2, 1, 3).reshape(m, nb, nq * 3),
+                      dNT[a:b].reshape(m, nq * 3, nb))               # (m, a, b)
+        K4 = K.reshape(m, 3, nb, 3, nb)
+        for i in range(3):
+            K4[:, i, :, i, :] += G
+    return out
 
 
 class SparsePattern:

@@ -15,6 +15,16 @@ from skinkit.fem.tensors import I3, inv3, outer, sym_product, trace
 VOLUMETRIC_KINDS = ("quadratic", "log")
 
 
+def b2(v: Any) -> np.ndarray:
+    """A batch of scalars shaped to scale ``(..., 3, 3)`` tensors."""
+    return np.asarray(v)[..., None, None]
+
+
+def b4(v: Any) -> np.ndarray:
+    """A batch of scalars shaped to scale ``(..., 3, 3, 3, 3)`` tensors."""
+    return np.asarray(v)[..., None, None, None, None]
+
+
 def kinematics(C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(Cinv, J, I1)`` of ``C`` ``(..., 3, 3)``: inverse, ``J = sqrt(det C)``, first invariant."""
     Cinv, d = inv3(C)
@@ -73,3 +83,15 @@ def iso_I4(C: np.ndarray, Cinv: np.ndarray, J: np.ndarray, a: np.ndarray):
     I4 = np.einsum("...I,...IJ,...J->...", a, C, a) if a.ndim > 1 else (C * A).sum(axis=(-2, -1))
     Jm23 = J ** (-2.0 / 3.0)
     return Jm23 * I4, Jm23[..., None, None] * (A - (I4 / 3.0)[..., None, None] * Cinv)
+
+
+def iso_hessian(Cinv: np.ndarray, J: np.ndarray, A: np.ndarray, IA: np.ndarray) -> np.ndarray:
+    """``∂²Ī/∂C∂C`` of an isochoric invariant ``Ī = J^(-2/3) A:C`` (A = I for Ī1, a⊗a for Ī4).
+
+    ``= J^(-2/3) [-(A⊗C⁻¹ + C⁻¹⊗A)/3 + IA/9 C⁻¹⊗C⁻¹ + IA/3 C⁻¹⊙C⁻¹]`` with ``IA = A:C``.
+    """
+    A = np.broadcast_to(A, Cinv.shape)
+    X = outer(A, Cinv)
+    X = X + np.swapaxes(np.swapaxes(X, -4, -2), -3, -1)
+    return b4(J ** (-2.0 / 3.0)) * (-X / 3.0 + b4(IA / 9.0) * outer(Cinv, Cinv)
+                                    + b4(IA / 3.0) * sym_product(Cinv))

@@ -23,7 +23,7 @@ from skinkit.fem import lawkit
 from skinkit.fem.bcs import BoundaryConditions, Rigid
 from skinkit.fem.errors import ModelError
 from skinkit.fem.mesh import FEMesh, block_mesh, disc_mesh
-from skinkit.fem.problem import Material, Problem, prestretch
+from skinkit.fem.problem import Material, Problem
 from skinkit.fem.solver import SolverOptions
 from skinkit.units import is_known, si_unit, to_si
 
@@ -101,6 +101,9 @@ class Model:
     options: SolverOptions
     intorder: int
     fixed_sets: list[str]
+    points: np.ndarray | None = None
+    point_depth: float = 0.0
+    sensitivities: bool = False
 
 
 def read_model(path: str | Path) -> dict[str, Any]:
@@ -146,20 +149,28 @@ def _params(law: Any, given: Mapping[str, Any], entry: str) -> dict[str, float]:
     return lawkit.check_parameters(law, out, f"{entry}.parameters")
 
 
-def _prestress(d: Mapping[str, Any] | None, entry: str) -> np.ndarray | None:
+def _prestress(d: Mapping[str, Any] | None, entry: str):
+    """``(F0, None)`` for a general initial deformation gradient, ``(None, (l1, l2, angle))``
+    for an in-plane pre-stretch (whose stretches are then differentiable), or ``(None, None)``."""
     if not d:
-        return None
+        return None, None
     _check_keys(d, {"stretch", "angle", "F0"}, entry)
     if "F0" in d:
-        F0 = np.asarray(d["F0"], dtype=float)
+        try:
+            F0 = np.asarray(d["F0"], dtype=float)
+        except (TypeError, ValueError):
+            raise ModelError(f"{entry}.F0", "must be a 3x3 matrix of numbers") from None
         if F0.shape != (3, 3) or np.linalg.det(F0) <= 0:
             raise ModelError(f"{entry}.F0", "must be a 3x3 matrix with positive determinant")
-        return F0
+        return F0, None
     st = _get(d, "stretch", entry)
-    if not isinstance(st, list) or len(st) not in (2, 3):
-        raise ModelError(f"{entry}.stretch", f"expected [l1, l2] or [l1, l2, l3], got {st!r}")
+    if not isinstance(st, list) or len(st) != 2:
+        raise ModelError(f"{entry}.stretch", f"expected [l1, l2], got {st!r}")
+    l1, l2 = float(st[0]), float(st[1])
+    if l1 <= 0 or l2 <= 0:
+        raise ModelError(f"{entry}.stretch", f"stretches must be positive, got {st!r}")
     ang = quantity(d.get("angle", 0.0), "rad", f"{entry}.angle")
-    return prestretch(float(st[0]), float(st[1]), ang, float(st[2]) if len(st) == 3 else None)
+    return None, (l1, l2, ang)
 
 
 def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tuple[FEMesh, float | None]:
@@ -258,8 +269,9 @@ def build_model(spec: Mapping[str, Any]) -> Model:
             raise ModelError(f"{entry}.thickness", f"must be positive, got {th}")
         layers.append((lname, th, int(L.get("elements", 2))))
         law = _law(L, entry)
+        F0, pre = _prestress(L.get("prestress"), f"{entry}.prestress")
         mats.append(Material(lname, law, _params(law, dict(L.get("parameters", {})), entry),
-                             F0=_prestress(L.get("prestress"), f"{entry}.prestress")))
+                             F0=F0, prestress=pre))
     if len({n for n, _, _ in layers}) != len(layers):
         raise ModelError("layers", "layer names must be unique")
     mesh, _ = _mesh(spec, layers)
@@ -294,4 +306,14 @@ def build_model(spec: Mapping[str, Any]) -> Model:
         bc.rigid = Rigid(nodes, mode, load.value, tuple(ind.get("components", (0, 1, 2))))
     else:
         load = _load(spec, unit)
-    return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed)
+    outp = dict(spec.get("output", {}))
+    _check_keys(outp, {"points", "point_depth", "sensitivities"}, "output")
+    points = None
+    if "points" in outp:
+        raw = outp["points"]
+        if not isinstance(raw, list) or not raw:
+            raise ModelError("output.points", "expected a list of [x, y, z] points")
+        points = np.array([vector(p, "m", f"output.points[{i}]") for i, p in enumerate(raw)])
+    depth = quantity(outp.get("point_depth", 0.0), "m", "output.point_depth")
+    return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed, points, depth,
+                 bool(outp.get("sensitivities", False)))

@@ -12,9 +12,10 @@ import numpy as np
 from skinkit.fem.mesh import FEMesh
 from skinkit.fem.solver import Solution
 
-#: VTK hexahedron corner order (0,0,0),(1,0,0),(1,1,0),(0,1,0),(0,0,1),(1,0,1),(1,1,1),(0,1,1)
-#: as positions in scikit-fem's hexahedron vertex order
-VTK_HEX_ORDER = np.array([7, 4, 1, 5, 6, 2, 0, 3])
+#: scikit-fem's hexahedron vertices in VTK's order (bottom quad then top quad, each
+#: counter-clockwise seen from above, so that VTK's cell volumes are positive); checked
+#: by ``tests/fem/test_fem_model.py::test_vtu_cells_have_positive_volume``
+VTK_HEX_ORDER = np.array([6, 2, 0, 3, 7, 4, 1, 5])
 
 
 def summary(model_name: str, mesh: FEMesh, sol: Solution, fixed_nodes: np.ndarray,
@@ -46,11 +47,18 @@ def write_hdf5(path: Path, mesh: FEMesh, sol: Solution, info: dict[str, Any]) ->
         f["mesh"].attrs["regions"] = json.dumps(mesh.regions)
         f["times"] = sol.times
         f["displacement"] = sol.u.reshape(len(sol.times), -1, 3)
-        tip = [s.tip_displacement if s.tip_displacement is not None else np.full(3, np.nan) for s in sol.steps]
-        frc = [s.tip_force if s.tip_force is not None else np.full(3, np.nan) for s in sol.steps]
+        nan3 = np.full(3, np.nan)
+        tip = [s.tip_displacement if s.tip_displacement is not None else nan3 for s in sol.steps]
+        frc = [s.tip_force if s.tip_force is not None else nan3 for s in sol.steps]
         f["tip_displacement"] = np.array(tip)
         f["tip_force"] = np.array(frc)
         f["iterations"] = np.array([s.iterations for s in sol.steps])
+        if "points" in sol.extra:
+            f["points"] = sol.extra["points"]  # (steps, M, 3) embedded point positions [m]
+        if "sensitivities" in sol.extra and sol.extra["sensitivities"]:
+            sens = sol.extra["sensitivities"]
+            f["sensitivity/displacement"] = np.array([sv.du for sv in sens])  # (steps, n_dof, n_par)
+            f["sensitivity"].attrs["parameters"] = json.dumps(sens[0].names)
 
 
 def write_vtu_series(out: Path, mesh: FEMesh, sol: Solution, stem: str = "step") -> Path:

@@ -36,6 +36,8 @@ class Material:
         params: parameter name -> SI value.
         F0: optional initial deformation gradient (pre-stress), ``(3, 3)`` or
             ``(n_el_region, n_q, 3, 3)``; the law sees ``C_e = F0ᵀ C F0``.
+        prestress: optional in-plane pre-stretch ``(l1, l2, angle [rad])`` (see
+            :func:`prestretch`); sets ``F0`` and makes the stretches differentiable.
     """
 
     region: str
@@ -43,6 +45,7 @@ class Material:
     params: Mapping[str, Any]
     F0: np.ndarray | None = None
     elements: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    prestress: tuple[float, float, float] | None = None
 
     def prony(self) -> tuple[np.ndarray, np.ndarray] | None:
         f = getattr(self.law, "prony", None)
@@ -59,6 +62,10 @@ def prestretch(l1: float, l2: float, angle: float = 0.0, l3: float | None = None
     c, s = np.cos(angle), np.sin(angle)
     Q = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
     return Q @ np.diag([l1, l2, l3]) @ Q.T
+
+
+#: elements per chunk of the law-and-tangent evaluation (see ``evaluate``)
+_CHUNK = 48
 
 
 class Problem:
@@ -81,6 +88,9 @@ class Problem:
                 raise ModelError("materials", f"no region {m.region!r} in the mesh ({mesh.regions})")
             m.elements = mesh.region_elements(m.region)
             m.params = lawkit.check_parameters(m.law, dict(m.params), f"materials[{m.region}]")
+            if m.prestress is not None:
+                m.prestress = tuple(float(x) for x in m.prestress)
+                m.F0 = prestretch(*m.prestress)
             if m.F0 is not None:
                 m.F0 = np.asarray(m.F0, dtype=float)
                 if np.linalg.det(m.F0.reshape(-1, 3, 3)).min() <= 0:
@@ -113,8 +123,10 @@ class Problem:
     def viscous(self) -> bool:
         return bool(self.state)
 
-    def material_response(self, k: int, F: np.ndarray, with_tangent: bool, dt: float | None):
-        """``(S, CC)`` of material ``k`` at deformation gradients ``F`` of its elements."""
+    def material_response(self, k: int, F: np.ndarray, with_tangent: bool, dt: float | None,
+                          sub: slice | None = None):
+        """``(S, CC)`` of material ``k`` at deformation gradients ``F`` of its elements (or of
+        the elements ``sub`` of them, a slice relative to the material)."""
         m = self.materials[k]
         C = np.swapaxes(F, -1, -2) @ F
         if m.F0 is not None:
@@ -122,7 +134,10 @@ class Problem:
         S, CC = lawkit.response(m.law, C, m.params, with_tangent)
         if k in self.state and dt is not None:
             g, tau = m.prony()
-            S, fac, _ = viscoelastic.trial(self.state[k], g, tau, dt, S)
+            st = self.state[k]
+            if sub is not None:
+                st = viscoelastic.PronyState(st.h[:, sub], st.Se[sub])
+            S, fac, _ = viscoelastic.trial(st, g, tau, dt, S)
             if CC is not None:
                 CC = fac * CC
         if m.F0 is not None:
@@ -142,10 +157,18 @@ class Problem:
         for k in range(len(self.materials)):
             el = self.slices[k]
             F = self._F(u, k)
-            S, CC = self.material_response(k, F, with_tangent, dt)
-            re[el] = element_residual(g.dN[el], g.w[el], F, S)
-            if with_tangent:
-                element_tangent(g.dN[el], g.w[el], F, S, CC, g.dNT[el], out=Ke[el])
+            if not with_tangent:
+                S, _ = self.material_response(k, F, False, dt)
+                re[el] = element_residual(g.dN[el], g.w[el], F, S)
+                continue
+            # tangents chunk by chunk: the fourth-order arrays stay in cache
+            n = el.stop - el.start
+            for a in range(0, n, _CHUNK):
+                sub = slice(a, min(a + _CHUNK, n))
+                ge = slice(el.start + sub.start, el.start + sub.stop)
+                S, CC = self.material_response(k, F[sub], True, dt, sub)
+                re[ge] = element_residual(g.dN[ge], g.w[ge], F[sub], S)
+                element_tangent(g.dN[ge], g.w[ge], F[sub], S, CC, g.dNT[ge], out=Ke[ge])
         return re, Ke
 
     def _F(self, u: np.ndarray, k: int) -> np.ndarray:

@@ -28,9 +28,10 @@ from skinkit.fem.problem import Problem
 class SolverOptions:
     """Newton and stepping controls.
 
-    ``rtol``: residual norm relative to the first residual of the increment (or to the
-    external load) at convergence; ``atol`` [N]: absolute floor; ``max_iter`` per increment;
-    ``max_cuts``: halvings of an increment before giving up; ``linear``: linear solver name.
+    ``rtol``: residual norm relative to the reference force of the increment (its initial
+    unbalance, the external load or the reactions carried, whichever is largest) at
+    convergence; ``atol`` [N]: absolute floor; ``max_iter`` per increment; ``max_cuts``:
+    successive halvings of an increment before giving up; ``linear``: linear solver name.
     """
 
     rtol: float = 1e-8
@@ -49,6 +50,7 @@ class Timings:
     solve: float = 0.0
     iterations: int = 0
     tangent_assemblies: int = 0
+    tangent: float = 0.0  # the part of ``assembly`` spent on tangent assemblies
 
 
 @dataclass
@@ -95,9 +97,11 @@ class NewtonSolver:
         self._last_re = re
         r = self.pattern.vector(re) - self.dofmap.external(t)
         K = self.pattern.matrix(Ke) if with_tangent else None
-        self.timings.assembly += time.perf_counter() - t0
+        dt_ = time.perf_counter() - t0
+        self.timings.assembly += dt_
         if with_tangent:
             self.timings.tangent_assemblies += 1
+            self.timings.tangent += dt_
         return r, K, re
 
     def increment(self, u: np.ndarray, t: float, dt: float | None):
@@ -148,8 +152,13 @@ class NewtonSolver:
         rhs = self.pattern.vector(re) - self.dofmap.external(t)
         K = self.pattern.matrix(Ke)
         self.timings.assembly += time.perf_counter() - t0
+        self.timings.tangent += time.perf_counter() - t0
         self.timings.tangent_assemblies += 1
-        ref = max(float(np.linalg.norm(rhs)), float(np.linalg.norm(self.dofmap.external(t))))
+        # reference force: the increment's unbalance, the load, or the reactions already
+        # carried (a hold step of a relaxing body has a tiny unbalance but real forces)
+        reactions = float(np.linalg.norm(full_vector(self.problem.geom.edofs, re - np.einsum(
+            "eij,ej->ei", Ke, dup[self.problem.geom.edofs]), self.problem.n_dof)))
+        ref = max(float(np.linalg.norm(rhs)), float(np.linalg.norm(self.dofmap.external(t))), reactions)
         t0 = time.perf_counter()
         self.linear.factor(K)
         dq = -self.linear.solve(rhs)
@@ -206,12 +215,18 @@ class NewtonSolver:
                           self.dofmap.rigid_force(rf), rf)
 
     def run(self, times: Sequence[float], u0: np.ndarray | None = None, viscous_time: bool = False,
-            progress: Callable[[float], None] | None = None) -> Solution:
+            progress: Callable[[float], None] | None = None, sensitivities: bool = False) -> Solution:
         """Solve at each of ``times`` (increasing); cut increments that fail.
 
         ``viscous_time``: ``times`` are seconds and viscous histories advance; otherwise
-        they are load factors and viscous laws answer elastically.
+        they are load factors and viscous laws answer elastically. ``sensitivities``: also
+        differentiate every output step with respect to every parameter (direct
+        differentiation, through the viscous history when there is one); the results are in
+        ``solution.extra["sensitivities"]``, one per output time.
         """
+        from skinkit.fem import sensitivity as sens_mod
+        tracker = sens_mod.HistorySensitivity(self) if sensitivities and viscous_time else None
+        sens_out = []
         times = [float(x) for x in times]
         if any(b <= a for a, b in zip(times, times[1:], strict=False)):
             raise SolverError("load programme times must increase")
@@ -239,17 +254,28 @@ class NewtonSolver:
                                           f"{self.options.max_cuts} step cuts: {exc}") from exc
                     h *= 0.5
                     continue
+                # a success ends the run of cuts; the increment grows back towards its size
+                cuts = 0
+                h = min(base, 2 * h)
+                if tracker is not None:
+                    last_sens = tracker.step(u_new, t_new, t_new - t_cur)
                 if viscous_time:
                     self.problem.commit(u_new, t_new - t_cur)
                 u = u_new
                 t_cur = t_new
             out_u.append(u.copy())
             out_steps.append(self.step_result(u, t_target, its, norm, None if not viscous_time else 0.0))
+            if sensitivities:
+                sens_out.append(last_sens if tracker is not None
+                                else sens_mod.sensitivities(self, u, t_target))
             if progress is not None:
                 progress(t_target)
             t_prev = t_target
-        return Solution(np.array(times), np.array(out_u), out_steps, self.timings, self.dofmap,
-                        self.linear)
+        sol = Solution(np.array(times), np.array(out_u), out_steps, self.timings, self.dofmap,
+                       self.linear)
+        if sensitivities:
+            sol.extra["sensitivities"] = sens_out
+        return sol
 
 
 def solve(problem: Problem, bc: BoundaryConditions, times: Sequence[float] = (1.0,),

@@ -271,3 +271,131 @@ def run(selected: list[str] | None = None, progress: Callable[[str], None] | Non
         r["seconds"] = time.perf_counter() - t0
         out.append(r)
     return {"cases": out, "passed": all(c["passed"] for c in out)}
+
+
+def _sens_problem(law_name: str, opts: dict[str, Any], p: dict[str, Any] | None,
+                  prestress: tuple[float, float, float] | None = None):
+    L = 0.01
+    mesh = block_mesh((L, L, 0.5 * L), (2, 2, 1))
+    law = _law(law_name, **opts)
+    p = lawkit.default_parameters(law) if p is None else p
+    s = mesh.node_sets
+    x = mesh.nodes
+    top = s["top"]
+    ind = top[np.hypot(x[top, 0] - L / 2, x[top, 1] - L / 2) <= 0.3 * L]
+    return mesh, law, p, s, ind, prestress
+
+
+def _sens_solve(mesh, law, p, s, ind, prestress, force):
+    prob = Problem(mesh, [Material("body", law, p, prestress=prestress)])
+    bc = BoundaryConditions(mesh.n_dof).fix(s["bottom"]).fix(s["sides"])
+    bc.rigid = Rigid(ind, "force", lambda t: t * force)
+    solver = NewtonSolver(prob, bc, SolverOptions(rtol=1e-12, atol=1e-16))
+    sol = solver.run([0.5, 1.0])
+    return solver, sol
+
+
+def sensitivity_check(law_name: str, opts: dict[str, Any] | None = None,
+                      p: dict[str, Any] | None = None,
+                      prestress: tuple[float, float, float] | None = None) -> dict[str, Any]:
+    """Direct-differentiation sensitivities of the indenter motion and the whole displacement
+    field against central finite differences of full re-solves, for every parameter."""
+    from skinkit.fem.sensitivity import sensitivities
+    opts = opts or {}
+    mesh, law, p, s, ind, pre = _sens_problem(law_name, opts, p, prestress)
+    force = np.array([0.0, 0.0, -0.02])
+    solver, sol = _sens_solve(mesh, law, p, s, ind, pre, force)
+    sens = sensitivities(solver, sol.u[-1], 1.0)
+    worst = 0.0
+    for j, name in enumerate(sens.names):
+        q = name.split(".", 1)[1]
+        if q.startswith("prestretch."):
+            i = ("prestretch.l1", "prestretch.l2", "prestretch.angle").index(q)
+            base = list(pre)
+            scale = 1.0 if i == 2 else abs(base[i])
+            h = 1e-5 * scale
+            outs = []
+            for sgn in (1, -1):
+                b2 = list(base)
+                b2[i] += sgn * h
+                outs.append(_sens_solve(mesh, law, p, s, ind, tuple(b2), force)[1].u[-1])
+        else:
+            scale = max(abs(p[q]), 1.0 if q == "gamma" else 1e-12)
+            h = 1e-5 * scale
+            outs = [_sens_solve(mesh, law, dict(p, **{q: p[q] + sgn * h}), s, ind, pre, force)[1].u[-1]
+                    for sgn in (1, -1)]
+        fd = (outs[0] - outs[1]) / (2 * h)
+        # compare normalised sensitivities (per relative change of the parameter)
+        ref = np.abs(sol.u[-1]).max()
+        worst = max(worst, float(np.abs((sens.du[:, j] - fd) * scale).max() / ref))
+    return {"error": worst, "n": len(sens.names), "names": sens.names}
+
+
+#: central differences with a relative step 1e-5 of full re-solves converged to 1e-12:
+#: truncation ~(1e-5)² and solver noise ~1e-12/1e-5 = 1e-7 of the response, stress
+#: derivatives by differences (Ogden, pre-stretch) ~1e-9: 1e-5 leaves a factor 100
+SENS_TOL = 1e-5
+
+_SENS_LAWS: dict[str, tuple[str, dict[str, Any], dict[str, Any] | None, Any]] = {
+    "neo-hookean": ("neo-hookean", {}, None, None),
+    "neo-hookean-ni": ("neo-hookean-ni", {}, None, None),
+    "neo-hookean-enu": ("neo-hookean-enu", {}, None, None),
+    "mooney-rivlin": ("mooney-rivlin", {}, None, None),
+    "ogden-2": ("ogden", {"terms": 2}, None, None),
+    "goh": ("goh", {}, {"c": 2e4, "k1": 5e4, "k2": 5.0, "kappa": 0.1, "gamma": 0.3, "k": 5e5}, None),
+    "prestretch": ("neo-hookean-ni", {}, None, (1.08, 1.03, 0.4)),
+}
+
+for _key, (_lname, _opts, _p, _pre) in _SENS_LAWS.items():
+    def _g(_lname=_lname, _opts=_opts, _p=_p, _pre=_pre, _key=_key):
+        """Sensitivities of every parameter against central finite differences (SENS_TOL)."""
+        r = sensitivity_check(_lname, _opts, _p, _pre)
+        return _result(f"sensitivities-{_key}", r["error"], SENS_TOL,
+                       f"{r['n']} parameters: {', '.join(r['names'])}")
+    case(f"sensitivities-{_key}")(_g)
+
+
+def qlv_history_sensitivity_check() -> dict[str, Any]:
+    """Indenter force over a ramp-and-hold history of a QLV block: direct differentiation
+    through the history against central differences of full re-runs, every parameter."""
+    L = 0.01
+    mesh = block_mesh((L, L, 0.5 * L), (2, 2, 1))
+    s = mesh.node_sets
+    x = mesh.nodes
+    top = s["top"]
+    ind = top[np.hypot(x[top, 0] - L / 2, x[top, 1] - L / 2) <= 0.3 * L]
+    law = _law("qlv", elastic="goh", terms=2, elastic_options={"switch": "macaulay"})
+    p = lawkit.default_parameters(law)
+    p.update({"gamma": 0.3, "g1": 0.25, "g2": 0.15, "tau1": 0.3, "tau2": 3.0})
+    times = [0.1, 0.2, 0.5, 1.0, 2.0]
+
+    def run(pp, sens=False):
+        prob = Problem(mesh, [Material("body", law, pp)])
+        bc = BoundaryConditions(mesh.n_dof).fix(s["bottom"]).fix(s["sides"])
+        bc.rigid = Rigid(ind, "displacement", lambda t: np.array([0.0, 0.0, -4e-4 * min(t / 0.2, 1.0)]))
+        return NewtonSolver(prob, bc, SolverOptions(rtol=1e-12, atol=1e-16)).run(
+            times, viscous_time=True, sensitivities=sens)
+
+    sol = run(p, True)
+    sens = sol.extra["sensitivities"]
+    F = np.array([st.tip_force[2] for st in sol.steps])
+    worst = 0.0
+    for j, name in enumerate(sens[0].names):
+        q = name.split(".", 1)[1]
+        scale = max(abs(p[q]), 1.0 if q == "gamma" else 1e-12)
+        h = 1e-5 * scale
+        Fp = np.array([st.tip_force[2] for st in run(dict(p, **{q: p[q] + h})).steps])
+        Fm = np.array([st.tip_force[2] for st in run(dict(p, **{q: p[q] - h})).steps])
+        fd = (Fp - Fm) / (2 * h)
+        dd = np.array([ss.tip_force[2, j] for ss in sens])
+        worst = max(worst, float(np.abs((dd - fd) * scale).max() / np.abs(F).max()))
+    return {"error": worst, "names": sens[0].names}
+
+
+@case("sensitivities-qlv-history")
+def _qlv_hist() -> dict[str, Any]:
+    """Sensitivities of the indenter force through a QLV (GOH) history vs central
+    differences of full re-runs (SENS_TOL, same budget as the elastic cases)."""
+    r = qlv_history_sensitivity_check()
+    return _result("sensitivities-qlv-history", r["error"], SENS_TOL,
+                   f"{len(r['names'])} parameters over 5 time steps: {', '.join(r['names'])}")

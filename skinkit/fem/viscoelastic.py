@@ -49,7 +49,11 @@ class PronyState:
 def trial(state: PronyState, g: np.ndarray, tau: np.ndarray, dt: float, Se: np.ndarray):
     """``(S, factor, h_new)``: total stress, tangent factor, and the trial history."""
     e, beta, fac = step_factors(g, tau, dt)
-    shape = (-1,) + (1,) * (Se.ndim)
-    h_new = e.reshape(shape) * state.h + beta.reshape(shape) * (Se - state.Se)[None]
-    S = (1 - np.sum(g)) * Se + np.tensordot(g, h_new, axes=(0, 0))
+    dSe = Se - state.Se
+    h_new = np.empty(state.h.shape, dtype=np.result_type(state.h, Se))
+    S = (1 - np.sum(g)) * Se
+    # a loop over the (few) terms: tensordot would copy the strided history slices
+    for i in range(h_new.shape[0]):
+        h_new[i] = e[i] * state.h[i] + beta[i] * dSe
+        S = S + g[i] * h_new[i]
     return S, fac, h_new

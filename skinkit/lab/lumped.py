@@ -1,65 +1,76 @@
-"""A lumped (mass-spring-damper) skin driven by a stochastic force: a synthetic robot record.
+"""A virtual stochastic-force session on a lumped skin with a known truth.
 
-The truth is the second-order system ``I x'' + B x' + K x = f`` (thesis Eq. 4.2 family),
-with the forearm values of thesis Table 7 by default, plus the robot's own moving mass.
+Truth by default: the forearm of thesis Table 7 (K = 1.45 kN/m, B = 4.76 N s/m,
+I = 15.5 g) behind the robot's own moving mass (25 g), followed by the Wiener
+nonlinearity of Table 8 (C1 = 8.6 mm, C2 = 0.51 /N); a 200 Hz Gaussian force of mean 1 N
+and 0.5 N rms sampled at 2 kHz for 5 s, 30 dB output noise.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
-from scipy import signal
 
 from skinkit.schemas import Protocol, RobotRecord
+from skinkit.sysid.lti import SecondOrder
+from skinkit.sysid.robot import RobotDynamics
+from skinkit.sysid.simulate import simulate_record
 
 
 @dataclass(frozen=True)
-class LumpedSkin:
-    """Truth of a lumped skin test: stiffness ``K`` [N/m], damping ``B`` [N s/m], inertia ``I``
-    [kg] (skin plus probe), and the output noise as a signal-to-noise ratio [dB]."""
+class LumpedTruth:
+    """What the virtual session is made of (SI)."""
 
-    K: float = 1450.0
-    B: float = 4.76
-    I: float = 0.0155 + 0.025
+    K_N_per_m: float = 1450.0
+    B_Ns_per_m: float = 4.76
+    I_kg: float = 0.0155
+    robot_mass_kg: float = 0.025
+    C1_m: float = 8.6e-3
+    C2_per_N: float = 0.51
+    mean_force_N: float = 1.0
+    rms_force_N: float = 0.5
+    cutoff_hz: float = 200.0
+    rate_hz: float = 2000.0
+    duration_s: float = 5.0
     snr_db: float = 30.0
 
+    @property
+    def skin(self) -> SecondOrder:
+        return SecondOrder(self.K_N_per_m, self.B_Ns_per_m, self.I_kg)
 
-def stochastic_force(duration_s: float, rate_hz: float, cutoff_hz: float, rms_N: float,
-                     rng: np.random.Generator) -> np.ndarray:
-    """Gaussian white noise low-pass filtered at ``cutoff_hz`` (4th-order Butterworth, zero
-    phase), scaled to ``rms_N`` [N]; returns ``(round(duration_s * rate_hz),)`` [N]."""
-    n = int(round(duration_s * rate_hz))
-    sos = signal.butter(4, cutoff_hz, fs=rate_hz, output="sos")
-    f = signal.sosfiltfilt(sos, rng.standard_normal(n))
-    return f * (rms_N / np.std(f))
+    @property
+    def robot(self) -> RobotDynamics:
+        return RobotDynamics(mass_kg=self.robot_mass_kg)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
 
 
-def simulate(truth: LumpedSkin, duration_s: float = 5.0, rate_hz: float = 2000.0,
-             cutoff_hz: float = 200.0, rms_N: float = 0.5, seed: int | np.random.Generator = 0,
-             ) -> RobotRecord:
-    """Simulate the probe position under a stochastic normal force.
+def stochastic_session(truth: LumpedTruth = LumpedTruth(), wiener: bool = True,
+                       seed: int | np.random.Generator = 0) -> RobotRecord:
+    """Simulate the probe's normal position under the stochastic force programme; returns a
+    :class:`RobotRecord` named ``stochastic_wiener`` or ``stochastic_linear`` (tip force and
+    position along z; x, y zero).
 
-    Returns a :class:`RobotRecord` with ``tip_force`` and ``tip_position`` along z (x and y
-    zero), position noise added at ``truth.snr_db``.
+    With ``wiener`` the mass-spring-damper (robot included) is scaled to unit DC gain and
+    followed by the static nonlinearity, as thesis Eq. 4.9 models it; else it is linear.
     """
-    rng = np.random.default_rng(seed)
-    f = stochastic_force(duration_s, rate_hz, cutoff_hz, rms_N, rng)
-    t = np.arange(f.size) / rate_hz
-    # Zero-order hold matches how a digital controller applies force between samples.
-    a = np.array([[0.0, 1.0], [-truth.K / truth.I, -truth.B / truth.I]])
-    b = np.array([[0.0], [1.0 / truth.I]])
-    ad, bd, cd, dd, _ = signal.cont2discrete((a, b, np.array([[1.0, 0.0]]), np.zeros((1, 1))),
-                                             1.0 / rate_hz, method="zoh")
-    x = signal.dlsim((ad, bd, cd, dd, 1.0 / rate_hz), f)[1][:, 0]
-    noise_rms = np.std(x) * 10 ** (-truth.snr_db / 20)
-    x_meas = x + noise_rms * rng.standard_normal(x.size)
-    zeros = np.zeros_like(f)
-    protocol = Protocol("stochastic_normal", kind="force",
-                        parameters={"rms_force": rms_N, "cutoff": cutoff_hz, "rate": rate_hz,
-                                    "duration": duration_s},
-                        units={"rms_force": "N", "cutoff": "Hz", "rate": "Hz", "duration": "s"},
-                        duration_s=duration_s,
+    total = SecondOrder(truth.K_N_per_m, truth.B_Ns_per_m, truth.I_kg + truth.robot_mass_kg)
+    sim = simulate_record(total, duration_s=truth.duration_s, rate_hz=truth.rate_hz,
+                          cutoff_hz=truth.cutoff_hz, rms_N=truth.rms_force_N,
+                          mean_N=truth.mean_force_N, snr_db=truth.snr_db,
+                          wiener=(truth.C1_m, truth.C2_per_N) if wiener else None, seed=seed)
+    name = "stochastic_wiener" if wiener else "stochastic_linear"
+    rec = sim.to_robot_record(axis=2, name=name)
+    protocol = Protocol(name, kind="force",
+                        parameters={"mean_force": truth.mean_force_N, "rms_force": truth.rms_force_N,
+                                    "cutoff": truth.cutoff_hz, "rate": truth.rate_hz,
+                                    "duration": truth.duration_s},
+                        units={"mean_force": "N", "rms_force": "N", "cutoff": "Hz", "rate": "Hz",
+                               "duration": "s"},
+                        duration_s=truth.duration_s,
                         description="virtual lab: Gaussian force, low-pass filtered, normal axis")
-    return RobotRecord(time_s=t, tip_force=np.column_stack([zeros, zeros, f]),
-                       tip_position=np.column_stack([zeros, zeros, x_meas]), protocol=protocol)
+    return RobotRecord(time_s=rec.time_s, tip_force=rec.tip_force, tip_position=rec.tip_position,
+                       protocol=protocol)

@@ -1,22 +1,28 @@
 """The main job on the embedded default: a virtual-lab session run through every step that exists.
 
-Steps: simulate a stochastic-force session on a lumped skin whose truth is known, stream it
-block by block into an experiment file, read it back validated, plot it, and summarise.
-Later steps (identification, vision, finite elements, gap diagnosis) extend this pipeline.
+1. simulate two stochastic-force protocols on lumped skins whose truth is known (thesis
+   Table 7 forearm behind the robot's 25 g; the same followed by the Table 8 nonlinearity);
+2. stream them block by block into an experiment file, as a driver would, and read them back;
+3. identify the linear model (K, B, I, robot mass removed) on the first and the Wiener model
+   (C1, C2, Is, Bs) on the second, store both as fit results, compare them with the truth;
+4. plot the record and the identification (thesis Fig. 4-12 style).
+
+Later steps (vision, finite elements, identification of FE parameters, gap diagnosis)
+extend this pipeline.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from skinkit.lab.lumped import LumpedSkin, simulate
-from skinkit.schemas import RobotRecord
+from skinkit.lab.lumped import LumpedTruth, stochastic_session
+from skinkit.schemas import FitResult, Parameter, ParameterSet, RobotRecord
 from skinkit.store import create_experiment, open_experiment
 
 Progress = Callable[[str, float], None]
@@ -26,19 +32,25 @@ def _quiet(step: str, fraction: float) -> None:
     pass
 
 
-def stream_record(path: Path, record: RobotRecord, block: int, progress: Progress = _quiet) -> None:
-    """Write ``record`` into a new experiment file ``path`` in blocks of ``block`` samples,
+def stream_records(path: Path, records: list[RobotRecord], block: int,
+                   progress: Progress = _quiet) -> None:
+    """Write ``records`` into a new experiment file ``path`` in blocks of ``block`` samples,
     each flushed, as a driver streaming from the robot would."""
+    total = sum(r.n_samples for r in records)
+    done = 0
     with create_experiment(path, overwrite=True) as exp:
         exp.set_metadata(subject="virtual", site="forearm (virtual lab)", operator="skinkit demo")
-        with exp.record_writer(record.protocol, record.channels, record.rate_hz) as w:
-            for start in range(0, record.n_samples, block):
-                w.append(record.slice(start, start + block))
-                progress("stream to store", min(1.0, (start + block) / record.n_samples))
+        for record in records:
+            with exp.record_writer(record.protocol, record.channels, record.rate_hz) as w:
+                for start in range(0, record.n_samples, block):
+                    chunk = record.slice(start, start + block)
+                    w.append(chunk)
+                    done += chunk.n_samples
+                    progress("stream to store", done / total)
 
 
 def plot_record(record: RobotRecord, path: Path) -> Path:
-    """Force and position against time, and the position spectrum; saved as PNG at ``path``."""
+    """Force and position against time, and the force-to-position compliance; PNG at ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -52,8 +64,9 @@ def plot_record(record: RobotRecord, path: Path) -> Path:
     axes[1].plot(t, record.tip_position[:, 2] * 1e3, lw=0.5, color="C1")
     axes[1].set_ylabel("tip position z [mm]")
     axes[1].set_xlabel("time [s]")
-    fx, pf = signal.welch(record.tip_force[:, 2], fs=record.rate_hz, nperseg=1024)
-    _, pxy = signal.csd(record.tip_force[:, 2], record.tip_position[:, 2], fs=record.rate_hz, nperseg=1024)
+    f = record.tip_force[:, 2] - record.tip_force[:, 2].mean()
+    fx, pf = signal.welch(f, fs=record.rate_hz, nperseg=1024)
+    _, pxy = signal.csd(f, record.tip_position[:, 2], fs=record.rate_hz, nperseg=1024)
     # Above the input's band the ratio is noise over noise: show only excited frequencies.
     band = (fx > 0) & (pf > 1e-3 * pf.max())
     axes[2].loglog(fx[band], np.abs(pxy[band] / pf[band]) * 1e3)
@@ -65,26 +78,84 @@ def plot_record(record: RobotRecord, path: Path) -> Path:
     return path
 
 
+def _fit(model: str, values: dict[str, tuple[float, str, float]], vaf_pct: float,
+         n_samples: int) -> FitResult:
+    """A FitResult from name -> (value, unit, standard error)."""
+    params = ParameterSet(Parameter(k, v, u, lower=-math.inf) for k, (v, u, _) in values.items())
+    se = [s for (_, _, s) in values.values()]
+    cov = np.diag(np.square(se)) if all(np.isfinite(se)) else None
+    return FitResult(model, params, objective=1.0 - vaf_pct / 100.0, n_evaluations=n_samples,
+                     covariance=cov, extra={"vaf_pct": vaf_pct},
+                     message="objective = 1 - VAF/100 (fraction of output variance unexplained)")
+
+
 def run_demo(out_dir: str | Path, seed: int = 0, progress: Progress = _quiet) -> dict[str, Any]:
     """Run the demo pipeline into ``out_dir``; returns the JSON-ready summary (also written to
     ``out_dir/summary.json``)."""
+    from skinkit.sysid import identify_linear, identify_wiener
+    from skinkit.sysid.plots import plot_identification
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    truth = LumpedSkin()
+    truth = LumpedTruth()
     progress("simulate virtual session", 0.0)
-    record = simulate(truth, seed=seed)
+    records = [stochastic_session(truth, wiener=False, seed=seed),
+               stochastic_session(truth, wiener=True, seed=seed + 1)]
     progress("simulate virtual session", 1.0)
     session = out / "session.h5"
-    stream_record(session, record, block=1000, progress=progress)
+    stream_records(session, records, block=1000, progress=progress)
     with open_experiment(session) as exp:
-        summary_store = exp.summary()
-        back = exp.read_record(record.protocol.name)
+        lin_rec, wie_rec = (exp.read_record(r.protocol.name) for r in records)
     progress("read back and validate", 1.0)
-    if not np.array_equal(back.tip_position, record.tip_position):
-        raise RuntimeError("the experiment file did not return what was written")
-    plot = plot_record(back, out / "record.png")
+    for a, b in zip((lin_rec, wie_rec), records, strict=True):
+        if not np.array_equal(a.tip_position, b.tip_position):
+            raise RuntimeError("the experiment file did not return what was written")
+
+    progress("identify linear + Wiener", 0.0)
+    lin = identify_linear(lin_rec, robot=truth.robot)
+    progress("identify linear + Wiener", 0.5)
+    wie = identify_wiener(wie_rec)
+    progress("identify linear + Wiener", 1.0)
+    ld, wd = lin.to_dict(), wie.to_dict()
+    with open_experiment(session, "a") as exp:
+        exp.write_fit("linear", _fit("linear", {
+            "K": (ld["K_N_per_m"], "N/m", ld["K_se_N_per_m"]),
+            "B": (ld["B_Ns_per_m"], "N s/m", ld["B_se_Ns_per_m"]),
+            "I": (ld["I_kg"], "kg", ld["I_se_kg"])}, ld["vaf_linear_pct"], lin_rec.n_samples))
+        exp.write_fit("wiener", _fit("wiener", {
+            "C1": (wd["C1_m"], "m", wd["C1_se_m"]), "C2": (wd["C2_per_N"], "1", wd["C2_se_per_N"]),
+            "Is": (wd["Is_s2"], "1", wd["Is_se_s2"]), "Bs": (wd["Bs_s"], "s", wd["Bs_se_s"])},
+            wd["vaf_wiener_pct"], wie_rec.n_samples))
+        summary_store = exp.summary()
+
+    plots = [plot_record(wie_rec, out / "record.png"),
+             plot_identification(lin, lin_rec.tip_force[:, 2], lin_rec.tip_position[:, 2],
+                                 out / "linear.png"),
+             plot_identification(wie, wie_rec.tip_force[:, 2], wie_rec.tip_position[:, 2],
+                                 out / "wiener.png")]
     progress("plot", 1.0)
-    summary = {"truth": asdict(truth), "experiment_file": str(session), "store": summary_store,
-               "plots": [str(plot)]}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+
+    def err(est: float, true: float) -> float:
+        return 100.0 * (est / true - 1.0)
+
+    # The Wiener model's Is and Bs describe the whole moving system, robot included.
+    i_total = truth.I_kg + truth.robot_mass_kg
+    summary = {
+        "truth": truth.to_dict(),
+        "experiment_file": str(session),
+        "store": summary_store,
+        "linear": {"K_N_per_m": ld["K_N_per_m"], "B_Ns_per_m": ld["B_Ns_per_m"], "I_kg": ld["I_kg"],
+                   "vaf_linear_pct": ld["vaf_linear_pct"], "warnings": ld["warnings"]},
+        "linear_error_pct": {"K": err(ld["K_N_per_m"], truth.K_N_per_m),
+                             "B": err(ld["B_Ns_per_m"], truth.B_Ns_per_m),
+                             "I": err(ld["I_kg"], truth.I_kg)},
+        "wiener": {"C1_m": wd["C1_m"], "C2_per_N": wd["C2_per_N"], "Is_s2": wd["Is_s2"],
+                   "Bs_s": wd["Bs_s"], "vaf_wiener_pct": wd["vaf_wiener_pct"],
+                   "vaf_linear_pct": wd["vaf_linear_pct"], "warnings": wd["warnings"]},
+        "wiener_error_pct": {"C1": err(wd["C1_m"], truth.C1_m), "C2": err(wd["C2_per_N"], truth.C2_per_N),
+                             "Is": err(wd["Is_s2"], i_total / truth.K_N_per_m),
+                             "Bs": err(wd["Bs_s"], truth.B_Ns_per_m / truth.K_N_per_m)},
+        "plots": [str(p) for p in plots],
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
     return summary

@@ -59,6 +59,10 @@ class NonCausalWarning(SysidWarning):
     """The position leads the force: the force is probably not the input of this test."""
 
 
+class MemoryWarning(SysidWarning):
+    """The IRF has not decayed by the end of its memory (memory too short, or drift/creep)."""
+
+
 class PoorFitWarning(SysidWarning):
     """A parametric fit is poor or outside its model class (e.g. not under-damped)."""
 

@@ -65,8 +65,7 @@ def fit_damped_sinusoid(irf: IRF, hold: str = "foh") -> DampedFit:
     """
     nn = irf.n_neg
     h = irf.h[nn:]
-    p0 = _initial(h, irf.rate_hz)
-    a1, a2, a3, ok = p0
+    a1, a2, a3, _ = _initial(h, irf.rate_hz)
 
     def resid(p: np.ndarray) -> np.ndarray:
         return kernel(p[0], p[1], p[2], h.size, irf.rate_hz, hold) - h
@@ -77,5 +76,6 @@ def fit_damped_sinusoid(irf: IRF, hold: str = "foh") -> DampedFit:
     if A2 < 0:  # sin is odd: (A1, A2) and (-A1, -A2) are the same curve
         A1, A2 = -A1, -A2
     fit = kernel(A1, A2, A3, h.size, irf.rate_hz, hold)
-    under = ok and A3 < 0 and A1 > 0 and A2 > 0
+    # judged on the fit itself: the AR(2) start only seeds the search
+    under = A3 < 0 and A1 > 0 and A2 > 0
     return DampedFit(A1, A2, A3, vaf(h, fit), under)

@@ -30,7 +30,7 @@ def youngs_modulus(K_N_per_m: float | np.ndarray, probe_radius_m: float,
     return (1 - poisson**2) * np.asarray(K_N_per_m) / (2 * probe_radius_m)
 
 
-def detect_segments(force_N: Any, rate_hz: float, *, min_s: float = 1.0, cutoff_hz: float = 5.0,
+def detect_segments(force_N: Any, rate_hz: float, *, min_s: float = 1.0, cutoff_hz: float = 20.0,
                     window_s: float = 0.1, level: float = 0.3,
                     trim_s: float = 0.25) -> list[Segment]:
     """Find the stochastic segments of an incremental record without its programme.

@@ -6,10 +6,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.linalg import solve_toeplitz
 from scipy.optimize import least_squares
 
 from skinkit.sysid.checks import (
     WARN_MEMORIES,
+    MemoryWarning,
     NonCausalWarning,
     PoorFitWarning,
     Signals,
@@ -17,7 +19,7 @@ from skinkit.sysid.checks import (
     warn,
 )
 from skinkit.sysid.damped import DampedFit, fit_damped_sinusoid
-from skinkit.sysid.irf import IRF, estimate_irf
+from skinkit.sysid.irf import IRF, correlations, estimate_irf
 from skinkit.sysid.lti import HOLDS, SecondOrder, simulate
 from skinkit.sysid.metrics import vaf
 from skinkit.sysid.record import as_signals
@@ -110,11 +112,21 @@ def auto_memory(sig: Signals, two_sided: bool, hold: str) -> float:
     m0 = min(MAX_AUTO_MEMORY_S, (sig.n / WARN_MEMORIES - 1) / sig.rate_hz)
     if m0 * sig.rate_hz < 8:
         raise SysidError(f"record of {sig.n} samples is too short for an automatic IRF memory")
-    irf = estimate_irf(sig.force_N, sig.position_m, sig.rate_hz, m0, two_sided)
-    fit = fit_damped_sinusoid(irf, hold)
+    # a first, cheap estimate: Levinson solution with a ridge (1 % of the input variance)
+    # in place of the eigen-decomposition, enough to see where the IRF decays
+    x = sig.force_N - sig.force_N.mean()
+    n0 = int(round(m0 * sig.rate_hz)) + 1
+    rxx, phi = correlations(x, sig.position_m - sig.position_m.mean(), n0)
+    col = rxx.copy()
+    col[0] *= 1.0 + 1e-2
+    h0 = solve_toeplitz(col, phi) * sig.rate_hz
+    quick = IRF(np.arange(n0) / sig.rate_hz, h0, np.zeros(n0), sig.rate_hz, n0, np.zeros(n0),
+                float("nan"))
+    fit = fit_damped_sinusoid(quick, hold)
     if fit.underdamped and fit.vaf_pct >= POOR_FIT_VAF:
         mem = np.log(1.0 / ENVELOPE_END) / -fit.A3
     else:
+        irf = estimate_irf(sig.force_N, sig.position_m, sig.rate_hz, m0, two_sided)
         h = irf.h[irf.n_neg:]
         sig_lags = np.flatnonzero(np.abs(h) > 3 * irf.h_std[irf.n_neg:])
         mem = 1.5 * (sig_lags[-1] if sig_lags.size else h.size - 1) / sig.rate_hz
@@ -122,8 +134,6 @@ def auto_memory(sig: Signals, two_sided: bool, hold: str) -> float:
 
 
 def _check_causality(sig: Signals, memory_s: float) -> None:
-    from skinkit.sysid.irf import correlations
-
     m = int(round(memory_s * sig.rate_hz)) + 1
     _, phi = correlations(sig.force_N - sig.force_N.mean(), sig.position_m - sig.position_m.mean(),
                           m, m - 1)
@@ -134,6 +144,23 @@ def _check_causality(sig: Signals, memory_s: float) -> None:
         warn(NonCausalWarning, f"the force-position cross-correlation is larger at negative lags "
              f"(peak at {lag:.4g} s): position leads force, so force is probably not the input "
              "(a displacement-controlled test?)", sig.issues)
+
+
+#: the IRF's last tenth may hold at most this fraction of its peak (significant values only)
+TAIL_FRACTION = 0.2
+
+
+def _check_decay(irf: IRF, sig: Signals) -> None:
+    h = irf.h[irf.n_neg:]
+    sd = irf.h_std[irf.n_neg:]
+    tail = slice(int(0.9 * h.size), None)
+    peak = float(np.max(np.abs(h)))
+    big = (np.abs(h[tail]) > TAIL_FRACTION * peak) & (np.abs(h[tail]) > 3 * sd[tail])
+    if big.any():
+        warn(MemoryWarning, f"the IRF has not decayed by the end of its {irf.memory_s:.4g} s "
+             f"memory (last tenth reaches {100 * np.max(np.abs(h[tail])) / peak:.3g} % of the "
+             "peak): lengthen the memory, or the response drifts/creeps beyond a short IRF",
+             sig.issues)
 
 
 def _se(system: SecondOrder, f: np.ndarray, resid_var: float, rate: float, hold: str,
@@ -181,6 +208,7 @@ def identify_signals(sig: Signals, memory_s: float | None = None, *, two_sided: 
     _check_causality(sig, memory_s)
     f, y, rate = sig.force_N, sig.position_m, sig.rate_hz
     irf = estimate_irf(f, y, rate, memory_s, two_sided, rank)
+    _check_decay(irf, sig)
     fit = fit_damped_sinusoid(irf, hold)
     if not fit.underdamped:
         warn(PoorFitWarning, f"the IRF is not an under-damped sinusoid (A1={fit.A1:.3g}, "
@@ -192,7 +220,7 @@ def identify_signals(sig: Signals, memory_s: float | None = None, *, two_sided: 
     total = fit.system
     burn = int(round(memory_s * rate)) + 1
     sim_hold = hold if hold != "impulse" else "foh"
-    if refine:
+    if refine and total.K > 0 and total.B > 0 and total.I > 0:
         total = refine_output_error(total, f, y, rate, sim_hold, burn)
     fm, ym = float(f.mean()), float(y.mean())
     y_irf = irf.predict(f - fm)

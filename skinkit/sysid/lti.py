@@ -96,6 +96,17 @@ def discretise(num: list[float], den: list[float], rate_hz: float,
     """
     if hold not in ("foh", "zoh"):
         raise ValueError(f"hold must be 'foh' or 'zoh' for simulation, got {hold!r}")
+    if len(num) == 1 and len(den) == 3 and den[0] != 0:
+        # an under-damped second-order system in closed form (no matrix exponential: this
+        # runs inside every least-squares iteration)
+        p = np.roots(den)
+        if abs(p[0].imag) > 0:
+            a3, a2 = float(p[0].real), abs(float(p[0].imag))
+            a1 = num[0] / (den[0] * a2)
+            T = 1.0 / rate_hz
+            a = np.array([1.0, -2 * np.exp(a3 * T) * np.cos(a2 * T), np.exp(2 * a3 * T)])
+            g = kernel(a1, a2, a3, 3, rate_hz, hold) * T  # first pulse-response samples
+            return np.convolve(a, g)[:3], a
     b, a, _ = signal.cont2discrete((num, den), 1.0 / rate_hz, method=hold)
     b = np.atleast_2d(b)[0]
     return b / a[0], np.asarray(a, float) / a[0]

@@ -50,12 +50,11 @@ def fit_exponential(x: np.ndarray, y: np.ndarray, fit_offset: bool = False,
     else:
         # y ~ a x + b x^2 + y0 near x = 0 gives C1 C2 = a and -C1 C2^2 / 2 = b
         b, a, y0 = np.polyfit(x, y, 2)
-        if a != 0 and b * a < 0:
+        if a != 0 and b != 0:  # saturating (C2 > 0) or, for b * a > 0, stiffening-free growth
             c2 = -2 * b / a
-            c1 = a / c2
         else:
-            c2 = 0.1 / max(float(np.max(np.abs(x))), 1e-12)
-            c1 = a / c2
+            c2 = 1e-3 / max(float(np.max(np.abs(x))), 1e-12)
+        c1 = a / c2
         if not fit_offset:
             y0 = 0.0
     p0 = [c1, c2, y0] if fit_offset else [c1, c2]

@@ -21,19 +21,27 @@ def _plt() -> Any:
 
 
 def plot_identification(model: Any, force_N: np.ndarray, position_m: np.ndarray,
-                        path: str | Path, window_s: float = 0.5) -> Path:
+                        path: str | Path, window_s: float | None = None) -> Path:
     """Four panels like thesis Fig. 4-12: (a) input force, (b) IRF measured (95 % band) and
     fitted, (c) static nonlinearity (Wiener/Hammerstein) or predicted-vs-measured (linear),
-    (d) predicted and measured output. ``model`` is a Linear, Wiener or Hammerstein model.
-    Returns the written file."""
+    (d) predicted and measured output. ``model`` is a Linear, Wiener or Hammerstein model;
+    when its linear part is not a valid damped sinusoid, the IRF's own prediction is shown.
+    ``window_s`` [s] of the record are shown in (a) and (d) (default 0.5 s, or the whole
+    record when the model is not valid). Returns the written file."""
     plt = _plt()
     lin = getattr(model, "linear", model)
     rate = lin.rate_hz
     f = np.asarray(force_N, float)
     y = np.asarray(position_m, float)
-    yp = model.predict(f)
+    if lin.valid:
+        yp = model.predict(f)
+    else:  # no simulatable parametric model: show what the non-parametric IRF predicts
+        yp = lin.irf.predict(f - f.mean()) + y.mean()
+        model = lin
     t = np.arange(f.size) / rate
     b = lin.burn_in
+    if window_s is None:
+        window_s = 0.5 if lin.valid else f.size / rate
     w = slice(b, min(f.size, b + int(window_s * rate)))
     fig, ax = plt.subplots(2, 2, figsize=(10, 7))
     ax[0, 0].plot(t[w], f[w], lw=0.8)
@@ -44,8 +52,9 @@ def plot_identification(model: Any, force_N: np.ndarray, position_m: np.ndarray,
     ax[0, 1].plot(irf.lags_s, irf.h, color="C0", lw=1, label="measured")
     d = lin.damped
     nn = irf.n_neg
-    fit = kernel(d.A1, d.A2, d.A3, irf.h.size - nn, rate, lin.hold)
-    ax[0, 1].plot(irf.lags_s[nn:], fit, color="C3", lw=1, label="damped sinusoid")
+    if lin.valid:
+        fit = kernel(d.A1, d.A2, d.A3, irf.h.size - nn, rate, lin.hold)
+        ax[0, 1].plot(irf.lags_s[nn:], fit, color="C3", lw=1, label="damped sinusoid")
     ax[0, 1].set(title=f"(b) IRF (rank {irf.rank})", xlabel="lag [s]", ylabel="h [m/(N s)]")
     ax[0, 1].legend(fontsize=8)
     nl = getattr(model, "nonlinearity", None)
@@ -122,6 +131,33 @@ def plot_incremental(table: list[dict[str, Any]], path: str | Path) -> Path:
                    label=direction, ms=4)
         a.set(xlabel="mean position [mm]", ylabel=label)
         a.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_comparison(rows: list[dict[str, Any]], band_edges_hz: np.ndarray,
+                    path: str | Path) -> Path:
+    """VAF per frequency band and whiteness of each model's residual, side by side (rows
+    from :func:`skinkit.sysid.diagnostics.compare`)."""
+    plt = _plt()
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    e = np.asarray(band_edges_hz)
+    labels = [f"{lo:g}-{hi:g}" for lo, hi in zip(e[:-1], e[1:], strict=True)]
+    width = 0.8 / max(len(rows), 1)
+    for k, r in enumerate(rows):
+        ax[0].bar(np.arange(len(labels)) + k * width, r["vaf_by_band_pct"], width,
+                  label=f"{r['model']} ({r['vaf_pct']:.2f} %)")
+    ax[0].set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels)
+    ax[0].set(title="VAF per frequency band", xlabel="band [Hz]", ylabel="VAF [%]")
+    ax[0].legend(fontsize=8)
+    names = [r["model"] for r in rows]
+    ax[1].bar(names, [100 * r["whiteness_outside"] for r in rows], label="autocorrelation")
+    ax[1].axhline(5.0, color="0.5", ls="--", label="white (5 %)")
+    ax[1].set(title="residual lags outside the 95 % band", ylabel="% of lags")
+    ax[1].legend(fontsize=8)
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out, dpi=120)

@@ -5,10 +5,11 @@ Thesis 4.1.2: the linear IRF divided by its DC compliance predicts an output in 
 the measured position, and the linear part is re-estimated, until the VAF converges. The
 dynamics are then the scaled inertia ``Is = I/K`` [s^2] and damping ``Bs = B/K`` [s].
 
-The thesis re-estimates the IRF through the inverse nonlinearity; inverting the exponential
-amplifies noise near its asymptote (y -> C1), so here the linear step instead re-fits Is and
-Bs to the measured output through the current nonlinearity (output error). A final joint
-least-squares pass over Is, Bs and the nonlinearity gives the estimates.
+The thesis re-estimates the IRF through the inverse nonlinearity (``update="inverse"``);
+inverting the exponential amplifies noise near its asymptote (y -> C1), so by default the
+linear step instead re-fits Is and Bs to the measured output through the current
+nonlinearity (output error). A final joint least-squares pass over Is, Bs and the
+nonlinearity gives the estimates (``joint=False`` keeps the iteration's own).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from skinkit.sysid.checks import Signals, SysidError
+from skinkit.sysid.checks import PoorFitWarning, Signals, SysidError, warn
 from skinkit.sysid.linear import LinearModel, identify_signals
 from skinkit.sysid.lti import SecondOrder, simulate
 from skinkit.sysid.metrics import vaf
@@ -94,9 +95,13 @@ def _fit_nl(kind: str, x: np.ndarray, y: np.ndarray, degree: int, fit_offset: bo
 def identify_wiener_signals(sig: Signals, memory_s: float | None = None, *,
                             nonlinearity: str = "exponential", degree: int = 3,
                             fit_offset: bool = False, max_iter: int = 20, tol_pct: float = 1e-3,
-                            joint: bool = True, hold: str = "foh",
+                            joint: bool = True, hold: str = "foh", update: str = "output_error",
                             linear: LinearModel | None = None, **linear_kw: Any) -> WienerModel:
     """:func:`identify_wiener` on already checked :class:`Signals`."""
+    if update not in ("output_error", "inverse"):
+        raise SysidError(f"update must be 'output_error' or 'inverse', got {update!r}")
+    if update == "inverse" and nonlinearity != "exponential":
+        raise SysidError("the inverse update needs the invertible exponential nonlinearity")
     if nonlinearity not in ("exponential", "polynomial"):
         raise SysidError(f"nonlinearity must be 'exponential' or 'polynomial', got {nonlinearity!r}")
     lin = linear if linear is not None else identify_signals(sig, memory_s, hold=hold, **linear_kw)
@@ -122,19 +127,43 @@ def identify_wiener_signals(sig: Signals, memory_s: float | None = None, *,
         if len(history) > 1 and abs(history[-1] - history[-2]) < tol_pct:
             converged = True
             break
-        g_now = g
-        sol = least_squares(lambda qq, g_now=g_now: g_now(x_of(qq)[burn:]) - yy, q, method="lm")
-        q = sol.x
+        if update == "inverse":
+            q = _inverse_update(g, sig, lin, q)
+        else:
+            g_now = g
+            sol = least_squares(lambda qq, g_now=g_now: g_now(x_of(qq)[burn:]) - yy, q,
+                                method="lm")
+            q = sol.x
     assert g is not None
     se = {"Is": float("nan"), "Bs": float("nan"), "C1": float("nan"), "C2": float("nan")}
     if joint:
         q, g, se_j = _joint(q, g, x_of, yy, burn, nonlinearity, degree, fit_offset)
         se.update(se_j)
         history.append(vaf(yy, g(x_of(q)[burn:])))
+    if history[-1] < lin.vaf_linear_pct:
+        hint = "" if fit_offset or nonlinearity != "exponential" else (
+            "; is position 0 the unloaded skin surface? if not, fit an offset "
+            "(fit_offset=True, --fit-offset)")
+        warn(PoorFitWarning, f"the Wiener model accounts for less variance ({history[-1]:.4g} %) "
+             f"than the linear model ({lin.vaf_linear_pct:.4g} %){hint}", sig.issues)
     Is, Bs = (float(v) for v in np.exp(q))
     return WienerModel(Is_s2=Is, Bs_s=Bs, nonlinearity=g, linear=lin,
                        vaf_wiener_pct=history[-1], vaf_history=history, rate_hz=rate, hold=hold,
                        converged=converged, se=se, issues=sig.issues)
+
+
+def _inverse_update(g: StaticNonlinearity, sig: Signals, lin: LinearModel,
+                    q: np.ndarray) -> np.ndarray:
+    """Thesis update: map the measured output back through the inverse nonlinearity and
+    re-identify the (unit-DC-gain) linear dynamics from force to that signal."""
+    c1, c2, y0 = g.params
+    u = np.clip(1.0 - (sig.position_m - y0) / c1, 1e-6, None)  # the asymptote is not crossed
+    z = -np.log(u) / c2
+    zsig = Signals(sig.force_N, z, sig.rate_hz, sig.t0_s, [])
+    m = identify_signals(zsig, lin.irf.memory_s, hold=lin.hold, two_sided=lin.irf.two_sided)
+    if not m.valid:
+        return q
+    return np.log([m.total.Is_s2, m.total.Bs_s])
 
 
 def _se(sol: Any, n_par: int) -> np.ndarray:
@@ -185,8 +214,8 @@ def identify_wiener(force_N: Any, position_m: Any = None, rate_hz: float | None 
                     memory_s: float | None = None, *, time_s: Any = None,
                     nonlinearity: str = "exponential", degree: int = 3, fit_offset: bool = False,
                     max_iter: int = 20, tol_pct: float = 1e-3, joint: bool = True,
-                    hold: str = "foh", flags: Any = None, force_limit_N: float | None = None,
-                    axis: int | str = 2,
+                    hold: str = "foh", update: str = "output_error", flags: Any = None,
+                    force_limit_N: float | None = None, axis: int | str = 2,
                     **linear_kw: Any) -> WienerModel:
     """Identify a Wiener model (thesis Eq. 4.9 nonlinearity by default).
 
@@ -199,9 +228,12 @@ def identify_wiener(force_N: Any, position_m: Any = None, rate_hz: float | None 
         degree: polynomial degree.
         max_iter, tol_pct: iterate until the VAF changes by less than ``tol_pct`` [%].
         joint: finish with a joint least-squares pass over dynamics and nonlinearity.
+        update: how each iteration re-estimates the linear part: ``"output_error"`` (fit
+            Is, Bs through the current nonlinearity) or ``"inverse"`` (the thesis's: IRF
+            from force to the output mapped through the inverse nonlinearity).
         **linear_kw: passed to the linear identification (``two_sided``, ``rank``, ...).
     """
     sig = as_signals(force_N, position_m, rate_hz, time_s, memory_s, flags, force_limit_N, axis)
     return identify_wiener_signals(sig, memory_s, nonlinearity=nonlinearity, degree=degree,
                                    fit_offset=fit_offset, max_iter=max_iter, tol_pct=tol_pct,
-                                   joint=joint, hold=hold, **linear_kw)
+                                   joint=joint, hold=hold, update=update, **linear_kw)

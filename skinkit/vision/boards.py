@@ -8,8 +8,7 @@ import cv2
 import numpy as np
 
 from skinkit.vision import VisionError
-from skinkit.vision.scene import Board
-
+from skinkit.vision.scene import Board, CharucoTarget
 
 #: image-plane handedness of a board seen from its printed (+z) face: with the image y axis
 #: pointing down, board x -> (1, 0) and y -> (0, -1) for a camera looking along -z.
@@ -102,14 +101,40 @@ def handedness(corners: np.ndarray, cols: int) -> float:
     return float(np.sign(ex[0] * ey[1] - ex[1] * ey[0]))
 
 
-def random_board_poses(n: int, rng: np.random.Generator, board: Board, tilt_deg: float = 25.0,
-                       shift_m: float = 0.006, lift_m: tuple[float, float] = (0.0, 0.012),
-                       ) -> list[Board]:
-    """``n`` board placements around the origin; the first lies flat, centred (world frame)."""
+def detect_charuco(image: np.ndarray, target: CharucoTarget) -> np.ndarray:
+    """``(P, 2)`` ChArUco chessboard corners [px] in id order, NaN where not detected.
+
+    Marker ids make the order unambiguous, and a partly visible board still counts.
+    """
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        img = cv2.normalize(img.astype(np.float32), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    board = target.cv_board()
+    det = cv2.aruco.CharucoDetector(board)
+    corners, ids, _, _ = det.detectBoard(img)
+    out = np.full((len(target.object_points()), 2), np.nan)
+    if ids is not None and len(ids):
+        out[np.asarray(ids).ravel()] = np.asarray(corners, float).reshape(-1, 2)
+    return out
+
+
+def random_board_poses(n: int, rng: np.random.Generator, board: Board | CharucoTarget,
+                       tilt_deg: float = 25.0, shift_m: float = 0.006,
+                       lift_m: tuple[float, float] = (0.0, 0.012)) -> list:
+    """``n`` placements of ``board`` around the origin, printed face up; the first lies
+    flat and centred (it defines the calibrated world frame)."""
+    from dataclasses import replace
+
     from scipy.spatial.transform import Rotation
 
-    c, r = board.inner
-    centre_local = np.array([(c - 1) / 2, (r - 1) / 2, 0.0]) * board.square_m
+    if isinstance(board, CharucoTarget):
+        c, r = board.squares
+        centre_local = np.array([c / 2, r / 2, 0.0]) * board.square_m
+        face = np.diag([1.0, -1.0, -1.0])  # OpenCV's ChArUco is printed on its -z side
+    else:
+        c, r = board.inner
+        centre_local = np.array([(c - 1) / 2, (r - 1) / 2, 0.0]) * board.square_m
+        face = np.eye(3)
     out = []
     for k in range(n):
         if k == 0:
@@ -123,8 +148,8 @@ def random_board_poses(n: int, rng: np.random.Generator, board: Board, tilt_deg:
             tilt = Rotation.from_rotvec(axis * np.deg2rad(rng.uniform(8, tilt_deg)))
             R = (tilt * spin).as_matrix()
             centre = np.array([*rng.uniform(-shift_m, shift_m, 2), rng.uniform(*lift_m)])
-        out.append(Board(board.inner, board.square_m, R, centre - R @ centre_local,
-                         board.margin_squares))
+        R = R @ face
+        out.append(replace(board, R=R, t=centre - R @ centre_local))
     return out
 
 

@@ -17,19 +17,22 @@ import numpy as np
 
 from skinkit.schemas import CameraModel, CameraRig
 from skinkit.vision import VisionError
-from skinkit.vision.boards import check_board, detect_board, handedness
+from skinkit.vision.boards import check_board, detect_board, detect_charuco, handedness
+from skinkit.vision.scene import CharucoTarget
 
 
 @dataclass
 class Detections:
     """Board corners found in each view.
 
-    ``corners``: ``(F, C, P, 2)`` [px], NaN where not detected; ``found``: ``(F, C)`` bool.
+    ``corners``: ``(F, C, P, 2)`` [px], NaN where not detected; ``found``: ``(F, C)`` bool
+    (the view is usable: the whole checkerboard, or enough ChArUco corners).
     """
 
     corners: np.ndarray
     found: np.ndarray
     image_size: tuple[int, int]
+    object_points: np.ndarray | None = None  # (P, 3) board coordinates [m] of the corners
 
 
 @dataclass
@@ -38,8 +41,8 @@ class Calibration:
 
     Attributes:
         rig: the cameras, world frame = board frame of view ``world_view``.
-        rms_px: overall RMS reprojection error [px].
-        per_camera_rms_px: ``(C,)`` RMS reprojection error per camera [px].
+        rms_px: overall RMS reprojection error [px] over the joint adjustment's views.
+        per_camera_rms_px: ``(C,)`` RMS reprojection error per camera [px], same views.
         per_view_rms_px: ``(F, C)`` RMS per view [px], NaN where the board was not seen.
         detections: the corners used.
         world_view: frame index whose board defines the world frame.
@@ -87,6 +90,30 @@ def detect_all(images: np.ndarray, inner: tuple[int, int],
     return Detections(corners, found, (W, H))
 
 
+def detect_all_charuco(images: np.ndarray, target: CharucoTarget, min_corners: int = 8) -> Detections:
+    """Detect a ChArUco board in ``(F, C, H, W)`` images; a view counts with ``min_corners``."""
+    imgs = np.asarray(images)
+    if imgs.ndim != 4:
+        raise VisionError(f"calibration images: expected (frames, cameras, H, W), got shape {imgs.shape}")
+    F, C, H, W = imgs.shape
+    P = len(target.object_points())
+    corners = np.full((F, C, P, 2), np.nan)
+    for f in range(F):
+        for c in range(C):
+            corners[f, c] = detect_charuco(imgs[f, c], target)
+    found = np.sum(np.isfinite(corners[..., 0]), axis=2) >= min_corners
+    corners[~found] = np.nan
+    return Detections(corners, found, (W, H), target.object_points())
+
+
+def calibrate_charuco(images: np.ndarray, target: CharucoTarget,
+                      camera_names: Sequence[str] | None = None, min_views: int = 4,
+                      world_view: int | None = None, fix_k3: bool = True) -> Calibration:
+    """:func:`calibrate` from views of a ChArUco board (partial views allowed)."""
+    det = detect_all_charuco(images, target)
+    return calibrate_detections(det, None, target.square_m, camera_names, min_views, world_view, fix_k3)
+
+
 def calibrate(images: np.ndarray, inner: tuple[int, int], square_m: float,
               camera_names: Sequence[str] | None = None, min_views: int = 4,
               world_view: int | None = None, fix_k3: bool = True) -> Calibration:
@@ -100,10 +127,11 @@ def calibrate(images: np.ndarray, inner: tuple[int, int], square_m: float,
     return calibrate_detections(det, inner, square_m, camera_names, min_views, world_view, fix_k3)
 
 
-def calibrate_detections(det: Detections, inner: tuple[int, int], square_m: float,
+def calibrate_detections(det: Detections, inner: tuple[int, int] | None, square_m: float,
                          camera_names: Sequence[str] | None = None, min_views: int = 4,
                          world_view: int | None = None, fix_k3: bool = True) -> Calibration:
-    """:func:`calibrate` from corners already detected."""
+    """:func:`calibrate` from corners already detected (``inner`` None: the detections
+    carry their board's object points)."""
     F, C = det.found.shape
     names = list(camera_names) if camera_names is not None else [f"cam{c}" for c in range(C)]
     if len(names) != C:
@@ -121,31 +149,54 @@ def calibrate_detections(det: Detections, inner: tuple[int, int], square_m: floa
         shared = np.any(det.found[det.found[:, c]][:, np.arange(C) != c])
         if not shared:
             raise VisionError(f"{names[c]} never sees the board at the same time as another camera")
-    c0, r0 = inner
-    j, i = np.mgrid[0:r0, 0:c0]
-    obj = (np.column_stack([i.ravel(), j.ravel(), np.zeros(c0 * r0)]) * square_m).astype(np.float32)
+    obj = _object_points(det, inner, square_m).astype(np.float32)
+    # OpenCV 5.0's multiview calibration initialises poses badly from partly observed
+    # boards, so each camera is first calibrated alone on every corner it saw (partial
+    # ChArUco views included), and the joint adjustment then starts from those intrinsics
+    # and uses the views where a camera saw the whole board.
+    full = det.found & np.all(np.isfinite(det.corners[..., 0]), axis=2)
+    counts_full = full.sum(axis=0)
+    few = [f"{names[c]} ({counts_full[c]})" for c in range(C) if counts_full[c] < 2]
+    if few:
+        raise VisionError(f"too few views of the whole board for the joint calibration: {', '.join(few)}")
     obj_points = [obj] * F
     img_points = []
     for c in range(C):
         per = []
         for f in range(F):
-            pts = det.corners[f, c] if det.found[f, c] else np.full((len(obj), 2), -1.0)
+            pts = det.corners[f, c] if full[f, c] else np.full((len(obj), 2), -1.0)
             per.append(pts.astype(np.float32))
         img_points.append(per)
-    mask = det.found.T.astype(np.uint8)
+    flag = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    Ks0, dists0 = [], []
+    for c in range(C):
+        views = np.flatnonzero(det.found[:, c])
+        seen = [np.isfinite(det.corners[f, c, :, 0]) for f in views]
+        try:
+            _, K, dist, _, _ = cv2.calibrateCamera(
+                [obj[m] for m in seen],
+                [det.corners[f, c, m].astype(np.float32) for f, m in zip(views, seen, strict=True)],
+                det.image_size, None, None, flags=flag)
+        except cv2.error as exc:
+            detail = str(exc).strip().splitlines()[-1]
+            raise VisionError(f"calibration of {names[c]} alone failed: {detail}") from None
+        Ks0.append(K)
+        dists0.append(dist.ravel()[:5].reshape(1, 5))
+    mask = full.T.astype(np.uint8)
     sizes = [det.image_size] * C
     models = np.zeros(C, np.uint8)
-    flags_intr = np.full(C, cv2.CALIB_FIX_K3 if fix_k3 else 0, np.int32)
+    flags_intr = np.full(C, flag, np.int32)
     try:
         out = cv2.calibrateMultiviewExtended(
-            obj_points, img_points, sizes, mask, models, None, None, None, None,
-            flagsForIntrinsics=flags_intr)
+            obj_points, img_points, sizes, mask, models, Ks0, dists0, None, None,
+            flagsForIntrinsics=flags_intr, flags=cv2.CALIB_USE_INTRINSIC_GUESS)
     except cv2.error as exc:
-        raise VisionError(f"OpenCV multiview calibration failed: {str(exc).strip().splitlines()[-1]}") from None
+        detail = str(exc).strip().splitlines()[-1]
+        raise VisionError(f"OpenCV multiview calibration failed: {detail}") from None
     rms, Ks, dists, Rs, Ts, _pairs, rvecs0, tvecs0, per_frame = out
     if world_view is None:
-        world_view = int(np.flatnonzero(det.found[:, 0])[0])
-    if not det.found[world_view, 0]:
+        world_view = int(np.flatnonzero(full[:, 0])[0])
+    if not full[world_view, 0]:
         raise VisionError(f"camera {names[0]} does not see the board in the world view {world_view}")
     Rb, _ = cv2.Rodrigues(np.asarray(rvecs0[world_view], float).reshape(3))
     tb = np.asarray(tvecs0[world_view], float).reshape(3)
@@ -156,20 +207,37 @@ def calibrate_detections(det: Detections, inner: tuple[int, int], square_m: floa
         Tc = np.asarray(Ts[c], float).reshape(3)
         cams.append(CameraModel(names[c], np.asarray(Ks[c], float), np.asarray(dists[c], float).ravel()[:5],
                                 Rc @ Rb, Rc @ tb + Tc, det.image_size))
-    rig = CameraRig(tuple(cams))
-    per_view = np.where(det.found, np.asarray(per_frame, float).T, np.nan)
-    per_cam = np.array([reprojection_rms(rig[c], det, c, inner, square_m, rvecs0, tvecs0, Rs, Ts)
+    rig = _z_towards_cameras(CameraRig(tuple(cams)))
+    per_view = np.where(full, np.asarray(per_frame, float).T, np.nan)
+    used = Detections(det.corners, full, det.image_size, det.object_points)
+    per_cam = np.array([reprojection_rms(rig[c], used, c, obj, rvecs0, tvecs0, Rs, Ts)
                         for c in range(C)])
     return Calibration(rig, float(rms), per_cam, per_view, det, world_view)
 
 
-def reprojection_rms(cam: CameraModel, det: Detections, c: int, inner: tuple[int, int],
-                     square_m: float, rvecs0: Sequence, tvecs0: Sequence, Rs: Sequence,
-                     Ts: Sequence) -> float:
-    """RMS reprojection error [px] of camera ``c`` over the views where it saw the board."""
+def _object_points(det: Detections, inner: tuple[int, int] | None, square_m: float) -> np.ndarray:
+    if inner is None:
+        if det.object_points is None:
+            raise VisionError("detections carry no board object points and no board size was given")
+        return np.asarray(det.object_points, float)
     c0, r0 = inner
     j, i = np.mgrid[0:r0, 0:c0]
-    obj = np.column_stack([i.ravel(), j.ravel(), np.zeros(c0 * r0)]) * square_m
+    return np.column_stack([i.ravel(), j.ravel(), np.zeros(c0 * r0)]) * square_m
+
+
+def _z_towards_cameras(rig: CameraRig) -> CameraRig:
+    """Turn the world half a turn about x if the cameras sit on its -z side, so that z
+    points from the board (the skin) towards the cameras whatever the board's convention."""
+    if np.mean([cam.centre[2] for cam in rig.cameras]) >= 0:
+        return rig
+    flip = np.diag([1.0, -1.0, -1.0])
+    return CameraRig(tuple(CameraModel(c.name, c.K, c.distortion, c.R @ flip, c.t, c.image_size)
+                           for c in rig.cameras))
+
+
+def reprojection_rms(cam: CameraModel, det: Detections, c: int, obj: np.ndarray,
+                     rvecs0: Sequence, tvecs0: Sequence, Rs: Sequence, Ts: Sequence) -> float:
+    """RMS reprojection error [px] of camera ``c`` over the corners it saw."""
     Rc = np.asarray(Rs[c], float)
     Rc = cv2.Rodrigues(Rc.reshape(3))[0] if Rc.size == 3 else Rc.reshape(3, 3)
     Tc = np.asarray(Ts[c], float).reshape(3)
@@ -179,7 +247,8 @@ def reprojection_rms(cam: CameraModel, det: Detections, c: int, inner: tuple[int
             continue
         Rb = cv2.Rodrigues(np.asarray(rvecs0[f], float).reshape(3))[0]
         tb = np.asarray(tvecs0[f], float).reshape(3)
-        Xc = (obj @ Rb.T + tb) @ Rc.T + Tc
+        Xc = (np.asarray(obj, float) @ Rb.T + tb) @ Rc.T + Tc
         px, _ = cv2.projectPoints(Xc.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.distortion)
-        sq.append(np.sum((px.reshape(-1, 2) - det.corners[f, c]) ** 2, axis=1))
+        seen = np.all(np.isfinite(det.corners[f, c]), axis=1)
+        sq.append(np.sum((px.reshape(-1, 2)[seen] - det.corners[f, c][seen]) ** 2, axis=1))
     return float(np.sqrt(np.mean(np.concatenate(sq)))) if sq else float("nan")

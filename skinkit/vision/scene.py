@@ -323,3 +323,67 @@ def visible(cam: CameraModel, objects: Sequence[object], X: np.ndarray, tol_m: f
     for obj in objects:
         nearest = np.minimum(nearest, obj.hit(cam.centre, dirs)[0])  # type: ignore[attr-defined]
     return inside & (nearest >= dist - tol_m)
+
+
+@dataclass
+class CharucoTarget:
+    """A ChArUco board (OpenCV ``aruco.CharucoBoard``) placed in the world.
+
+    ``squares``: (columns, rows) of squares; ``square_m``, ``marker_m`` [m]; ``dictionary``:
+    an ``cv2.aruco.DICT_*`` name. Board coordinates follow OpenCV: origin at the outer
+    top-left corner, x along a row, y down the printed image, z into the board, so the
+    printed face is seen from -z. ``R`` (board -> world) and ``t`` [m] place it.
+    """
+
+    squares: tuple[int, int] = (8, 6)
+    square_m: float = 0.004
+    marker_m: float = 0.003
+    dictionary: str = "DICT_4X4_50"
+    R: np.ndarray = field(default_factory=lambda: np.diag([1.0, -1.0, -1.0]))
+    t: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    px_per_square: int = 60
+
+    def cv_board(self) -> object:
+        import cv2
+
+        d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        return cv2.aruco.CharucoBoard(tuple(self.squares), self.square_m, self.marker_m, d)
+
+    def object_points(self) -> np.ndarray:
+        """``(P, 3)`` chessboard-corner board coordinates [m], in ChArUco id order."""
+        return np.asarray(self.cv_board().getChessboardCorners(), float).reshape(-1, 3)  # type: ignore[attr-defined]
+
+    def corners_world(self) -> np.ndarray:
+        return self.object_points() @ np.asarray(self.R).T + np.asarray(self.t)
+
+    def _image(self) -> np.ndarray:
+        key = (self.squares, self.square_m, self.marker_m, self.dictionary, self.px_per_square)
+        if key not in _CHARUCO_IMAGES:
+            c, r = self.squares
+            img = self.cv_board().generateImage((c * self.px_per_square, r * self.px_per_square),  # type: ignore[attr-defined]
+                                                marginSize=0, borderBits=1)
+            _CHARUCO_IMAGES[key] = np.asarray(img, float) / 255.0
+        return _CHARUCO_IMAGES[key]
+
+    def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        from scipy.ndimage import map_coordinates
+
+        R = np.asarray(self.R, float)
+        nrm = R[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = ((np.asarray(self.t) - origin) @ nrm) / (dirs @ nrm)
+        q = (origin + s[:, None] * dirs - self.t) @ R
+        scale = self.px_per_square / self.square_m
+        col = q[:, 0] * scale - 0.5
+        row = q[:, 1] * scale - 0.5
+        img = self._image()
+        h, w = img.shape
+        m = 0.5 * self.px_per_square  # white margin of half a square
+        on = (s > 0) & (col >= -m) & (col <= w - 1 + m) & (row >= -m) & (row <= h - 1 + m)
+        rad = np.full(len(dirs), 0.9)
+        inside = on & (col >= 0) & (col <= w - 1) & (row >= 0) & (row <= h - 1)
+        rad[inside] = 0.08 + 0.82 * map_coordinates(img, [row[inside], col[inside]], order=1)
+        return np.where(on, s, np.inf), rad
+
+
+_CHARUCO_IMAGES: dict[tuple, np.ndarray] = {}

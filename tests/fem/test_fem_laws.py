@@ -18,6 +18,7 @@ pytestmark = pytest.mark.needs_plugins
 LAWS = [("neo-hookean", {}), ("neo-hookean-ni", {}), ("neo-hookean-ni", {"volumetric": "log"}),
         ("neo-hookean-enu", {}), ("mooney-rivlin", {}), ("ogden", {"terms": 1}),
         ("ogden", {"terms": 3}), ("goh", {}), ("goh", {"families": 1, "frame_angle": 0.4}),
+        ("goh", {"switch": "macaulay"}),
         ("qlv", {"elastic": "goh", "terms": 2}), ("qlv", {"elastic": "ogden"})]
 
 

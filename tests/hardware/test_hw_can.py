@@ -12,10 +12,6 @@ pytestmark = pytest.mark.needs_hardware
 pytest.importorskip("skinkit_hardware")
 
 import can  # noqa: E402
-
-from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
-from skinkit.schemas.robot import FLAG_SAMPLES_LOST  # noqa: E402
-from skinkit.store import create_experiment, open_experiment  # noqa: E402
 from skinkit_hardware import faults as F  # noqa: E402
 from skinkit_hardware.can_bridge import BridgeError, parse_loopback  # noqa: E402
 from skinkit_hardware.can_emulator import CanLinkServer  # noqa: E402
@@ -26,6 +22,10 @@ from skinkit_hardware.emulator import serve  # noqa: E402
 from skinkit_hardware.params import RobotParameters  # noqa: E402
 from skinkit_hardware.testing import EmulatorProcess  # noqa: E402
 from skinkit_hardware.wire import can_codec as C  # noqa: E402
+
+from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
+from skinkit.schemas.robot import FLAG_SAMPLES_LOST  # noqa: E402
+from skinkit.store import create_experiment, open_experiment  # noqa: E402
 
 P = RobotParameters()
 FAST = ("--speed", "0", "--bitrate", "0")
@@ -75,8 +75,12 @@ def test_bridge_refuses_non_loopback_addresses() -> None:
 def test_virtual_bus_in_one_process_matches_sim() -> None:
     link = CanLinkServer(None, 0, 65536, 0.0, 0.0, np.random.default_rng(1), P)
     stop = threading.Event()
-    th = threading.Thread(target=serve, args=(Device(clock=wall_clock, seed=5), link, 0.0, None), kwargs={"stop": stop},
-                          daemon=True)
+    th = threading.Thread(
+        target=serve,
+        args=(Device(clock=wall_clock, seed=5), link, 0.0, None),
+        kwargs={"stop": stop},
+        daemon=True,
+    )
     th.start()
     try:
         d = CanDriver()
@@ -155,3 +159,22 @@ def test_can_stuck_sensor_and_watchdog() -> None:
         with pytest.raises(F.DeviceFault, match="position sensor stuck on motor 3"):
             list(d.run(proto()))
         d.disconnect()
+
+
+def test_can_silent_host_trips_the_watchdog() -> None:
+    import time
+
+    from skinkit_hardware.params import Limits
+
+    with EmulatorProcess("can", "--speed", "1", "--bitrate", "0") as emu:
+        d = CanDriver()
+        d.connect(port=emu.address, heartbeat_thread=False)
+        d.home()
+        blocks = []
+        with pytest.raises(F.DeviceFault, match=r"watchdog \(host silent\)"):
+            for b in d.run(proto(periods=3)):
+                blocks.append(b)
+                if len(blocks) == 2:
+                    time.sleep(3 * Limits().watchdog_s)
+        d.disconnect()
+    assert sum(b.n_samples for b in blocks) == d.last_run.received

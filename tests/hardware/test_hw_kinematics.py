@@ -18,7 +18,7 @@ arm = st.floats(min_value=LO, max_value=HI, allow_nan=False)
 TOL = 1e-6  # the acceptance figure: 1 um
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(arm, arm, arm)
 def test_inverse_of_forward_returns_the_arm_positions(q1: float, q2: float, q3: float) -> None:
     q = np.array([q1, q2, q3])
@@ -26,7 +26,7 @@ def test_inverse_of_forward_returns_the_arm_positions(q1: float, q2: float, q3: 
     assert np.max(np.abs(back - q)) < TOL
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(arm, arm, arm)
 def test_forward_of_inverse_returns_the_tip(q1: float, q2: float, q3: float) -> None:
     tip = kin.forward(np.array([q1, q2, q3]), G)  # a tip the mechanism can reach

@@ -12,15 +12,16 @@ import pytest
 pytestmark = pytest.mark.needs_hardware
 pytest.importorskip("skinkit_hardware")
 
-from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
-from skinkit.schemas.robot import FLAG_LIMIT, FLAG_SAMPLES_LOST  # noqa: E402
-from skinkit.store import create_experiment, open_experiment  # noqa: E402
 from skinkit_hardware import faults as F  # noqa: E402
 from skinkit_hardware.drivers.serial import SerialDriver, SerialTransport  # noqa: E402
 from skinkit_hardware.drivers.sim import SimDriver  # noqa: E402
 from skinkit_hardware.params import Limits, RobotParameters  # noqa: E402
 from skinkit_hardware.testing import EmulatorProcess  # noqa: E402
 from skinkit_hardware.wire import serial_codec as S  # noqa: E402
+
+from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
+from skinkit.schemas.robot import FLAG_LIMIT, FLAG_SAMPLES_LOST  # noqa: E402
+from skinkit.store import create_experiment, open_experiment  # noqa: E402
 
 P = RobotParameters()
 I_OFF = 5 * P.current_noise_A + P.current_lsb_A  # 5 sigma of the current-sense noise
@@ -48,7 +49,9 @@ def test_frames_round_trip_and_resynchronise_after_corruption() -> None:
     rows = np.zeros((40, 15))
     rows[:, 0] = np.arange(40)
     rows[:, 1] = np.arange(40) * 10
-    rows[:, 2:5] = P.adc_span_m[0] + rng.integers(0, 65535, (40, 3)) * (P.adc_span_m[1] - P.adc_span_m[0]) / 65535
+    rows[:, 2:5] = (
+        P.adc_span_m[0] + rng.integers(0, 65535, (40, 3)) * (P.adc_span_m[1] - P.adc_span_m[0]) / 65535
+    )
     rows[:, 8:11] = rng.integers(-2000, 2000, (40, 3)) * P.ft_force_resolution_N
     frames = [f for _, f in S.encode_samples(send, rows, P)]
     bad = bytearray(frames[0])
@@ -99,7 +102,9 @@ def test_emulator_killed_mid_protocol_keeps_every_sample(tmp_path) -> None:
 
 def test_dropped_and_corrupted_frames_are_counted_and_stored(tmp_path) -> None:
     path = tmp_path / "lossy.h5"
-    with EmulatorProcess("serial", *FAST, "--drop-rate", "0.05", "--corrupt-rate", "0.05", "--seed", "3") as emu:
+    with EmulatorProcess(
+        "serial", *FAST, "--drop-rate", "0.05", "--corrupt-rate", "0.05", "--seed", "3"
+    ) as emu:
         d = serial_driver(emu)
         with create_experiment(path) as exp:
             s = run_protocol(d, proto(periods=2), exp)
@@ -135,7 +140,7 @@ def test_silent_host_trips_the_watchdog() -> None:
         d.disconnect()
     flags, cur = stack(blocks, "flags"), stack(blocks, "motor_current")
     k = int(np.argmax(flags & FLAG_LIMIT > 0))
-    assert flags[k] & FLAG_LIMIT and np.all(np.abs(cur[k + 1:]) < I_OFF)
+    assert flags[k] & FLAG_LIMIT and np.all(np.abs(cur[k + 1 :]) < I_OFF)
 
 
 def test_limits_over_serial_refused_before_motion_and_stopped_in_motion() -> None:
@@ -150,7 +155,7 @@ def test_limits_over_serial_refused_before_motion_and_stopped_in_motion() -> Non
         flags, cur = stack(blocks, "flags"), stack(blocks, "motor_current")
         k = int(np.argmax(flags & FLAG_LIMIT > 0))
         # decimation 1 streams every control tick: the tick after the trip has no current
-        assert np.all(np.abs(cur[k + 1:]) < I_OFF)
+        assert np.all(np.abs(cur[k + 1 :]) < I_OFF)
         # the firmware refuses an over-travel programme even when the host does not check
         t = d.transport
         t.send("clear")

@@ -10,14 +10,15 @@ pytestmark = pytest.mark.needs_hardware
 
 pytest.importorskip("skinkit_hardware")
 
-from skinkit import registry  # noqa: E402
-from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
-from skinkit.schemas.robot import FLAG_CAMERA_TRIGGER, FLAG_ESTOP, FLAG_LIMIT  # noqa: E402
-from skinkit.store import create_experiment, open_experiment  # noqa: E402
 from skinkit_hardware import faults as F  # noqa: E402
 from skinkit_hardware.device import Device, Injection, run_device_until  # noqa: E402
 from skinkit_hardware.drivers.sim import SimDriver  # noqa: E402
 from skinkit_hardware.params import Limits, RobotParameters  # noqa: E402
+
+from skinkit import registry  # noqa: E402
+from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
+from skinkit.schemas.robot import FLAG_CAMERA_TRIGGER, FLAG_ESTOP, FLAG_LIMIT  # noqa: E402
+from skinkit.store import create_experiment, open_experiment  # noqa: E402
 
 P = RobotParameters()
 # measured current noise: 0.5 mA standard deviation; 5 sigma bounds "motors off"
@@ -41,8 +42,18 @@ def homed(**kw) -> SimDriver:
 
 def collect(blocks):
     blocks = list(blocks)
-    return {c: np.concatenate([getattr(b, c) for b in blocks]) for c in
-            ("time_s", "motor_position", "motor_current", "motor_force", "tip_position", "tip_force", "flags")}
+    return {
+        c: np.concatenate([getattr(b, c) for b in blocks])
+        for c in (
+            "time_s",
+            "motor_position",
+            "motor_current",
+            "motor_force",
+            "tip_position",
+            "tip_force",
+            "flags",
+        )
+    }
 
 
 def test_registry_gives_the_sim_driver() -> None:
@@ -60,13 +71,18 @@ def test_home_finds_contact_at_about_10_mN() -> None:
     np.testing.assert_allclose(d.q_zero, np.full(3, d.geometry.home_m + 0.001), atol=30e-6)
 
 
-@pytest.mark.parametrize("name,direction", [
-    ("normal_indentation", (0, 0, 1)),
-    ("in_plane_030", (np.cos(np.pi / 6), np.sin(np.pi / 6), 0)),
-    ("normal_retraction", (0, 0, -1)),
-    ("out_of_plane_285", (np.cos(np.deg2rad(285)) / np.sqrt(2), np.sin(np.deg2rad(285)) / np.sqrt(2),
-                          1 / np.sqrt(2))),
-])
+@pytest.mark.parametrize(
+    "name,direction",
+    [
+        ("normal_indentation", (0, 0, 1)),
+        ("in_plane_030", (np.cos(np.pi / 6), np.sin(np.pi / 6), 0)),
+        ("normal_retraction", (0, 0, -1)),
+        (
+            "out_of_plane_285",
+            (np.cos(np.deg2rad(285)) / np.sqrt(2), np.sin(np.deg2rad(285)) / np.sqrt(2), 1 / np.sqrt(2)),
+        ),
+    ],
+)
 def test_trajectory_protocols_follow_their_direction(name: str, direction) -> None:
     d = homed()
     r = collect(d.run(fast(name)))
@@ -135,7 +151,7 @@ def test_travel_limit_refused_before_motion() -> None:
     d = homed()
     dev = d.transport.device
     tick = dev.tick
-    with pytest.raises(F.LimitRefused, match=r"travel limit on motor \d at t=.*limit 10.000 mm"):
+    with pytest.raises(F.LimitRefused, match=r"travel limit on motor \d at t=.*limit 10.0000 mm"):
         d.run(fast("normal_indentation", peak_to_peak=8e-3))
     assert dev.tick == tick and dev.programme is None  # nothing loaded, nothing moved
 
@@ -168,7 +184,7 @@ def test_limit_exceeded_during_motion_stops_within_one_control_period(tmp_path) 
     assert rec.n_samples == d.last_run.received  # every sample received is in the file
     k = int(np.argmax(rec.flags & FLAG_LIMIT > 0))
     assert np.linalg.norm(rec.tip_force[k]) > 1.0
-    assert np.all(np.abs(rec.motor_current[k + 1:]) < I_OFF)
+    assert np.all(np.abs(rec.motor_current[k + 1 :]) < I_OFF)
     assert open_experiment(path).record_info("normal_indentation")["complete"] is False
 
 
@@ -192,7 +208,7 @@ def test_emergency_stop_from_the_host() -> None:
     flags = np.concatenate([b.flags for b in blocks])
     cur = np.concatenate([b.motor_current for b in blocks])
     assert np.any(flags & FLAG_ESTOP)
-    assert np.all(np.abs(cur[np.argmax(flags & FLAG_ESTOP > 0) + 1:]) < I_OFF)
+    assert np.all(np.abs(cur[np.argmax(flags & FLAG_ESTOP > 0) + 1 :]) < I_OFF)
 
 
 def test_watchdog_deenergises_a_silent_host() -> None:
@@ -224,3 +240,17 @@ def test_run_before_home_is_refused() -> None:
     d.connect()
     with pytest.raises(Exception, match="home"):
         d.run(fast("normal_indentation"))
+
+
+def test_thermal_filter_matches_the_device_recurrence() -> None:
+    from skinkit_hardware.safety import thermal_rms
+
+    rng = np.random.default_rng(0)
+    f = rng.normal(2, 1, (3000, 3))
+    a = np.exp(-1 / (1000 * 0.05))  # tau 50 ms: several closed-form chunks of 2500 samples
+    th = np.zeros(3)
+    ref = np.empty_like(f)
+    for k in range(f.shape[0]):
+        th = a * th + (1 - a) * f[k] ** 2
+        ref[k] = th
+    np.testing.assert_allclose(thermal_rms(f, 1000, 0.05), np.sqrt(ref), rtol=1e-10)

@@ -1,19 +1,14 @@
-"""Shared truth for the sysid tests: thesis Table 7 forearm values plus the robot's moving
-mass (about 25 g, thesis Fig. 4-9), Table 8 nonlinearity."""
+"""Fixtures of the sysid tests (constants live in ``sysid_truth``)."""
 
 from __future__ import annotations
 
 import pytest
+from sysid_truth import ROBOT, SKIN
 
 from skinkit.sysid.lti import SecondOrder
-from skinkit.sysid.robot import RobotDynamics
-
-SKIN = SecondOrder(K=1450.0, B=4.76, I=0.0155)
-ROBOT = RobotDynamics(mass_kg=0.025)
-C1_M, C2_PER_N = 8.6e-3, 0.51
-SEEDS = (1, 2, 3)
 
 
 @pytest.fixture(scope="session")
 def total() -> SecondOrder:
+    """Skin (thesis Table 7 forearm) plus the robot's moving mass: what the robot measures."""
     return ROBOT.add(SKIN)

@@ -7,12 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from skinkit.errors import SkinkitError
 from skinkit.schemas.robot import FLAG_SATURATED
 from skinkit.sysid import (
     ClippedForceWarning,
     GapWarning,
+    MemoryWarning,
     NaNWarning,
     NarrowbandInputWarning,
     NonCausalWarning,
@@ -107,6 +110,12 @@ def test_bad_shapes_and_arguments(rec):
 
 
 @pytest.mark.filterwarnings("ignore::skinkit.sysid.PoorFitWarning")
+def test_memory_too_short_warns(rec):
+    with pytest.warns(MemoryWarning, match="not decayed"):
+        identify_linear(rec.force_N, rec.position_m, 2000.0, memory_s=0.02)
+
+
+@pytest.mark.filterwarnings("ignore::skinkit.sysid.PoorFitWarning")
 def test_position_leading_force_warns(rec):
     # swap cause and effect: a "force" that follows the position by 10 ms
     y = rec.position_m
@@ -127,7 +136,32 @@ def test_real_relaxation_test_is_flagged_not_fitted():
     # a ramp-and-hold extensometer test is not a stochastic input; its IRF is no sinusoid
     assert NarrowbandInputWarning.__name__ in names
     assert PoorFitWarning.__name__ in names
+    assert MemoryWarning.__name__ in names  # the force relaxes over tens of seconds
     assert not m.valid and m.to_dict()["valid"] is False
     with pytest.raises(SysidError, match="not a stable under-damped"), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         identify_wiener(record)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(nan_at=st.lists(st.integers(0, 1999), max_size=30),
+       gap_at=st.lists(st.integers(1, 1999), max_size=3),
+       jitter=st.sampled_from([0.0, 1e-2]))
+def test_check_signals_never_returns_bad_samples(nan_at, gap_at, jitter):
+    # whatever the damage, the result is finite and uniform, or a SysidError says why
+    rng = np.random.default_rng(len(nan_at) + 7 * len(gap_at))
+    f = rng.standard_normal(2000)
+    y = np.convolve(f, np.ones(8) / 8, mode="same") + 0.01 * rng.standard_normal(2000)
+    f[nan_at] = np.nan
+    t = np.arange(2000) / 1000.0 + jitter * rng.uniform(-0.5, 0.5, 2000) / 1000.0
+    for g in gap_at:
+        t[g:] += 0.05
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            sig = check_signals(f, y, time_s=t)
+        except SysidError:
+            return
+    assert np.isfinite(sig.force_N).all() and np.isfinite(sig.position_m).all()
+    assert sig.force_N.size == sig.position_m.size >= 64
+    assert sig.rate_hz == pytest.approx(1000.0, rel=0.02)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import C1_M, C2_PER_N, ROBOT, SKIN
+from sysid_truth import C1_M, C2_PER_N, ROBOT, SKIN
 
 from skinkit.cli import cli
 from skinkit.sysid.simulate import simulate_record
@@ -30,7 +30,7 @@ def wiener_csv(tmp_path_factory, total):
 
 def test_cli_wiener_json_and_plots(wiener_csv, tmp_path):
     r = CliRunner().invoke(cli, ["sysid", str(wiener_csv), "--model", "wiener", "--json",
-                                 "--plot", str(tmp_path / "plots")])
+                                 "--compare", "--plot", str(tmp_path / "plots")])
     assert r.exit_code == 0, r.output
     d = json.loads(r.stdout)
     for key in ("K_N_per_m", "B_Ns_per_m", "I_kg", "vaf_linear_pct", "irf_memory_s", "C1_m",
@@ -39,6 +39,10 @@ def test_cli_wiener_json_and_plots(wiener_csv, tmp_path):
     assert d["C1_m"] == pytest.approx(C1_M, rel=0.05)
     assert d["C2_per_N"] == pytest.approx(C2_PER_N, rel=0.05)
     assert all(Path(p).stat().st_size > 10_000 for p in d["plots"])
+    assert len(d["plots"]) == 3
+    vafs = {row["model"]: row["vaf_pct"] for row in d["comparison"]}
+    assert vafs["wiener"] == pytest.approx(d["vaf_wiener_pct"], abs=1e-9)
+    assert vafs["wiener"] > vafs["hammerstein"] and vafs["wiener"] > vafs["linear"]
 
 
 def test_cli_linear_experiment_file_with_protocol(tmp_path, total):
@@ -91,3 +95,26 @@ def test_bench_sysid_json():
     # the rank-reduced pseudo-inverse is accurate where plain least squares on an input
     # with no power above 200 Hz is not
     assert d["irf_error_svd_rel"] < 0.05 < d["irf_error_lstsq_rel"]
+
+
+def test_cli_incremental(tmp_path, total):
+    from skinkit.sysid import SecondOrder
+    from skinkit.sysid.inputs import incremental
+    from skinkit.sysid.lti import simulate
+    from skinkit.sysid.simulate import SimulatedRecord, exponential
+
+    prog = incremental("A", 3.0, 2000.0, n_steps=3, step_s=2.0, precondition_s=0.5, seed=3)
+    x = simulate(SecondOrder.from_scaled(total.Is_s2, total.Bs_s), prog.force_N, 2000.0)
+    y = exponential(x, C1_M, C2_PER_N)
+    y = y + 1e-6 * np.random.default_rng(3).standard_normal(y.size)
+    path = _csv(tmp_path / "inc.csv", SimulatedRecord(prog.force_N, y, y, 1e-6, 2000.0))
+    r = CliRunner().invoke(cli, ["sysid", str(path), "--incremental", "--probe-radius", "2",
+                                 "--json", "--plot", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.stdout)
+    assert [row["direction"] for row in d["increments"]] == ["up"] * 3 + ["down"] * 3
+    ks = [row["K_N_per_m"] for row in d["increments"][:3]]
+    assert ks == sorted(ks)
+    assert all(row["E_Pa"] > 0 for row in d["increments"])
+    assert len(d["hysteresis"]) == 3
+    assert Path(d["plots"][0]).stat().st_size > 10_000

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import C1_M, C2_PER_N
+from sysid_truth import C1_M, C2_PER_N
 
 from skinkit.sysid import SysidError, identify_hammerstein, identify_wiener
 from skinkit.sysid.diagnostics import compare, diagnose, residual_diagnostics

@@ -6,8 +6,10 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import ROBOT, SEEDS, SKIN
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import signal
+from sysid_truth import ROBOT, SEEDS, SKIN
 
 from skinkit.sysid import SecondOrder, identify_linear, vaf
 from skinkit.sysid.irf import estimate_irf, estimate_irf_lstsq
@@ -166,3 +168,12 @@ def test_mdl_keeps_fewer_terms_when_noise_grows(total):
         rec = simulate_record(total, seed=10, snr_db=snr)
         ranks.append(estimate_irf(rec.force_N, rec.position_m, 2000.0, 0.12).rank)
     assert ranks[1] < ranks[0]
+
+
+@settings(max_examples=50, deadline=None)
+@given(K=st.floats(10.0, 1e5), I=st.floats(1e-4, 1.0), zeta=st.floats(0.01, 0.95))
+def test_damped_sinusoid_round_trip_any_underdamped_system(K, I, zeta):
+    s = SecondOrder(K=K, B=2 * zeta * np.sqrt(K * I), I=I)
+    back = SecondOrder.from_damped_sinusoid(*s.damped_sinusoid())
+    assert np.allclose([back.K, back.B, back.I], [s.K, s.B, s.I], rtol=1e-9)
+    assert back.zeta == pytest.approx(zeta, rel=1e-9)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import C1_M, C2_PER_N, SKIN
+from sysid_truth import C1_M, C2_PER_N, SKIN
 
 from skinkit.sysid import (
     RobotDynamics,
@@ -186,7 +186,7 @@ def test_cv_table_thesis_definition(tmp_path):
 def test_detect_segments_finds_the_stochastic_steps(protocol):
     from skinkit.sysid.incremental import detect_segments
 
-    p = incremental(protocol, 3.0, 2000.0, n_steps=4, step_s=3.0, precondition_s=1.0, seed=5)
+    p = incremental(protocol, 3.0, 2000.0, n_steps=4, step_s=3.0, precondition_s=0.5, seed=5)
     found = detect_segments(p.force_N, 2000.0)
     true = p.identify_segments()
     assert len(found) == len(true)

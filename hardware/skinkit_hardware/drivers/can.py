@@ -21,8 +21,13 @@ from skinkit_hardware.wire import can_codec as C
 class CanTransport:
     """Host side of the CAN protocol on a python-can bus (heartbeats as in the serial driver)."""
 
-    def __init__(self, bus: can.BusABC, params: RobotParameters, heartbeat_thread: bool = True,
-                 heartbeat_s: float = 0.05) -> None:
+    def __init__(
+        self,
+        bus: can.BusABC,
+        params: RobotParameters,
+        heartbeat_thread: bool = True,
+        heartbeat_s: float = 0.05,
+    ) -> None:
         self.bus = bus
         self.asm = C.SampleAssembler(params)
         self.lock = threading.Lock()
@@ -53,7 +58,9 @@ class CanTransport:
                 for m in msgs:
                     self.bus.send(m, timeout=2.0)
             except (can.CanError, OSError) as exc:
-                raise F.DeviceFault(f"can: link lost while sending {command}: {exc}", F.Fault(F.LINK)) from None
+                raise F.DeviceFault(
+                    f"can: link lost while sending {command}: {exc}", F.Fault(F.LINK)
+                ) from None
             self.last_sent = time.monotonic()
 
     def receive(self, timeout_s: float) -> tuple[np.ndarray, list[Event]]:
@@ -101,14 +108,18 @@ class CanDriver(HostDriver):
             if port:
                 interface, _, channel = str(port).partition(":")
                 if not channel:
-                    raise F.DeviceFault(f"can driver: --port must be INTERFACE:CHANNEL (e.g. "
-                                        f"skinkit_loopback:127.0.0.1:29536 or socketcan:can0), got {port!r}")
+                    raise F.DeviceFault(
+                        f"can driver: --port must be INTERFACE:CHANNEL (e.g. "
+                        f"skinkit_loopback:127.0.0.1:29536 or socketcan:can0), got {port!r}"
+                    )
             if not interface or channel is None:
                 raise F.DeviceFault("can driver: give interface and channel (or --port INTERFACE:CHANNEL)")
             try:
                 bus = can.Bus(interface=interface, channel=channel, bitrate=bitrate)
             except Exception as exc:  # noqa: BLE001 - python-can interfaces raise many types
-                raise F.DeviceFault(f"can: cannot open {interface}:{channel} at {bitrate} bit/s: {exc}") from None
+                raise F.DeviceFault(
+                    f"can: cannot open {interface}:{channel} at {bitrate} bit/s: {exc}"
+                ) from None
         t = CanTransport(bus, self.params, heartbeat_thread=hb)
         t.send("hello")
         t_end = time.monotonic() + 3.0

@@ -24,8 +24,14 @@ class SerialTransport:
     device's watchdog. Without the thread, a host that stops reading goes silent.
     """
 
-    def __init__(self, port: str, baudrate: int, params: RobotParameters, heartbeat_thread: bool = True,
-                 heartbeat_s: float = 0.05) -> None:
+    def __init__(
+        self,
+        port: str,
+        baudrate: int,
+        params: RobotParameters,
+        heartbeat_thread: bool = True,
+        heartbeat_s: float = 0.05,
+    ) -> None:
         import serial
 
         try:
@@ -91,8 +97,11 @@ class SerialTransport:
                 import json
 
                 self.info = json.loads(payload)
-        self.stats = {"corrupted_frames": self.reader.corrupted, "frame_seq_gaps": self.reader.seq_gaps,
-                      "skipped_bytes": self.reader.skipped_bytes}
+        self.stats = {
+            "corrupted_frames": self.reader.corrupted,
+            "frame_seq_gaps": self.reader.seq_gaps,
+            "skipped_bytes": self.reader.skipped_bytes,
+        }
         out = np.concatenate(rows) if rows else np.empty((0, 15))
         return out, events
 
@@ -114,8 +123,10 @@ class SerialDriver(HostDriver):
     def _open(self, **options: Any) -> SerialTransport:
         port = options.pop("port", None)
         if not port:
-            raise F.DeviceFault("serial driver: no port given (e.g. --port /dev/ttyUSB0, or the "
-                                "port `skinkit robot emulate --serial` prints)")
+            raise F.DeviceFault(
+                "serial driver: no port given (e.g. --port /dev/ttyUSB0, or the "
+                "port `skinkit robot emulate --serial` prints)"
+            )
         baud = int(options.pop("baudrate", 921600))
         hb = bool(options.pop("heartbeat_thread", True))
         if options:
@@ -127,5 +138,7 @@ class SerialDriver(HostDriver):
             t.receive(0.05)
         if not t.info:
             t.close()
-            raise F.DeviceFault(f"serial: no answer from a device on {port} within 3 s (is the emulator running?)")
+            raise F.DeviceFault(
+                f"serial: no answer from a device on {port} within 3 s (is the emulator running?)"
+            )
         return t

@@ -47,11 +47,15 @@ class SimDriver(HostDriver):
     def _open(self, **options: Any) -> SimTransport:
         device = options.pop("device", None)
         if device is None:
-            device = Device(params=self.params, limits=self.limits, geometry=self.geometry,
-                            skin=make_skin(options.pop("skin", "kelvin-voigt")),
-                            seed=int(options.pop("seed", 0)),
-                            injection=options.pop("injection", None) or Injection(),
-                            decimation=self.decimation)
+            device = Device(
+                params=self.params,
+                limits=self.limits,
+                geometry=self.geometry,
+                skin=make_skin(options.pop("skin", "kelvin-voigt")),
+                seed=int(options.pop("seed", 0)),
+                injection=options.pop("injection", None) or Injection(),
+                decimation=self.decimation,
+            )
         block_s = float(options.pop("block_s", 0.05))
         if options:
             from skinkit.errors import SkinkitError

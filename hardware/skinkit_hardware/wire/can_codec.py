@@ -22,8 +22,16 @@ from skinkit_hardware.device import Event
 from skinkit_hardware.params import RobotParameters
 from skinkit_hardware.wire.counts import counts_to_rows, rows_to_counts
 
-COMMAND_CODES = {"hello": 1, "heartbeat": 2, "start": 8, "stop": 9, "estop": 10, "clear": 11, "hold": 12,
-                 "disable": 13}
+COMMAND_CODES = {
+    "hello": 1,
+    "heartbeat": 2,
+    "start": 8,
+    "stop": 9,
+    "estop": 10,
+    "clear": 11,
+    "hold": 12,
+    "disable": 13,
+}
 COMMAND_NAMES = {v: k for k, v in COMMAND_CODES.items()}
 EVENT_KINDS = {"home_done": 1, "run_end": 2, "fault": 3, "refused": 4}
 EVENT_NAMES = {v: k for k, v in EVENT_KINDS.items()}
@@ -35,8 +43,9 @@ FRAME_BITS = 125  # 8-byte standard frame: 111 bits + worst-case-ish bit stuffin
 @lru_cache(maxsize=1)
 def database() -> cantools.database.can.Database:
     """The protocol's DBC, shipped with the package."""
-    return cantools.database.load_string(files("skinkit_hardware").joinpath("skinkit_robot.dbc").read_text(),
-                                         database_format="dbc")
+    return cantools.database.load_string(
+        files("skinkit_hardware").joinpath("skinkit_robot.dbc").read_text(), database_format="dbc"
+    )
 
 
 def _msg(name: str):  # noqa: ANN202
@@ -63,12 +72,22 @@ def decode(msg: can.Message) -> tuple[str, dict[str, Any]] | None:
 # -- host -> device -----------------------------------------------------------------------
 def encode_command(command: str, **args: Any) -> list[can.Message]:
     if command == "configure":
-        return [frame("HOST_CONFIGURE", Decimation=int(args.get("decimation", 10)),
-                      Watchdog=int(round(float(args.get("watchdog_s", 0.5)) * 1000)),
-                      TipForceLimit=int(round(float(args.get("tip_force_N", 0.0)) * 1000)))]
+        return [
+            frame(
+                "HOST_CONFIGURE",
+                Decimation=int(args.get("decimation", 10)),
+                Watchdog=int(round(float(args.get("watchdog_s", 0.5)) * 1000)),
+                TipForceLimit=int(round(float(args.get("tip_force_N", 0.0)) * 1000)),
+            )
+        ]
     if command == "home":
-        return [frame("HOST_HOME", ContactForce=int(round(float(args.get("contact_N", 0.01)) * 1e4)),
-                      Speed=int(round(float(args.get("speed_m_s", 0.002)) * 1e6)))]
+        return [
+            frame(
+                "HOST_HOME",
+                ContactForce=int(round(float(args.get("contact_N", 0.01)) * 1e4)),
+                Speed=int(round(float(args.get("speed_m_s", 0.002)) * 1e6)),
+            )
+        ]
     if command == "load":
         mode = args["mode"]
         sp = np.asarray(args["setpoints"], dtype=float)
@@ -77,11 +96,25 @@ def encode_command(command: str, **args: Any) -> list[can.Message]:
         if np.abs(raw).max() > 32767:
             raise F.DeviceFault(f"CAN protocol: setpoint {np.abs(sp).max():.4g} out of the 16-bit range")
         raw = raw.astype("<i2")
-        out = [frame("HOST_LOAD_BEGIN", Mode=0 if mode == "position" else 1, Count=sp.shape[0],
-                     Rate=int(round(float(args["rate_hz"]))),
-                     TriggerPeriod=int(round(float(args.get("trigger_period_s", 0.0)) * 1000)))]
-        out += [frame("HOST_LOAD_DATA", Index=i & 0xFFFF, Setpoint1=int(r[0]), Setpoint2=int(r[1]),
-                      Setpoint3=int(r[2])) for i, r in enumerate(raw.tolist())]
+        out = [
+            frame(
+                "HOST_LOAD_BEGIN",
+                Mode=0 if mode == "position" else 1,
+                Count=sp.shape[0],
+                Rate=int(round(float(args["rate_hz"]))),
+                TriggerPeriod=int(round(float(args.get("trigger_period_s", 0.0)) * 1000)),
+            )
+        ]
+        out += [
+            frame(
+                "HOST_LOAD_DATA",
+                Index=i & 0xFFFF,
+                Setpoint1=int(r[0]),
+                Setpoint2=int(r[1]),
+                Setpoint3=int(r[2]),
+            )
+            for i, r in enumerate(raw.tolist())
+        ]
         out.append(frame("HOST_LOAD_END", Count=sp.shape[0], Checksum=zlib.crc32(raw.tobytes())))
         return out
     if command in COMMAND_CODES:
@@ -100,14 +133,23 @@ class CommandAssembler:
             cmd = COMMAND_NAMES.get(int(s["Command"]))
             return (cmd, {}) if cmd else None
         if name == "HOST_CONFIGURE":
-            return "configure", {"decimation": int(s["Decimation"]), "watchdog_s": s["Watchdog"] / 1000,
-                                 "tip_force_N": s["TipForceLimit"] / 1000}
+            return "configure", {
+                "decimation": int(s["Decimation"]),
+                "watchdog_s": s["Watchdog"] / 1000,
+                "tip_force_N": s["TipForceLimit"] / 1000,
+            }
         if name == "HOST_HOME":
             return "home", {"contact_N": s["ContactForce"] / 1e4, "speed_m_s": s["Speed"] / 1e6}
         if name == "HOST_LOAD_BEGIN":
             n = int(s["Count"])
-            self.load = {"mode": "position" if s["Mode"] == 0 else "force", "n": n, "rate_hz": float(s["Rate"]),
-                         "trigger_period_s": s["TriggerPeriod"] / 1000, "data": np.zeros((n, 3), "<i2"), "next": 0}
+            self.load = {
+                "mode": "position" if s["Mode"] == 0 else "force",
+                "n": n,
+                "rate_hz": float(s["Rate"]),
+                "trigger_period_s": s["TriggerPeriod"] / 1000,
+                "data": np.zeros((n, 3), "<i2"),
+                "next": 0,
+            }
             return "heartbeat", {}
         if name == "HOST_LOAD_DATA" and self.load is not None:
             ld = self.load
@@ -123,9 +165,12 @@ class CommandAssembler:
             if ld.get("bad") or ld["next"] != ld["n"] or zlib.crc32(ld["data"].tobytes()) != s["Checksum"]:
                 return "load_corrupt", {}
             unit = POSITION_UNIT_M if ld["mode"] == "position" else FORCE_UNIT_N
-            return "load", {"mode": ld["mode"], "rate_hz": ld["rate_hz"],
-                            "setpoints": ld["data"].astype(float) * unit,
-                            "trigger_period_s": ld["trigger_period_s"]}
+            return "load", {
+                "mode": ld["mode"],
+                "rate_hz": ld["rate_hz"],
+                "setpoints": ld["data"].astype(float) * unit,
+                "trigger_period_s": ld["trigger_period_s"],
+            }
         return None
 
 
@@ -137,39 +182,55 @@ def encode_samples(rows: np.ndarray, p: RobotParameters) -> list[list[can.Messag
     for k in range(rows.shape[0]):
         i = int(c["index"][k]) & 0xFFFF
         pos, cur, fo, to = (c[n][k].tolist() for n in ("pos", "cur", "force", "torque"))
-        out.append([
-            frame("ROBOT_SAMPLE_POSITION", Index=i, Position1=pos[0], Position2=pos[1], Position3=pos[2]),
-            frame("ROBOT_SAMPLE_CURRENT", Index=i, Current1=cur[0], Current2=cur[1], Current3=cur[2]),
-            frame("ROBOT_SAMPLE_FORCE", Index=i, ForceX=fo[0], ForceY=fo[1], ForceZ=fo[2]),
-            frame("ROBOT_SAMPLE_TORQUE", Index=i, TorqueX=to[0], TorqueY=to[1], TorqueZ=to[2]),
-            frame("ROBOT_SAMPLE_TICK", Index=i, Tick=int(c["tick"][k]), Flags=int(c["flags"][k])),
-        ])
+        out.append(
+            [
+                frame("ROBOT_SAMPLE_POSITION", Index=i, Position1=pos[0], Position2=pos[1], Position3=pos[2]),
+                frame("ROBOT_SAMPLE_CURRENT", Index=i, Current1=cur[0], Current2=cur[1], Current3=cur[2]),
+                frame("ROBOT_SAMPLE_FORCE", Index=i, ForceX=fo[0], ForceY=fo[1], ForceZ=fo[2]),
+                frame("ROBOT_SAMPLE_TORQUE", Index=i, TorqueX=to[0], TorqueY=to[1], TorqueZ=to[2]),
+                frame("ROBOT_SAMPLE_TICK", Index=i, Tick=int(c["tick"][k]), Flags=int(c["flags"][k])),
+            ]
+        )
     return out
 
 
 def encode_event(ev: Event, p: RobotParameters) -> list[can.Message]:
     f = ev.fault or F.Fault(0)
-    out = [frame("ROBOT_EVENT_VALUE", Value=f.value, Limit=f.limit),
-           frame("ROBOT_EVENT_TIME", Time=f.time_s, Index=ev.index)]
+    out = [
+        frame("ROBOT_EVENT_VALUE", Value=f.value, Limit=f.limit),
+        frame("ROBOT_EVENT_TIME", Time=f.time_s, Index=ev.index),
+    ]
     if ev.q is not None:
         lo, hi = p.adc_span_m
         lsb = (hi - lo) / ((1 << p.adc_bits) - 1)
         q = [int(round((x - lo) / lsb)) for x in ev.q]
         out.append(frame("ROBOT_HOME_POSITION", Position1=q[0], Position2=q[1], Position3=q[2]))
-    out.append(frame("ROBOT_EVENT", Kind=EVENT_KINDS[ev.kind], Code=f.code, Motor=f.motor, Generated=ev.generated))
+    out.append(
+        frame("ROBOT_EVENT", Kind=EVENT_KINDS[ev.kind], Code=f.code, Motor=f.motor, Generated=ev.generated)
+    )
     return out
 
 
 def encode_info(info: dict[str, Any]) -> list[can.Message]:
-    return [frame("ROBOT_INFO", ControlRate=int(info["control_rate_hz"]), Decimation=int(info["decimation"]),
-                  Firmware=1)]
+    return [
+        frame(
+            "ROBOT_INFO",
+            ControlRate=int(info["control_rate_hz"]),
+            Decimation=int(info["decimation"]),
+            Firmware=1,
+        )
+    ]
 
 
 class SampleAssembler:
     """Host side: frames -> complete sample rows and events; unwraps the 16-bit index."""
 
-    PARTS = {"ROBOT_SAMPLE_POSITION": "pos", "ROBOT_SAMPLE_CURRENT": "cur", "ROBOT_SAMPLE_FORCE": "force",
-             "ROBOT_SAMPLE_TORQUE": "torque"}
+    PARTS = {
+        "ROBOT_SAMPLE_POSITION": "pos",
+        "ROBOT_SAMPLE_CURRENT": "cur",
+        "ROBOT_SAMPLE_FORCE": "force",
+        "ROBOT_SAMPLE_TORQUE": "torque",
+    }
 
     def __init__(self, p: RobotParameters) -> None:
         self.p = p
@@ -235,7 +296,11 @@ class SampleAssembler:
         hp = self.event_parts.pop("ROBOT_HOME_POSITION", None)
         kind = EVENT_NAMES.get(int(s["Kind"]), "fault")
         code = int(s["Code"])
-        fault = F.Fault(code, int(s["Motor"]), float(v["Value"]), float(v["Limit"]), float(t["Time"])) if code else None
+        fault = (
+            F.Fault(code, int(s["Motor"]), float(v["Value"]), float(v["Limit"]), float(t["Time"]))
+            if code
+            else None
+        )
         q = None
         if hp is not None:
             lo, hi = self.p.adc_span_m

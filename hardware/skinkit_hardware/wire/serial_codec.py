@@ -28,8 +28,18 @@ MAX_PAYLOAD = 4096
 # host -> device
 HELLO, HEARTBEAT, CONFIGURE, HOME, LOAD_BEGIN, LOAD_DATA, LOAD_END = range(1, 8)
 START, STOP, ESTOP, CLEAR, HOLD, DISABLE = range(8, 14)
-COMMANDS = {"hello": HELLO, "heartbeat": HEARTBEAT, "configure": CONFIGURE, "home": HOME,
-            "start": START, "stop": STOP, "estop": ESTOP, "clear": CLEAR, "hold": HOLD, "disable": DISABLE}
+COMMANDS = {
+    "hello": HELLO,
+    "heartbeat": HEARTBEAT,
+    "configure": CONFIGURE,
+    "home": HOME,
+    "start": START,
+    "stop": STOP,
+    "estop": ESTOP,
+    "clear": CLEAR,
+    "hold": HOLD,
+    "disable": DISABLE,
+}
 # device -> host
 INFO, SAMPLES, EVENT = 0x82, 0x83, 0x84
 
@@ -41,8 +51,16 @@ SAMPLES_HEAD = struct.Struct("<IB")
 EVENT_S = struct.Struct("<BBB3f3fII")
 EVENT_KINDS = {"home_done": 1, "run_end": 2, "fault": 3, "refused": 4}
 EVENT_NAMES = {v: k for k, v in EVENT_KINDS.items()}
-SAMPLE_DTYPE = np.dtype([("tick", "<u4"), ("pos", "<u2", 3), ("cur", "<i2", 3), ("force", "<i2", 3),
-                         ("torque", "<i2", 3), ("flags", "<u2")])
+SAMPLE_DTYPE = np.dtype(
+    [
+        ("tick", "<u4"),
+        ("pos", "<u2", 3),
+        ("cur", "<i2", 3),
+        ("force", "<i2", 3),
+        ("torque", "<i2", 3),
+        ("flags", "<u2"),
+    ]
+)
 SAMPLES_PER_FRAME = 32
 SETPOINTS_PER_FRAME = 64
 POSITION_UNIT_M = 1e-9
@@ -89,7 +107,7 @@ class FrameReader:
             end = 2 + HEADER.size + n + CRC.size
             if len(buf) < end:
                 break
-            body = bytes(buf[2: end - CRC.size])
+            body = bytes(buf[2 : end - CRC.size])
             (crc,) = CRC.unpack_from(buf, end - CRC.size)
             if zlib.crc32(body) != crc:
                 self.corrupted += 1
@@ -99,7 +117,7 @@ class FrameReader:
             if self._next_seq is not None and seq != self._next_seq:
                 self.seq_gaps += (seq - self._next_seq) & 0xFFFF
             self._next_seq = (seq + 1) & 0xFFFF
-            out.append((kind, seq, body[HEADER.size:]))
+            out.append((kind, seq, body[HEADER.size :]))
         return out
 
 
@@ -119,20 +137,36 @@ class Sender:
 def encode_command(send: Sender, command: str, **args: Any) -> bytes:
     """Bytes for one host command (``load`` becomes LOAD_BEGIN, LOAD_DATA..., LOAD_END)."""
     if command == "configure":
-        return send(CONFIGURE, CONFIGURE_S.pack(int(args.get("decimation", 10)),
-                                                float(args.get("watchdog_s", 0.5)),
-                                                float(args.get("tip_force_N", 0.0))))
+        return send(
+            CONFIGURE,
+            CONFIGURE_S.pack(
+                int(args.get("decimation", 10)),
+                float(args.get("watchdog_s", 0.5)),
+                float(args.get("tip_force_N", 0.0)),
+            ),
+        )
     if command == "home":
-        return send(HOME, HOME_S.pack(float(args.get("contact_N", 0.01)), float(args.get("speed_m_s", 0.002))))
+        return send(
+            HOME, HOME_S.pack(float(args.get("contact_N", 0.01)), float(args.get("speed_m_s", 0.002)))
+        )
     if command == "load":
         mode = args["mode"]
         sp = np.asarray(args["setpoints"], dtype=float)
         unit = POSITION_UNIT_M if mode == "position" else FORCE_UNIT_N
         data = np.rint(sp / unit).astype("<i4")
-        out = [send(LOAD_BEGIN, LOAD_BEGIN_S.pack(0 if mode == "position" else 1, sp.shape[0],
-                                                   float(args["rate_hz"]), float(args.get("trigger_period_s", 0.0))))]
+        out = [
+            send(
+                LOAD_BEGIN,
+                LOAD_BEGIN_S.pack(
+                    0 if mode == "position" else 1,
+                    sp.shape[0],
+                    float(args["rate_hz"]),
+                    float(args.get("trigger_period_s", 0.0)),
+                ),
+            )
+        ]
         for off in range(0, sp.shape[0], SETPOINTS_PER_FRAME):
-            chunk = data[off: off + SETPOINTS_PER_FRAME]
+            chunk = data[off : off + SETPOINTS_PER_FRAME]
             out.append(send(LOAD_DATA, LOAD_DATA_HEAD.pack(off) + chunk.tobytes()))
         out.append(send(LOAD_END, CRC.pack(zlib.crc32(data.tobytes()))))
         return b"".join(out)
@@ -158,25 +192,36 @@ def encode_samples(send: Sender, rows: np.ndarray, p: RobotParameters) -> list[t
 def decode_samples(payload: bytes, p: RobotParameters) -> np.ndarray:
     first, n = SAMPLES_HEAD.unpack_from(payload)
     a = np.frombuffer(payload, SAMPLE_DTYPE, count=n, offset=SAMPLES_HEAD.size)
-    c = {"index": first + np.arange(n), "tick": a["tick"].astype(np.int64), "pos": a["pos"].astype(np.int64),
-         "cur": a["cur"].astype(np.int64), "force": a["force"].astype(np.int64),
-         "torque": a["torque"].astype(np.int64), "flags": a["flags"].astype(np.int64)}
+    c = {
+        "index": first + np.arange(n),
+        "tick": a["tick"].astype(np.int64),
+        "pos": a["pos"].astype(np.int64),
+        "cur": a["cur"].astype(np.int64),
+        "force": a["force"].astype(np.int64),
+        "torque": a["torque"].astype(np.int64),
+        "flags": a["flags"].astype(np.int64),
+    }
     return counts_to_rows(c, p)
 
 
 def encode_event(send: Sender, ev: Event) -> bytes:
     f = ev.fault or F.Fault(0)
     q = ev.q or (0.0, 0.0, 0.0)
-    return send(EVENT, EVENT_S.pack(EVENT_KINDS[ev.kind], f.code, f.motor, f.value, f.limit, f.time_s,
-                                    *q, ev.generated, ev.index))
+    return send(
+        EVENT,
+        EVENT_S.pack(
+            EVENT_KINDS[ev.kind], f.code, f.motor, f.value, f.limit, f.time_s, *q, ev.generated, ev.index
+        ),
+    )
 
 
 def decode_event(payload: bytes) -> Event:
     kind, code, motor, value, limit, t, q1, q2, q3, generated, index = EVENT_S.unpack(payload)
     name = EVENT_NAMES.get(kind, "fault")
     fault = F.Fault(code, motor, value, limit, t) if code else None
-    return Event(name, fault=fault, q=(q1, q2, q3) if name == "home_done" else None,
-                 generated=generated, index=index)
+    return Event(
+        name, fault=fault, q=(q1, q2, q3) if name == "home_done" else None, generated=generated, index=index
+    )
 
 
 def encode_info(send: Sender, info: dict[str, Any]) -> bytes:

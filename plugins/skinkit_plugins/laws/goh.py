@@ -3,7 +3,10 @@
 W = c/2 (Ī1 - 3) + Σ_α k1/(2 k2) [exp(k2 Ē_α²) - 1] + k/2 (ln J)²,
 Ē_α = κ (Ī1 - 3) + (1 - 3κ) (Ī4α - 1),
 
-with fibre family α active only in tension (Ī4α > 1, as FEBio). The fibres lie in the
+with fibre family α active only in tension. Two switches are offered: ``"febio"`` (the
+default) activates a family where Ī4α > 1, as FEBio does — with κ > 0 the energy then jumps
+where a family switches on, which can stall Newton's method; ``"macaulay"`` uses ⟨Ē_α⟩,
+as Abaqus and the thesis's Eq 7.1 do, continuous with a continuous stress. The fibres lie in the
 e1-e2 plane of the local frame at ±γ from e1 (one family: +γ only), exactly as FEBio's
 ``gamma``; the local frame is the global one turned by the option ``frame_angle`` [rad]
 about z. The thesis's Abaqus form (Eq 7.1) has C10 = c/2.
@@ -18,12 +21,17 @@ import numpy as np
 
 from skinkit.fem.hyper import (
     VOLUMETRIC_KINDS,
+    b2,
+    b4,
+    iso_hessian,
     iso_I1,
     iso_I4,
     kinematics,
     volumetric_energy,
     volumetric_stress,
+    volumetric_tangent,
 )
+from skinkit.fem.tensors import I3, outer
 from skinkit.schemas import Parameter
 
 
@@ -31,13 +39,17 @@ class GOH:
     """Parameters ``c``, ``k1``, ``k`` [Pa], ``k2`` [1], ``kappa`` [1] in [0, 1/3], ``gamma`` [rad].
 
     Options: ``families`` (1 or 2), ``frame_angle`` [rad], ``volumetric`` (``"log"``, FEBio's
-    default, or ``"quadratic"``).
+    default, or ``"quadratic"``), ``switch`` (``"febio"`` or ``"macaulay"``, see the module).
     """
 
     name = "goh"
     complex_safe = True
 
-    def __init__(self, families: int = 2, frame_angle: float = 0.0, volumetric: str = "log") -> None:
+    def __init__(self, families: int = 2, frame_angle: float = 0.0, volumetric: str = "log",
+                 switch: str = "febio") -> None:
+        if switch not in ("febio", "macaulay"):
+            raise ValueError(f"switch must be 'febio' or 'macaulay', got {switch!r}")
+        self.switch = switch
         if families not in (1, 2):
             raise ValueError(f"families must be 1 or 2, got {families!r}")
         if volumetric not in VOLUMETRIC_KINDS:
@@ -69,8 +81,8 @@ class GOH:
         k1, k2, kap = (np.asarray(p[n]) for n in ("k1", "k2", "kappa"))
         for a in self.fibres(p["gamma"]):
             I4b, dI4b = iso_I4(C, Cinv, J, a)
-            active = np.real(I4b) > 1.0
             E = kap * (I1b - 3) + (1 - 3 * kap) * (I4b - 1)
+            active = (np.real(I4b) > 1.0) if self.switch == "febio" else (np.real(E) > 0.0)
             E = np.where(active, E, 0.0)
             yield k1, k2, kap, E, dI4b, active
 
@@ -81,6 +93,34 @@ class GOH:
         for k1, k2, _, E, _, active in self._fibre_terms(C, Cinv, J, I1b, dI1b, p):
             W = W + np.where(active, k1 / (2 * k2) * (np.exp(k2 * E ** 2) - 1), 0.0)
         return W
+
+    def tangent(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Analytic tangent: 4 Σ [W'' ∂Ē⊗∂Ē + W' ∂²Ē] over active families + ground + bulk."""
+        return self.response(C, p, True)[1]
+
+    def response(self, C: np.ndarray, p: Mapping[str, Any], with_tangent: bool = True):
+        """Stress and tangent sharing the kinematics (the engine's hot path)."""
+        S = self.stress(C, p)
+        if not with_tangent:
+            return S, None
+        Cinv, J, I1 = kinematics(C)
+        I1b, dI1b = iso_I1(C, Cinv, J, I1)
+        H1 = iso_hessian(Cinv, J, I3, I1)
+        CC = b4(2 * np.asarray(p["c"])) * H1 + volumetric_tangent(self.volumetric, p["k"], J, Cinv)
+        k1, k2, kap = (np.asarray(p[n]) for n in ("k1", "k2", "kappa"))
+        for a in self.fibres(p["gamma"]):
+            I4b, dI4b = iso_I4(C, Cinv, J, a)
+            E = kap * (I1b - 3) + (1 - 3 * kap) * (I4b - 1)
+            active = (np.real(I4b) > 1.0) if self.switch == "febio" else (np.real(E) > 0.0)
+            ex = np.exp(k2 * E ** 2)
+            d1 = np.where(active, k1 * E * ex, 0.0)                       # ∂W/∂Ē
+            d2 = np.where(active, k1 * ex * (1 + 2 * k2 * E ** 2), 0.0)   # ∂²W/∂Ē²
+            A = a[..., :, None] * a[..., None, :]
+            I4 = (C * A).sum(axis=(-2, -1))
+            G = b2(kap) * dI1b + b2(1 - 3 * kap) * dI4b
+            H = b4(kap) * H1 + b4(1 - 3 * kap) * iso_hessian(Cinv, J, A, I4)
+            CC = CC + 4 * (b4(d2) * outer(G, G) + b4(d1) * H)
+        return S, CC
 
     def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
         Cinv, J, I1 = kinematics(C)

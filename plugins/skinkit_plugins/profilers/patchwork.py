@@ -164,7 +164,7 @@ class PatchworkProfiler:
         self._patch(img_a, img_b, mask_a, sa, sb, g, box, out, stats)
         if not out:
             return empty
-        pa, pb, q, isu = (np.concatenate(x) for x in zip(*out))
+        pa, pb, q, isu = (np.concatenate(x) for x in zip(*out, strict=True))
         stats["matched"] = float(len(pa))
         stats["mean_isu_px"] = float(np.mean(isu))
         return pa, pb, q, isu, stats

@@ -94,7 +94,8 @@ class GaussNewtonTracker(SubsetTracker):
             wx = M[0, 0] * ex + M[0, 1] * ey + M[0, 2] + centre[0]
             wy = M[1, 0] * ex + M[1, 1] * ey + M[1, 2] + centre[1]
             if wx.min() < 0 or wy.min() < 0 or wx.max() > w - 1 or wy.max() > h - 1:
-                return np.full(2, np.nan), float(match.peak), "displaced subset leaves the current image", {}
+                why = "displaced subset leaves the current image"
+                return np.full(2, np.nan), float(match.peak), why, {}
             g = map_coordinates(coef, [wy, wx], order=self.order, prefilter=False, mode="mirror")
             gm = g.mean()
             dg = np.sqrt(np.sum((g - gm) ** 2))
@@ -112,7 +113,8 @@ class GaussNewtonTracker(SubsetTracker):
                 break
         quality = 1.0 - znssd / 2.0
         if not converged:
-            return np.full(2, np.nan), quality, f"Gauss-Newton did not converge in {self.max_iter} iterations", {}
+            why = f"Gauss-Newton did not converge in {self.max_iter} iterations"
+            return np.full(2, np.nan), quality, why, {}
         loc = p - centre
         moved = M[:2, :2] @ loc + M[:2, 2]
         extra = {"gradient": M[:2, :2] - np.eye(2)} if affine else {}

@@ -18,7 +18,6 @@ from scipy.ndimage import map_coordinates, spline_filter
 from skinkit.vision.subsets import IntegerMatch
 from skinkit_plugins.trackers.base import SubsetTracker
 
-
 _GRIDS: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
 
 

@@ -1,0 +1,174 @@
+"""Fitting a mesh to a measured surface, and embedding tracked material points.
+
+* :func:`fit_surface` (thesis 7.4.4): top-surface nodes move along z only to the measured
+  surface; nodes on the rim and under the indenter stay; the nodes of the skin layer move
+  with the top node above them so that the skin keeps its thickness, and the deeper nodes
+  follow by an offset fading linearly to zero at the floor.
+* :func:`embed_points`: each tracked surface point (optionally offset below the surface,
+  as the thesis embeds its microspheres) is located in its element with local coordinates,
+  so its position can be read in any deformed state (:meth:`Embedding.positions`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+from skfem import ElementHex2
+
+from skinkit.fem.errors import ModelError
+from skinkit.fem.mesh import FEMesh
+
+_ELEMENT = ElementHex2()
+
+
+def _columns(mesh: FEMesh, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Column id of every node (nodes sharing x, y) and the top node of each column."""
+    key = np.round(mesh.nodes[:, :2] / (1e-9 * scale)).astype(np.int64)
+    _, col = np.unique(key, axis=0, return_inverse=True)
+    col = col.ravel()
+    top_of = np.full(col.max() + 1, -1)
+    top = mesh.node_sets["top"]
+    top_of[col[top]] = top
+    return col, top_of
+
+
+@dataclass
+class SurfaceFit:
+    """A fitted mesh and the RMS distance [m] of the measured points to its top surface."""
+
+    mesh: FEMesh
+    rms: float
+    max_abs: float
+
+
+def fit_surface(mesh: FEMesh, points: np.ndarray, skin_thickness: float,
+                keep: tuple[str, ...] = ("outer", "indenter")) -> SurfaceFit:
+    """Move the mesh onto the measured surface ``points`` ``(M, 3)`` [m] (see module doc)."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
+        raise ModelError("surface", f"expected (M >= 3, 3) points, got shape {pts.shape}")
+    X = mesh.nodes
+    scale = float(np.ptp(X, axis=0).max())
+    col, top_of = _columns(mesh, scale)
+    lin = LinearNDInterpolator(pts[:, :2], pts[:, 2])
+    near = NearestNDInterpolator(pts[:, :2], pts[:, 2])
+    top = mesh.node_sets["top"]
+    z_new = lin(X[top, :2])
+    miss = ~np.isfinite(z_new)
+    z_new[miss] = near(X[top[miss], :2])
+    dz_top = z_new - X[top, 2]
+    fixed = np.zeros(mesh.n_nodes, bool)
+    for k in keep:
+        if k in mesh.node_sets:
+            fixed[mesh.node_sets[k]] = True
+    dz_top[fixed[top]] = 0.0
+    dz_col = np.zeros(top_of.size)
+    dz_col[col[top]] = dz_top
+    z_floor = X[:, 2].min()
+    z_skin = X[top, 2].max() - skin_thickness
+    z = X[:, 2]
+    # skin nodes move rigidly with their column's top node; deeper nodes fade to the floor
+    w = np.where(z >= z_skin - 1e-12 * scale, 1.0, (z - z_floor) / max(z_skin - z_floor, 1e-300))
+    new = X.copy()
+    new[:, 2] += w * dz_col[col]
+    fitted = mesh.with_nodes(new)
+    # residual: the measured points against the fitted top surface (interpolated linearly
+    # between top nodes, the surface the elements' faces follow to second order)
+    surf = LinearNDInterpolator(new[top, :2], new[top, 2])
+    zs = surf(pts[:, :2])
+    ok = np.isfinite(zs)
+    r = pts[ok, 2] - zs[ok]
+    return SurfaceFit(fitted, float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan"),
+                      float(np.max(np.abs(r))) if r.size else float("nan"))
+
+
+@dataclass
+class Embedding:
+    """Tracked points located in a mesh: element ``(M,)``, local coordinates ``(M, 3)`` in
+    [0, 1]³, the node indices of each element ``(M, 27)`` and shape values ``(M, 27)``."""
+
+    element: np.ndarray
+    local: np.ndarray
+    nodes: np.ndarray
+    N: np.ndarray
+
+    def positions(self, X: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """``(M, 3)`` positions [m] with node coordinates ``X`` ``(N, 3)`` and displacement
+        ``u`` (``(n_dof,)`` or ``(N, 3)``; None: the reference positions)."""
+        P = X[self.nodes]
+        if u is not None:
+            P = P + np.asarray(u).reshape(-1, 3)[self.nodes]
+        return np.einsum("ma,mai->mi", self.N, P)
+
+    def position_jacobian(self, n_dof: int):
+        """Sparse ``(3 M, n_dof)`` matrix mapping a displacement (or a sensitivity ``du/dp``)
+        to the points' displacements: ``d(positions)/dp = J @ du/dp``."""
+        import scipy.sparse as sp
+        M = self.element.size
+        rows = (3 * np.arange(M)[:, None, None] + np.arange(3)[None, None, :]).repeat(27, axis=1)
+        cols = 3 * self.nodes[:, :, None] + np.arange(3)[None, None, :]
+        vals = np.repeat(self.N[:, :, None], 3, axis=2)
+        return sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * M, n_dof))
+
+
+def _shape(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Shape values ``(27, M)`` and reference gradients ``(27, 3, M)`` at ``xi`` ``(3, M)``."""
+    N = np.empty((27, xi.shape[1]))
+    dN = np.empty((27, 3, xi.shape[1]))
+    for a in range(27):
+        N[a], dN[a] = _ELEMENT.lbasis(xi, a)
+    return N, dN
+
+
+def embed_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: float = 1e-10) -> Embedding:
+    """Locate ``points`` ``(M, 3)`` [m] (moved ``depth`` [m] down first) in ``mesh``.
+
+    Newton inversion of the isoparametric map in every element whose node bounding box
+    holds the point, nearest centre first; a point in none raises :class:`ModelError`.
+    """
+    pts = np.asarray(points, dtype=float).copy()
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ModelError("points", f"expected (M, 3) points, got shape {pts.shape}")
+    pts[:, 2] -= depth
+    Xe = mesh.nodes[mesh.elements]                  # (E, 27, 3)
+    lo, hi = Xe.min(axis=1), Xe.max(axis=1)
+    pad = 1e-6 * (hi - lo).max(axis=1, keepdims=True)  # curved faces stay within the nodes' hull
+    inbox = np.all((pts[:, None, :] >= lo[None] - pad[None]) & (pts[:, None, :] <= hi[None] + pad[None]),
+                   axis=2)                           # (M, E)
+    dist = np.linalg.norm(pts[:, None, :] - Xe.mean(axis=1)[None], axis=2)
+    dist[~inbox] = np.inf
+    order = np.argsort(dist, axis=1)
+    n_c = int(inbox.sum(axis=1).max()) if len(pts) else 0
+    cand = order[:, :max(n_c, 1)]
+    M = len(pts)
+    found = np.full(M, -1)
+    local = np.zeros((M, 3))
+    for j in range(cand.shape[1]):
+        todo = np.flatnonzero((found < 0) & np.isfinite(dist[np.arange(M), cand[:, j]]))
+        if todo.size == 0:
+            break
+        e = cand[todo, j]
+        xi = np.full((3, todo.size), 0.5)
+        for _ in range(30):
+            N, dN = _shape(xi)
+            x = np.einsum("am,mai->mi", N, Xe[e])
+            Jm = np.einsum("ajm,mai->mij", dN, Xe[e])
+            r = pts[todo] - x
+            try:
+                dxi = np.linalg.solve(Jm, r[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                break
+            xi = np.clip(xi + dxi.T, -0.5, 1.5)
+            if np.max(np.abs(dxi)) < tol:
+                break
+        inside = np.all((xi > -1e-8) & (xi < 1 + 1e-8), axis=0) & (np.linalg.norm(r, axis=1) < 1e-8 * (
+            np.ptp(mesh.nodes, axis=0).max()) + 1e-15)
+        found[todo[inside]] = e[inside]
+        local[todo[inside]] = np.clip(xi.T[inside], 0.0, 1.0)
+    if np.any(found < 0):
+        bad = int(np.flatnonzero(found < 0)[0])
+        raise ModelError(f"points[{bad}]", f"{pts[bad].tolist()} m lies outside the mesh")
+    N, _ = _shape(local.T)
+    return Embedding(found, local, mesh.elements[found], N.T.copy())

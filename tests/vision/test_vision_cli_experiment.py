@@ -1,0 +1,52 @@
+"""``skinkit vision calibrate | profile | track-3d`` over a real experiment file."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from skinkit.schemas import ImageSequence
+from skinkit.store import create_experiment, open_experiment
+
+pytestmark = pytest.mark.needs_plugins
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "skinkit", "vision", *args],
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_calibrate_profile_track(tmp_path, true_rig, board_set, arm_scene):
+    _, boards_img = board_set
+    path = tmp_path / "session.h5"
+    with create_experiment(path) as exp:
+        exp.write_images(ImageSequence("calib", boards_img, true_rig.names, np.arange(len(boards_img)) * 1.0))
+        exp.write_images(arm_scene["images"])
+
+    r = _run("calibrate", str(path), "--images", "calib", "--board", "8x6", "--square-mm", "3")
+    assert r.returncode == 2 and "symmetric" in r.stderr, r.stderr
+    r = _run("profile", str(path), "--images", "indent")
+    assert r.returncode == 2 and "error:" in r.stderr and "Traceback" not in r.stderr
+
+    r = _run("calibrate", str(path), "--images", "calib", "--board", "9x6", "--square-mm", "3")
+    assert r.returncode == 0, r.stderr
+    assert "overall reprojection RMS" in r.stdout
+    r = _run("profile", str(path), "--images", "indent", "--spacing", "24")
+    assert r.returncode == 0, r.stderr
+    assert "mean ISU" in r.stdout
+    r = _run("track-3d", str(path), "--images", "indent", "--tracker", "pcc")
+    assert r.returncode == 0, r.stderr
+
+    with open_experiment(path) as exp:
+        rig = exp.read_rig()
+        profile = exp.read_profile("profile")
+        track = exp.read_track("indent")
+    assert rig.names == true_rig.names
+    assert profile.n_points >= 100
+    assert track.n_frames == 2 and track.valid[:, 1].mean() > 0.7
+    # The skin moves by less than its 0.6 mm dimple plus the 1 % stretch of 25 mm.
+    moved = np.linalg.norm(track.displacements()[track.valid[:, 1], 1], axis=1)
+    assert moved.max() < 0.0006 + 0.00025 + 50e-6
