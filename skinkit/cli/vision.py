@@ -132,8 +132,10 @@ def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, squ
 @click.option("--spacing", "spacing_px", default=12, show_default=True, help="grid step [px]")
 @click.option("--subset", "subset_px", default=31, show_default=True, help="subset side [px]")
 @click.option("--name", "out_name", default="profile", show_default=True, help="name of the stored profile")
+@click.option("--plot", "plot_path", default=None, type=click.Path(dir_okay=False),
+              help="also save a figure (height and ISU maps) to this PNG")
 def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_name: str,
-                spacing_px: int, subset_px: int, out_name: str) -> None:
+                spacing_px: int, subset_px: int, out_name: str, plot_path: str | None) -> None:
     """Profile the surface automatically and store the point cloud in EXPERIMENT."""
     import numpy as np
 
@@ -145,8 +147,16 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
         seq = _images(exp, images_name)
         kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}
         prof = registry.create("skinkit.profilers", profiler_name, **kwargs)
-        sp = prof.profile(seq, rig, frame=frame)
+        from rich.console import Console
+
+        with Console(stderr=True).status(f"profiling with {profiler_name} ..."):
+            sp = prof.profile(seq, rig, frame=frame)
         exp.write_profile(out_name, sp)
+    if plot_path:
+        from skinkit.vision.plots import plot_profile
+
+        plot_profile(sp, plot_path, title=f"{experiment}: {out_name}")
+        click.echo(f"figure saved to {plot_path}")
     isu = "" if sp.uncertainty_px is None else f", mean ISU {np.mean(sp.uncertainty_px):.2f} px"
     click.echo(f"profile {out_name!r}: {sp.n_points} points{isu}; stored in {experiment}")
 

@@ -387,3 +387,27 @@ class CharucoTarget:
 
 
 _CHARUCO_IMAGES: dict[tuple, np.ndarray] = {}
+
+
+@dataclass
+class GroundTruth:
+    """Exact truth for chosen material points: ``points`` ``(N, 3)`` [m], ``pixels``
+    ``(N, C, 2)`` [px] in every camera, ``visible`` ``(N, C)`` (in the image, not hidden)."""
+
+    points: np.ndarray
+    pixels: np.ndarray
+    visible: np.ndarray
+
+
+def ground_truth(rig: object, skin: Skin, XY: np.ndarray, objects: Sequence[object] | None = None,
+                 ) -> GroundTruth:
+    """Where the material points ``XY`` ``(N, 2)`` [m] of ``skin`` (in its current state)
+    are in 3D and in each camera of ``rig``; ``objects`` (default: the skin alone) may hide
+    them."""
+    XY = np.asarray(XY, float).reshape(-1, 2)
+    X = skin.position(XY[:, 0], XY[:, 1])
+    cams = rig.cameras  # type: ignore[attr-defined]
+    px = np.stack([cam_ops.project(c, X) for c in cams], axis=1)
+    objs = list(objects) if objects is not None else [skin]
+    vis = np.stack([visible(c, objs, X, tol_m=1e-6) for c in cams], axis=1)
+    return GroundTruth(X, px, vis)

@@ -34,9 +34,11 @@ def test_calibrate_profile_track(tmp_path, true_rig, board_set, arm_scene):
     r = _run("calibrate", str(path), "--images", "calib", "--board", "9x6", "--square-mm", "3")
     assert r.returncode == 0, r.stderr
     assert "overall reprojection RMS" in r.stdout
-    r = _run("profile", str(path), "--images", "indent", "--spacing", "24")
+    r = _run("profile", str(path), "--images", "indent", "--spacing", "24", "--plot",
+             str(tmp_path / "profile.png"))
     assert r.returncode == 0, r.stderr
     assert "mean ISU" in r.stdout
+    assert (tmp_path / "profile.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     r = _run("track-3d", str(path), "--images", "indent", "--tracker", "pcc")
     assert r.returncode == 0, r.stderr
 
