@@ -123,4 +123,24 @@ def run_protocol(
             summary.lost = max(summary.lost, int(stats.lost))
         if bar is not None:
             bar.stop()
+        _store_accounting(experiment, summary)
     return summary
+
+
+def _store_accounting(experiment: Any, summary: RunSummary) -> None:
+    """Keep the link's sample accounting with the experiment (session metadata
+    ``<protocol>.samples_lost`` and ``<protocol>.link``), fault or not."""
+    setter = getattr(experiment, "set_metadata", None)
+    if setter is None:
+        return
+    import json
+
+    try:
+        setter(
+            **{
+                f"{summary.protocol}.samples_lost": int(summary.lost),
+                f"{summary.protocol}.link": json.dumps(summary.to_dict(), default=str),
+            }
+        )
+    except Exception:  # noqa: BLE001 - never mask the run's own error with a metadata failure
+        pass

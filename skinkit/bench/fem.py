@@ -55,7 +55,7 @@ def run_skinkit(n: int = 7, linear: str = "auto") -> dict:
     return {"mesh": mesh, "u": sol.u[-1].reshape(-1, 3), "wall": wall, "setup": setup,
             "factorisations": n_fact, "assembly_s": tm.assembly / n_fact, "solve_s": tm.solve / n_fact,
             "tangent_assembly_s": tm.tangent / max(tm.tangent_assemblies, 1),
-            "s_per_newton": wall / n_fact, "dof": mesh.n_dof, "linear": linear}
+            "s_per_newton": wall / n_fact, "dof": mesh.n_dof, "linear": solver.linear.name}
 
 
 def run_sfepy(mesh) -> dict:

@@ -110,8 +110,22 @@ class PardisoSolver:
         self._pattern = None
         self._K = None
         self._n = 0
+        self._nthreads: int | None = None
 
     def _call(self, phase: int, K: sp.csr_matrix, b: np.ndarray | None = None) -> np.ndarray | None:
+        # PARDISO crashes when its phases run with different thread counts (e.g. a factor
+        # inside a caller's BLAS thread limit after an analysis outside it): pin the count
+        # chosen at the analysis for every call, then restore the caller's
+        lib = self._w.libmkl
+        if self._nthreads is None:
+            self._nthreads = max(1, int(lib.MKL_Get_Max_Threads()))
+        prev = lib.MKL_Set_Num_Threads_Local(ctypes.c_int(self._nthreads))
+        try:
+            return self._call_pinned(phase, K, b)
+        finally:
+            lib.MKL_Set_Num_Threads_Local(ctypes.c_int(prev))
+
+    def _call_pinned(self, phase: int, K: sp.csr_matrix, b: np.ndarray | None = None) -> np.ndarray | None:
         n = K.shape[0]
         nrhs = 1 if b is None or b.ndim == 1 else b.shape[1]
         bb = np.zeros(n) if b is None else np.asfortranarray(b, dtype=float)

@@ -92,14 +92,14 @@ def _dS(problem: Problem, k: int, name: str, F: np.ndarray) -> np.ndarray:
 
 
 def sensitivities(solver: NewtonSolver, u: np.ndarray, t: float) -> Sensitivities:
-    """Derivatives of the converged state ``u`` (at load ``t``) of an elastic problem.
+    """Derivatives of the converged state ``u`` (at load ``t``) of a static problem.
 
-    Costs one tangent assembly and factorisation at ``u`` plus one back-substitution per
-    parameter (all right-hand sides at once).
+    Viscous laws respond elastically in a static solve, so their Prony parameters get zero
+    derivatives here; through a time history use :class:`HistorySensitivity`. Costs one
+    tangent assembly and factorisation at ``u`` plus one back-substitution per parameter
+    (all right-hand sides at once).
     """
     prob = solver.problem
-    if prob.viscous:
-        raise NotImplementedError("sensitivities through viscoelastic histories are not implemented yet")
     g = prob.geom
     pars = parameter_list(prob)
     re, Ke = prob.evaluate(u, True)

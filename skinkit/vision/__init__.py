@@ -5,15 +5,19 @@ Submodules (each one job):
 - :mod:`skinkit.vision.texture`       speckle texture bound to material coordinates
 - :mod:`skinkit.vision.sensor`        blur, illumination falloff, noise, quantisation
 - :mod:`skinkit.vision.planar`        2D renders of a deformed speckle with exact truth
-- :mod:`skinkit.vision.subsets`       subset extraction, NCC integer search, track results
+- :mod:`skinkit.vision.subsets`       subset extraction, NCC integer search, ISU, TrackResult
+- :mod:`skinkit.vision.imageio`       reading images and point lists with clear errors
 - :mod:`skinkit.vision.camera`        projection and back-projection through a CameraModel
 - :mod:`skinkit.vision.rigs`          ring rigs like the thesis stereoscope
-- :mod:`skinkit.vision.scene`         surfaces, boards, cones and markers seen by a rig
-- :mod:`skinkit.vision.calibration`   checkerboard detection and joint rig calibration
+- :mod:`skinkit.vision.scene`         skin, boards, cone and markers seen by a rig; ground truth
+- :mod:`skinkit.vision.boards`        checkerboard / ChArUco detection, rendered board views
+- :mod:`skinkit.vision.calibration`   joint calibration of N cameras (OpenCV 5 multiview)
+- :mod:`skinkit.vision.matching`      SIFT seed correspondences checked against the epipolar geometry
 - :mod:`skinkit.vision.triangulation` multi-view triangulation with reprojection errors
 - :mod:`skinkit.vision.tracking3d`    2D tracks of profiled points -> SurfaceTrack
 - :mod:`skinkit.vision.cone`          least-squares cone fit and indenter tip
-- :mod:`skinkit.vision.markers`       marker sphere detection and validation
+- :mod:`skinkit.vision.markers`       marker sphere detection, matching and track validation
+- :mod:`skinkit.vision.plots`         profile figures
 """
 
 from skinkit.errors import SkinkitError

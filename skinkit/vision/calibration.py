@@ -182,6 +182,9 @@ def calibrate_detections(det: Detections, inner: tuple[int, int] | None, square_
             raise VisionError(f"calibration of {names[c]} alone failed: {detail}") from None
         Ks0.append(K)
         dists0.append(dist.ravel()[:5].reshape(1, 5))
+    if not hasattr(cv2, "calibrateMultiviewExtended"):
+        raise VisionError(f"joint rig calibration needs OpenCV >= 5.0 (calibrateMultiviewExtended); "
+                          f"this is OpenCV {cv2.__version__}")
     mask = full.T.astype(np.uint8)
     sizes = [det.image_size] * C
     models = np.zeros(C, np.uint8)

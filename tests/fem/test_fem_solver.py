@@ -102,3 +102,25 @@ def test_linear_solvers_agree(linear):
     u = NewtonSolver(prob, bc, SolverOptions(linear=linear, rtol=1e-12)).run([1.0]).u[-1]
     # two direct solvers on the same converged Newton problem: rounding-level agreement
     np.testing.assert_allclose(u, u_ref, atol=1e-10)
+
+
+def test_pardiso_survives_a_thread_limit_between_phases():
+    """PARDISO crashed (segfault) when a factorisation ran under a BLAS thread limit after
+    an analysis without one; the solver pins its thread count."""
+    from skinkit.fem import linsolve
+    from skinkit.fem.threads import single_threaded_blas
+    if "pardiso" not in linsolve.available():
+        pytest.skip("pypardiso not installed")
+    m = block_mesh((1, 1, 1), (5, 5, 5))
+    prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 20.0})])
+    bc = BoundaryConditions(m.n_dof).fix(m.node_sets["bottom"]).fix(m.node_sets["top"])
+    solver = NewtonSolver(prob, bc, SolverOptions(linear="pardiso"))
+    _, Ke = prob.evaluate(np.zeros(m.n_dof))
+    K = solver.pattern.matrix(Ke)
+    b = np.random.default_rng(0).normal(size=K.shape[0])
+    solver.linear.factor(K)
+    x1 = solver.linear.solve(b)
+    with single_threaded_blas():
+        solver.linear.factor(K)
+        x2 = solver.linear.solve(b)
+    np.testing.assert_allclose(x2, x1, rtol=1e-10, atol=1e-12 * np.abs(x1).max())

@@ -4,6 +4,7 @@ loopback bridge to the emulator process, equivalence with ``sim``, and fault inj
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -37,6 +38,23 @@ def proto(periods: int = 1, **kw):
 
 def stack(blocks, c):
     return np.concatenate([getattr(b, c) for b in blocks])
+
+
+def kill_after_samples(driver, emu, n: int = 200, timeout_s: float = 30.0) -> threading.Thread:
+    """Kill the emulator once the driver has received ``n`` samples of the current run."""
+
+    def watch() -> None:
+        t_end = time.monotonic() + timeout_s
+        while time.monotonic() < t_end:
+            st = driver.last_run
+            if st is not None and st.received >= n:
+                break
+            time.sleep(0.01)
+        emu.kill()
+
+    th = threading.Thread(target=watch, daemon=True)
+    th.start()
+    return th
 
 
 def test_dbc_scales_match_the_sensor_model() -> None:
@@ -141,7 +159,7 @@ def test_can_emulator_killed_mid_protocol(tmp_path) -> None:
         d = CanDriver()
         d.connect(port=emu.address)
         d.home()
-        threading.Timer(1.0, emu.kill).start()
+        kill_after_samples(d, emu)
         with create_experiment(path) as exp:
             with pytest.raises(F.DeviceFault, match="can: (link lost|no data)"):
                 run_protocol(d, proto(periods=5), exp)

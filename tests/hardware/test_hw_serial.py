@@ -36,6 +36,23 @@ def stack(blocks, c):
     return np.concatenate([getattr(b, c) for b in blocks])
 
 
+def kill_after_samples(driver, emu, n: int = 200, timeout_s: float = 30.0) -> threading.Thread:
+    """Kill the emulator once the driver has received ``n`` samples of the current run."""
+
+    def watch() -> None:
+        t_end = time.monotonic() + timeout_s
+        while time.monotonic() < t_end:
+            st = driver.last_run
+            if st is not None and st.received >= n:
+                break
+            time.sleep(0.01)
+        emu.kill()
+
+    th = threading.Thread(target=watch, daemon=True)
+    th.start()
+    return th
+
+
 def serial_driver(emu, **kw) -> SerialDriver:
     d = SerialDriver(limits=kw.pop("limits", None))
     d.connect(port=emu.address, **kw)
@@ -88,7 +105,7 @@ def test_emulator_killed_mid_protocol_keeps_every_sample(tmp_path) -> None:
     path = tmp_path / "killed.h5"
     with EmulatorProcess("serial", "--speed", "1", "--baud", "0") as emu:
         d = serial_driver(emu)
-        threading.Timer(1.0, emu.kill).start()
+        kill_after_samples(d, emu)
         with create_experiment(path) as exp:
             with pytest.raises(F.DeviceFault, match="serial: (link lost|no data)"):
                 run_protocol(d, proto(periods=5), exp)
@@ -114,9 +131,12 @@ def test_dropped_and_corrupted_frames_are_counted_and_stored(tmp_path) -> None:
     assert st.received + st.lost == st.generated  # nothing disappears silently
     rec = open_experiment(path).read_record("normal_indentation")
     assert rec.n_samples == st.received == s.samples
+    assert open_experiment(path).metadata()["normal_indentation.samples_lost"] == st.lost
     # every gap is flagged on the sample after it and visible in the device time stamps
     gaps = np.round(np.diff(rec.time_s) * P.control_rate_hz / 10).astype(int) - 1
-    assert gaps.sum() + (rec.time_s[0] > 0) * round(rec.time_s[0] * 1000) == st.lost
+    head = round(rec.time_s[0] * 1000)  # samples lost before the first one received
+    tail = st.generated - 1 - round(rec.time_s[-1] * 1000)  # ... and after the last one
+    assert head + gaps.sum() + tail == st.lost
     assert np.count_nonzero(rec.flags & FLAG_SAMPLES_LOST) == np.count_nonzero(gaps) + (rec.time_s[0] > 0)
 
 

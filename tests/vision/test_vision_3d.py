@@ -63,7 +63,7 @@ def test_automatic_profile_of_forearm(true_rig, arm_scene):
     print(f"profile: {sp.n_points} points, mean ISU {mean_isu:.2f} px, |dz| RMS "
           f"{1e6 * np.sqrt(np.mean(dz**2)):.1f} um, max {1e6 * dz.max():.1f} um; "
           f"{prof.report.n_statistical_outliers} statistical outliers removed "
-          f"({prof.report.outlier_backend})")
+          f"({prof.report.outlier_backend}), {prof.report.n_surface_outliers} off the local surface")
     assert sp.n_points >= 300
     assert mean_isu <= 5.2  # the thesis's manual patchwork
     assert dz.max() <= 100e-6  # no outlier left over 100 um

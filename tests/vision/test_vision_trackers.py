@@ -129,3 +129,14 @@ def test_large_shift_found_by_integer_search_and_isu_reported():
     assert np.allclose(res.displacement_px[0], [13.25, -9.6], atol=0.05)
     # A speckle dot of sigma 1.5 px correlates above 85 % over a few pixels only.
     assert 1 <= res.isu_px[0] <= 9
+
+
+def test_bench_compare_runs_every_method():
+    from skinkit.bench.vision import compare
+
+    rows = compare(n_trials=3, subset_px=32, seed=1)
+    names = [r["method"] for r in rows]
+    assert names[:2] == ["skinkit pcc", "skinkit gn"]
+    assert any(n.startswith("cv2.phaseCorrelate") for n in names)
+    for r in rows:
+        assert r["failed"] == 0 and np.isfinite(r["rms_px"]) and r["subsets_per_s"] > 0

@@ -46,6 +46,7 @@ class ProfileReport:
     reference_camera: np.ndarray | None = None
     reference_px: np.ndarray | None = None
     outlier_backend: str = ""
+    n_surface_outliers: int = 0
 
 
 class PatchworkProfiler:
@@ -189,6 +190,7 @@ class PatchworkProfiler:
         grid = np.column_stack([gx.ravel(), gy.ravel()]).astype(float)
         self.report = ProfileReport()
         self._features = {}
+        cv2.setRNGSeed(0)  # RANSAC in the affine fits: the same images give the same profile
         all_pts, all_q, all_isu, all_ref, all_px = [], [], [], [], []
         for a in range(C):
             ga = grid if masks is None else grid[masks[a][grid[:, 1].astype(int), grid[:, 0].astype(int)]]
@@ -230,6 +232,9 @@ class PatchworkProfiler:
             raise VisionError("profiling found no matched points (no texture, or views do not overlap)")
         keep = self._statistical_inliers(P)
         self.report.n_statistical_outliers = int(np.count_nonzero(~keep))
+        smooth = self._surface_inliers(P[keep])
+        self.report.n_surface_outliers = int(np.count_nonzero(~smooth))
+        keep[np.flatnonzero(keep)[~smooth]] = False
         self.report.reference_camera = ref[keep]
         self.report.reference_px = rpx[keep]
         return SurfaceProfile(P[keep], Q[keep], ISU[keep], "peak_correlation")
@@ -255,6 +260,24 @@ class PatchworkProfiler:
         tri = triangulate(rig, obs)
         ok = tri.valid & (tri.reprojection_px <= self.max_reprojection_px) & (tri.n_views >= self.min_views)
         return tri.points, ok
+
+    def _surface_inliers(self, P: np.ndarray, k: int = 12, n_sigma: float = 5.0) -> np.ndarray:
+        """Skin is smooth at the scale of a few grid steps: drop points farther from the
+        plane through their ``k`` nearest neighbours than ``n_sigma`` robust standard
+        deviations (MAD) of that distance over the cloud. Open3d's density test misses a
+        point that slipped along a line of sight yet still has close neighbours."""
+        if len(P) <= k + 3:
+            return np.ones(len(P), bool)
+        from scipy.spatial import cKDTree
+
+        _, idx = cKDTree(P).query(P, k=k + 1)
+        nb = P[idx[:, 1:]]  # (N, k, 3), the point itself excluded
+        c = nb.mean(axis=1)
+        _, _, vt = np.linalg.svd(nb - c[:, None], full_matrices=False)
+        normal = vt[:, -1]
+        d = np.abs(np.sum((P - c) * normal, axis=1))
+        sigma = 1.4826 * np.median(d)
+        return d <= n_sigma * max(sigma, 1e-9)
 
     def _statistical_inliers(self, P: np.ndarray) -> np.ndarray:
         """open3d's statistical outlier removal: drop points whose mean distance to their
