@@ -50,6 +50,17 @@ def demo(out_dir: Path, seed: int, as_json: bool) -> None:
     click.echo(f"  VAF Wiener {wie['vaf_wiener_pct']:.2f} % vs linear {wie['vaf_linear_pct']:.2f} %")
     for w in lin["warnings"] + wie["warnings"]:
         click.echo(f"  warning: {w}")
-    for p in summary["plots"]:
+    vis = summary["vision"]
+    if "skipped" in vis:
+        click.echo(f"stereo vision: skipped ({vis['skipped']})")
+    else:
+        click.echo(f"stereo vision: rig calibrated to {vis['reprojection_rms_px']:.3f} px; automatic "
+                   f"profile of {vis['profile_points']} points (mean ISU {vis['mean_isu_px']:.2f} px)")
+        click.echo(f"  profile vs truth: {vis['profile_error_um']['rms']:.1f} um RMS, "
+                   f"{vis['profile_error_um']['max']:.1f} um max")
+        click.echo(f"  3D tracks vs truth: {vis['track_error_um']['rms']:.1f} um RMS, "
+                   f"{vis['track_error_um']['max']:.1f} um max "
+                   f"({100 * vis['tracked_fraction']:.0f} % tracked)")
+    for p in summary["plots"] + vis.get("plots", []):
         click.echo(f"plot: {p}")
     click.echo(f"summary: {out_dir / 'summary.json'}")

@@ -5,10 +5,13 @@
 2. stream them block by block into an experiment file, as a driver would, and read them back;
 3. identify the linear model (K, B, I, robot mass removed) on the first and the Wiener model
    (C1, C2, Is, Bs) on the second, store both as fit results, compare them with the truth;
-4. plot the record and the identification (thesis Fig. 4-12 style).
+4. plot the record and the identification (thesis Fig. 4-12 style);
+5. render the stereoscope's views of calibration boards and of the speckled forearm,
+   undeformed and indented; calibrate the rig, profile the surface automatically, track it
+   in 3D, and compare with the rendered truth (needs the tracker and profiler plugins).
 
-Later steps (vision, finite elements, identification of FE parameters, gap diagnosis)
-extend this pipeline.
+Later steps (finite elements, identification of FE parameters, gap diagnosis) extend this
+pipeline.
 """
 
 from __future__ import annotations
@@ -157,5 +160,34 @@ def run_demo(out_dir: str | Path, seed: int = 0, progress: Progress = _quiet) ->
                              "Bs": err(wd["Bs_s"], truth.B_Ns_per_m / truth.K_N_per_m)},
         "plots": [str(p) for p in plots],
     }
+    summary["vision"] = run_vision(session, out, seed, progress)
+    with open_experiment(session) as exp:
+        summary["store"] = exp.summary()
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
     return summary
+
+
+def run_vision(session: Path, out: Path, seed: int, progress: Progress) -> dict[str, Any]:
+    """Stereo step on a rendered session; errors against the truth in micrometres."""
+    from skinkit.pipelines.stereo import calibrate_profile_track, missing_plugins
+
+    missing = missing_plugins()
+    if missing:
+        return {"skipped": f"needs plugins not installed: {', '.join(missing)}"}
+    from skinkit.lab.stereo import BOARD_INNER, BOARD_SQUARE_M, stereo_session
+    from skinkit.vision.plots import plot_profile
+
+    progress("render stereo views", 0.0)
+    lab = stereo_session(seed)
+    progress("render stereo views", 1.0)
+    res, profile, track = calibrate_profile_track(session, lab.boards, lab.skin, BOARD_INNER,
+                                                  BOARD_SQUARE_M, progress=progress)
+    P = lab.from_calibrated(profile.points)
+    dz = P[:, 2] - lab.true_height_m(P)
+    ok = track.valid[:, 1]
+    e = np.linalg.norm(lab.from_calibrated(track.points[ok, 1]) - lab.true_indented(P[ok]), axis=1)
+    res["profile_error_um"] = {"rms": float(1e6 * np.sqrt(np.mean(dz**2))),
+                               "max": float(1e6 * np.abs(dz).max())}
+    res["track_error_um"] = {"rms": float(1e6 * np.sqrt(np.mean(e**2))), "max": float(1e6 * e.max())}
+    res["plots"] = [str(plot_profile(profile, out / "profile.png", title="automatic profile"))]
+    return res
