@@ -12,8 +12,8 @@
 
 Each routine is a pure fit on arrays (usable with real data) plus, where useful, a helper
 that runs the experiment on the simulated device. The results form a
-:class:`RobotCalibration`, stored with the experiment (session metadata
-``robot_calibration``) and applied to a driver with :meth:`RobotCalibration.apply`.
+:class:`RobotCalibration`, stored with the experiment (as
+``/calibrations/robot``) and applied to a driver with :meth:`RobotCalibration.apply`.
 """
 
 from __future__ import annotations
@@ -163,15 +163,14 @@ class RobotCalibration:
             driver.force_constant = self.force_constant
 
     def save(self, experiment: Any) -> None:
-        """Store with the experiment (session metadata ``robot_calibration``)."""
-        experiment.set_metadata(robot_calibration=self.to_json())
+        """Store with the experiment (``/calibrations/robot``)."""
+        experiment.write_calibration("robot", json.loads(self.to_json()))
 
     @classmethod
     def load(cls, experiment: Any) -> RobotCalibration:
-        text = experiment.metadata().get("robot_calibration")
-        if text is None:
+        if "robot" not in experiment.calibration_names():
             raise CalibrationError(f"{experiment.path}: no robot calibration stored")
-        return cls.from_json(text)
+        return cls.from_json(json.dumps(experiment.read_calibration("robot")))
 
 
 # -- experiments on the simulated device ------------------------------------------------

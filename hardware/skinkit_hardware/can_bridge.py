@@ -140,33 +140,50 @@ class BridgeServer:
             self._serve(conn)
 
     def _serve(self, conn: socket.socket) -> None:
+        # one thread per direction: a flood of samples towards the host must never delay
+        # the host's heartbeats towards the device (that would trip the watchdog)
+        done = threading.Event()
+        up = threading.Thread(
+            target=self._to_host, args=(conn, done), name="skinkit-can-bridge-up", daemon=True
+        )
+        up.start()
         buf = bytearray()
-        conn.setblocking(False)
         try:
-            while not self._stop.is_set():
-                out = bytearray()
-                while True:  # device -> host
+            while not self._stop.is_set() and not done.is_set():
+                r, _, _ = select.select([conn], [], [], 0.05)
+                if not r:
+                    continue
+                data = conn.recv(65536)
+                if not data:
+                    return
+                buf += data
+                while len(buf) >= RECORD.size:  # host -> device
+                    self.bus.send(unpack(bytes(buf[: RECORD.size])))
+                    del buf[: RECORD.size]
+        except OSError:
+            return
+        finally:
+            done.set()
+            up.join(1.0)
+            conn.close()
+
+    def _to_host(self, conn: socket.socket, done: threading.Event) -> None:
+        try:
+            while not self._stop.is_set() and not done.is_set():
+                msg = self.bus.recv(0.05)
+                if msg is None:
+                    continue
+                out = bytearray(pack(msg))
+                while len(out) < 64 * RECORD.size:
                     msg = self.bus.recv(0)
                     if msg is None:
                         break
                     out += pack(msg)
-                if out:
-                    conn.setblocking(True)
-                    conn.sendall(out)
-                    conn.setblocking(False)
-                r, _, _ = select.select([conn], [], [], 0.0005)
-                if r:
-                    data = conn.recv(65536)
-                    if not data:
-                        return
-                    buf += data
-                    while len(buf) >= RECORD.size:  # host -> device
-                        self.bus.send(unpack(bytes(buf[: RECORD.size])))
-                        del buf[: RECORD.size]
+                conn.sendall(out)
         except OSError:
-            return
+            pass
         finally:
-            conn.close()
+            done.set()
 
     def close(self) -> None:
         self._stop.set()

@@ -40,5 +40,7 @@ def emulate(
             skin,
             "--seed",
             str(seed),
+            "--buffer-bytes",
+            str(buffer_bytes),
         ]
     )

@@ -7,6 +7,7 @@ is then marked incomplete). The driver is left de-energised whatever happens.
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -128,19 +129,13 @@ def run_protocol(
 
 
 def _store_accounting(experiment: Any, summary: RunSummary) -> None:
-    """Keep the link's sample accounting with the experiment (session metadata
-    ``<protocol>.samples_lost`` and ``<protocol>.link``), fault or not."""
-    setter = getattr(experiment, "set_metadata", None)
+    """Keep the link's sample accounting with the record (``extra`` attributes ``samples_lost``
+    and ``link``), fault or not."""
+    setter = getattr(experiment, "set_record_attrs", None)
     if setter is None:
         return
-    import json
-
     try:
-        setter(
-            **{
-                f"{summary.protocol}.samples_lost": int(summary.lost),
-                f"{summary.protocol}.link": json.dumps(summary.to_dict(), default=str),
-            }
-        )
-    except Exception:  # noqa: BLE001 - never mask the run's own error with a metadata failure
+        setter(summary.protocol, samples_lost=int(summary.lost),
+               link=json.loads(json.dumps(summary.to_dict(), default=str)))
+    except Exception:  # noqa: BLE001 - never mask the run's own error with an accounting failure
         pass

@@ -41,6 +41,8 @@ def inspect(file: Path, as_json: bool) -> None:
         chans = ", ".join(f"{c} [{u}]" for c, u in r["units"].items())
         rate = "?" if r["rate_hz"] is None else f"{r['rate_hz']:.6g}"
         done = "yes" if r["complete"] else "[red]no[/red]"
+        if "samples_lost" in r["extra"]:
+            done += f" ({r['extra']['samples_lost']} lost)"
         t.add_row(r["protocol"], str(r["kind"]), str(r["samples"]), rate, f"{r['duration_s']:.4g}",
                   chans, done)
     con.print(t)
@@ -60,6 +62,8 @@ def inspect(file: Path, as_json: bool) -> None:
         con.print(f"profile {p['name']}: {p['points']} points")
     for tr in summary["tracks"]:
         con.print(f"track {tr['name']}: {tr['points']} points x {tr['frames']} frames")
+    for c in summary["calibrations"]:
+        con.print(f"calibration {c}")
     for f in summary["fits"]:
         con.print(f"fit {f}")
     for g in summary["gaps"]:

@@ -7,7 +7,8 @@ from pathlib import Path
 import click
 
 from skinkit.errors import StoreError
-from skinkit.store import open_experiment, recover as recover_file
+from skinkit.store import open_experiment
+from skinkit.store import recover as recover_file
 
 
 @click.command()

@@ -326,7 +326,24 @@ class Experiment:
             "channels": channels,
             "units": {c: RobotRecord.CHANNELS[c] for c in channels if c in RobotRecord.CHANNELS},
             "complete": bool(g.attrs.get("complete", False)),
+            "extra": self._json_attr(g, "extra") if "extra" in g.attrs else {},
         }
+
+    def set_record_attrs(self, name: str, **items: Any) -> None:
+        """Attach JSON-ready facts to record ``name`` (e.g. the link's ``samples_lost``), merged
+        into its ``extra`` attribute; call once its writer has closed (or crashed)."""
+        f = self._writable()
+        path = f"{L.RECORDS}/{name}"
+        if path not in f:
+            raise self._err(path, "missing")
+        g = f[path]
+        extra = json.loads(g.attrs["extra"]) if "extra" in g.attrs else {}
+        extra.update(items)
+        try:
+            g.attrs["extra"] = json.dumps(extra, allow_nan=True)
+        except TypeError as exc:
+            raise SchemaError(f"record {name!r} attrs", f"not JSON-ready ({exc})") from None
+        f.flush()
 
     def _committed(self, g: h5py.Group) -> int:
         d = self._dataset(g, "committed", 1)
@@ -570,6 +587,19 @@ class Experiment:
         """The gap report ``name`` as its JSON dict."""
         return self._json_attr(self._group(f"{L.GAPS}/{name}"), "json")
 
+    def write_calibration(self, name: str, payload: dict[str, Any]) -> None:
+        """Store (replace) a device calibration ``name`` (e.g. ``"robot"``) as JSON."""
+        self._write_json(L.CALIBRATIONS, name, payload)
+
+    @_reading
+    def calibration_names(self) -> list[str]:
+        return sorted(self._f[L.CALIBRATIONS]) if L.CALIBRATIONS in self._f else []
+
+    @_reading
+    def read_calibration(self, name: str) -> dict[str, Any]:
+        """The calibration ``name`` as its JSON dict."""
+        return self._json_attr(self._group(f"{L.CALIBRATIONS}/{name}"), "json")
+
     # -- summary -------------------------------------------------------------------------
     @_reading
     def summary(self) -> dict[str, Any]:
@@ -595,6 +625,7 @@ class Experiment:
             "tracks": [{"name": n, "points": int(self._f[f"{L.TRACKS}/{n}/points"].shape[0]),
                         "frames": int(self._f[f"{L.TRACKS}/{n}/points"].shape[1])}
                        for n in self.track_names()],
+            "calibrations": self.calibration_names(),
             "fits": self.fit_names(),
             "gaps": self.gap_names(),
         }

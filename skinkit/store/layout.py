@@ -7,7 +7,8 @@
     /session                  attrs: free metadata (subject, site, operator, notes, ...)
     /records/<protocol>/      one robot record per protocol run
         attrs: protocol (JSON of skinkit.schemas.Protocol), rate_hz (nominal),
-               channels (JSON list), complete (bool: the writer closed it)
+               channels (JSON list), complete (bool: the writer closed it),
+               [extra (JSON object: facts about the run, e.g. the link's samples_lost)]
         time_s      (N,)   float64  [s]
         <channel>   (N, 3) float64  unit in the dataset's "unit" attribute, one of
                                     RobotRecord.CHANNELS (motor_position m, motor_current A,
@@ -21,6 +22,7 @@
     /profiles/<name>/         points (N,3) m, quality (N,), [uncertainty_px (N,)];
                               attrs quality_name
     /tracks/<name>/           points (P,F,3) m, valid (P,F) bool, time_s (F,), [point_ids (P,)]
+    /calibrations/<name>      attrs json (a device calibration, e.g. "robot")
     /fits/<name>              attrs json (skinkit.schemas.FitResult.to_dict)
     /gaps/<name>              attrs json (skinkit.schemas.GapReport.to_dict)
 
@@ -42,5 +44,6 @@ IMAGES = "images"
 PROFILES = "profiles"
 TRACKS = "tracks"
 FITS = "fits"
+CALIBRATIONS = "calibrations"
 GAPS = "gaps"
 SESSION = "session"

@@ -298,3 +298,21 @@ def test_fuzz_store_reader(tmp_path_factory, data):
         _read_everything(path)
     except StoreError as exc:
         assert "\n" not in str(exc)
+
+
+def test_record_attrs_and_calibrations(tmp_path):
+    path = tmp_path / "a.h5"
+    with create_experiment(path) as exp:
+        exp.write_record(_rec())
+        exp.set_record_attrs("stochastic", samples_lost=3, link={"kind": "serial", "baud": 921600})
+        exp.set_record_attrs("stochastic", samples_lost=4)
+        exp.write_calibration("robot", {"mass_kg": 0.025})
+        with pytest.raises(StoreError, match="records/nope: missing"):
+            exp.set_record_attrs("nope", a=1)
+        with pytest.raises(SchemaError, match="not JSON-ready"):
+            exp.set_record_attrs("stochastic", bad=object())
+    with open_experiment(path) as exp:
+        extra = exp.record_info("stochastic")["extra"]
+        assert extra == {"samples_lost": 4, "link": {"kind": "serial", "baud": 921600}}
+        assert exp.read_calibration("robot") == {"mass_kg": 0.025}
+        assert exp.summary()["calibrations"] == ["robot"]

@@ -131,7 +131,7 @@ def test_dropped_and_corrupted_frames_are_counted_and_stored(tmp_path) -> None:
     assert st.received + st.lost == st.generated  # nothing disappears silently
     rec = open_experiment(path).read_record("normal_indentation")
     assert rec.n_samples == st.received == s.samples
-    assert open_experiment(path).metadata()["normal_indentation.samples_lost"] == st.lost
+    assert open_experiment(path).record_info("normal_indentation")["extra"]["samples_lost"] == st.lost
     # every gap is flagged on the sample after it and visible in the device time stamps
     gaps = np.round(np.diff(rec.time_s) * P.control_rate_hz / 10).astype(int) - 1
     head = round(rec.time_s[0] * 1000)  # samples lost before the first one received
