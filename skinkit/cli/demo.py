@@ -50,6 +50,14 @@ def demo(out_dir: Path, seed: int, as_json: bool) -> None:
     click.echo(f"  VAF Wiener {wie['vaf_wiener_pct']:.2f} % vs linear {wie['vaf_linear_pct']:.2f} %")
     for w in lin["warnings"] + wie["warnings"]:
         click.echo(f"  warning: {w}")
+    rob = summary["robot"]
+    if "skipped" in rob:
+        click.echo(f"robot: skipped ({rob['skipped']})")
+    else:
+        click.echo(f"robot (sim driver): {rob['protocol']} {rob['simulated_s']:.0f} s simulated in "
+                   f"{rob['wall_s']:.0f} s, {rob['samples']} samples, {rob['lost']} lost; normal travel "
+                   f"{rob['tip_travel_pp_m'][2] * 1e3:.3f} mm p-p, "
+                   f"peak force {rob['peak_normal_force_N']:.2f} N")
     vis = summary["vision"]
     if "skipped" in vis:
         click.echo(f"stereo vision: skipped ({vis['skipped']})")

@@ -6,7 +6,10 @@
 3. identify the linear model (K, B, I, robot mass removed) on the first and the Wiener model
    (C1, C2, Is, Bs) on the second, store both as fit results, compare them with the truth;
 4. plot the record and the identification (thesis Fig. 4-12 style);
-5. render the stereoscope's views of calibration boards and of the speckled forearm,
+5. run thesis Table 12's normal indentation (1.5 mm peak to peak, 0.1 Hz, three periods)
+   through the simulated robot (the ``sim`` driver plugin: voice coils, PID, sensor noise,
+   safety limits, a Kelvin–Voigt skin) into the same file;
+6. render the stereoscope's views of calibration boards and of the speckled forearm,
    undeformed and indented; calibrate the rig, profile the surface automatically, track it
    in 3D, and compare with the rendered truth (needs the tracker and profiler plugins).
 
@@ -160,11 +163,25 @@ def run_demo(out_dir: str | Path, seed: int = 0, progress: Progress = _quiet) ->
                              "Bs": err(wd["Bs_s"], truth.B_Ns_per_m / truth.K_N_per_m)},
         "plots": [str(p) for p in plots],
     }
+    summary["robot"] = run_robot(session, seed, progress)
     summary["vision"] = run_vision(session, out, seed, progress)
     with open_experiment(session) as exp:
         summary["store"] = exp.summary()
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
     return summary
+
+
+def run_robot(session: Path, seed: int, progress: Progress) -> dict[str, Any]:
+    """Acquisition step through the simulated robot, if a ``sim`` driver is installed."""
+    from skinkit import registry
+    from skinkit.pipelines.acquire import run_protocols
+
+    if "sim" not in registry.names("skinkit.drivers"):
+        return {"skipped": "needs the driver plugin skinkit.drivers:sim (skinkit-hardware)"}
+    progress("robot: normal indentation", 0.0)
+    (res,) = run_protocols(session, ["normal_indentation"], "sim", skin="kelvin-voigt", seed=seed)
+    progress("robot: normal indentation", 1.0)
+    return res
 
 
 def run_vision(session: Path, out: Path, seed: int, progress: Progress) -> dict[str, Any]:
