@@ -58,6 +58,15 @@ def demo(out_dir: Path, seed: int, as_json: bool) -> None:
                    f"{rob['wall_s']:.0f} s, {rob['samples']} samples, {rob['lost']} lost; normal travel "
                    f"{rob['tip_travel_pp_m'][2] * 1e3:.3f} mm p-p, "
                    f"peak force {rob['peak_normal_force_N']:.2f} N")
+    fem = summary["fem"]
+    if "skipped" in fem:
+        click.echo(f"finite elements: skipped ({fem['skipped']})")
+    else:
+        w, wo = fem["with_prestretch"], fem["without_prestretch"]
+        click.echo(f"finite elements: in vivo model, {w['dof']} unknowns, 20 mN tip force: indentation "
+                   f"{-w['tip_displacement_m'][2] * 1e6:.1f} um with the skin's pre-stretch, "
+                   f"{-wo['tip_displacement_m'][2] * 1e6:.1f} um without")
+        click.echo(f"  ParaView: {w['paraview']}")
     vis = summary["vision"]
     if "skipped" in vis:
         click.echo(f"stereo vision: skipped ({vis['skipped']})")

@@ -16,7 +16,7 @@ from skfem import Basis, ElementHex2
 
 from skinkit.fem.errors import InvertedElementError
 from skinkit.fem.mesh import FEMesh
-from skinkit.fem.tensors import I3
+from skinkit.fem.tensors import I3, det3
 from skinkit.fem.threads import single_threaded_blas
 
 #: default quadrature degree: 3 Gauss points per direction integrate the 27-node element's
@@ -75,10 +75,17 @@ def deformation_gradient(geom: Geometry, u: np.ndarray, elements: np.ndarray | N
     return I3 + np.einsum("eia,eqaJ->eqiJ", ue, dN, optimize=True)
 
 
-def element_residual(dN: np.ndarray, w: np.ndarray, F: np.ndarray, S: np.ndarray) -> np.ndarray:
+def element_residual(dN: np.ndarray, w: np.ndarray, F: np.ndarray, S: np.ndarray,
+                     dNT: np.ndarray | None = None) -> np.ndarray:
     """``(n_el, 81)`` internal forces ``∫ F S : ∇δu`` [N], ordered (component, node)."""
-    P = F @ S
-    return np.einsum("eqiJ,eqaJ,eq->eia", P, dN, w, optimize=True).reshape(dN.shape[0], -1)
+    ne, nq, nb, _ = dN.shape
+    Pw = (F @ S) * w[:, :, None, None]
+    # Σ_q,J Pw[e,q,i,J] dN[e,q,a,J] as one batched product over the stacked (q, J) axis
+    A = Pw.transpose(0, 2, 1, 3).reshape(ne, 3, nq * 3)
+    if dNT is None:
+        dNT = np.ascontiguousarray(np.swapaxes(dN, -1, -2))
+    with single_threaded_blas():
+        return np.matmul(A, dNT.reshape(ne, nq * 3, nb)).reshape(ne, -1)
 
 
 _VI = np.array([0, 1, 2, 0, 1, 0])
@@ -182,13 +189,18 @@ class SparsePattern:
         self.indices = (uniq % self.n).astype(np.int32)
         self.indptr = np.searchsorted(uniq // self.n, np.arange(self.n + 1)).astype(np.int32)
         self.nnz = uniq.size
+        # the scatter as one sparse product (nnz x element entries): about half the time
+        # of gathering then bin-counting the element matrices
+        n_entries = edofs.shape[0] * edofs.shape[1] ** 2
+        self._gather = sp.csr_matrix((np.ones(self.take.size), (self.inv, self.take)),
+                                     shape=(self.nnz, n_entries))
         rvec = r.ravel()
         self.rtake = np.flatnonzero(rvec >= 0)
         self.rdest = rvec[self.rtake]
 
     def matrix(self, Ke: np.ndarray) -> sp.csr_matrix:
         """Scatter element matrices ``(n_el, 81, 81)`` into the reduced CSR matrix."""
-        data = np.bincount(self.inv, weights=Ke.ravel()[self.take], minlength=self.nnz)
+        data = self._gather @ Ke.ravel()
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
 
     def vector(self, re: np.ndarray) -> np.ndarray:
@@ -203,7 +215,7 @@ def full_vector(edofs: np.ndarray, re: np.ndarray, n_dof: int) -> np.ndarray:
 
 def check_inversion(F: np.ndarray, elements: np.ndarray | None = None) -> np.ndarray:
     """``det F`` ``(n_el, n_q)``; raises :class:`InvertedElementError` where it is not positive."""
-    J = np.linalg.det(F)
+    J = det3(F)
     bad = ~(J > 0)
     if bad.any():
         e, q = np.unravel_index(int(np.argmax(bad)), J.shape)

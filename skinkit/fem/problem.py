@@ -24,6 +24,7 @@ from skinkit.fem.assembly import (
 from skinkit.fem.errors import ModelError
 from skinkit.fem.mesh import FEMesh
 from skinkit.fem.tensors import I3, push_with
+from skinkit.fem.threads import single_threaded_blas
 
 
 @dataclass
@@ -159,7 +160,7 @@ class Problem:
             F = self._F(u, k)
             if not with_tangent:
                 S, _ = self.material_response(k, F, False, dt)
-                re[el] = element_residual(g.dN[el], g.w[el], F, S)
+                re[el] = element_residual(g.dN[el], g.w[el], F, S, g.dNT[el])
                 continue
             # tangents chunk by chunk: the fourth-order arrays stay in cache
             n = el.stop - el.start
@@ -167,7 +168,7 @@ class Problem:
                 sub = slice(a, min(a + _CHUNK, n))
                 ge = slice(el.start + sub.start, el.start + sub.stop)
                 S, CC = self.material_response(k, F[sub], True, dt, sub)
-                re[ge] = element_residual(g.dN[ge], g.w[ge], F[sub], S)
+                re[ge] = element_residual(g.dN[ge], g.w[ge], F[sub], S, g.dNT[ge])
                 element_tangent(g.dN[ge], g.w[ge], F[sub], S, CC, g.dNT[ge], out=Ke[ge])
         return re, Ke
 
@@ -175,8 +176,9 @@ class Problem:
         """Deformation gradients ``(n_el_k, n_q, 3, 3)`` of material ``k``'s elements."""
         el = self.slices[k]
         g = self.geom
-        ue = u[g.edofs[el]].reshape(-1, 3, g.dN.shape[2])
-        F = I3 + np.einsum("eia,eqaJ->eqiJ", ue, g.dN[el], optimize=True)
+        ue = u[g.edofs[el]].reshape(-1, 1, 3, g.dN.shape[2])
+        with single_threaded_blas():
+            F = I3 + np.matmul(ue, g.dN[el])   # (e, 1, i, a) @ (e, q, a, J) -> (e, q, i, J)
         check_inversion(F, self.order[el])
         return F
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem import linsolve
+from skinkit.fem import linsolve, threads
 from skinkit.fem.assembly import SparsePattern, full_vector
 from skinkit.fem.bcs import BoundaryConditions, DofMap
 from skinkit.fem.errors import InvertedElementError, SolverError
@@ -90,6 +90,8 @@ class NewtonSolver:
         self.pattern = SparsePattern(problem.geom.edofs, self.dofmap.map, self.dofmap.n_unknowns,
                                      upper=self.linear.upper)
         self.timings = Timings()
+        # after the linear solver has loaded its libraries, so the controller sees them all
+        threads.warm()
 
     def _residual(self, u: np.ndarray, t: float, dt: float | None, with_tangent: bool):
         t0 = time.perf_counter()

@@ -14,6 +14,18 @@ from collections.abc import Iterator
 _controller = None
 
 
+def warm() -> None:
+    """Build the thread-pool controller now (it inspects every loaded library, ~tens of ms)
+    so that the first assembly of a solve does not pay for it."""
+    global _controller
+    if _controller is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+        except ImportError:
+            return
+        _controller = ThreadpoolController()
+
+
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
     """Limit BLAS (OpenBLAS/MKL through NumPy) to one thread inside the block."""

@@ -123,6 +123,14 @@ def test_demo_runs(tmp_path):
         # Position control to the Table 12 amplitude; 30 s at 1 kHz, no sample lost in-process.
         assert rob["samples"] == samples["normal_indentation"] == 30000 and rob["lost"] == 0
         assert abs(rob["tip_travel_pp_m"][2] - 1.5e-3) < 0.05e-3
+    fem = data["fem"]
+    if "skipped" not in fem:
+        w, wo = fem["with_prestretch"], fem["without_prestretch"]
+        # Force control: the solved tip force is the prescribed 20 mN to solver tolerance.
+        assert abs(w["tip_force_N"][2] + 0.02) < 1e-9 and abs(wo["tip_force_N"][2] + 0.02) < 1e-9
+        # In-plane tension adds a membrane stiffness to the out-of-plane response.
+        assert 0 < -w["tip_displacement_m"][2] < -wo["tip_displacement_m"][2]
+        assert Path(w["paraview"]).exists()
     vis = data["vision"]
     if "skipped" in vis:
         assert "skinkit.profilers:patchwork" in vis["skipped"] or "skinkit.trackers:gn" in vis["skipped"]
