@@ -4,7 +4,6 @@ emulator in another process). Messages are defined in ``skinkit_robot.dbc``."""
 
 from __future__ import annotations
 
-import threading
 import time
 from typing import Any
 
@@ -13,13 +12,14 @@ import numpy as np
 
 from skinkit_hardware import faults as F
 from skinkit_hardware.device import Event
+from skinkit_hardware.drivers.link import LinkTransport
 from skinkit_hardware.host import HostDriver
 from skinkit_hardware.params import RobotParameters
 from skinkit_hardware.wire import can_codec as C
 
 
-class CanTransport:
-    """Host side of the CAN protocol on a python-can bus (heartbeats as in the serial driver)."""
+class CanTransport(LinkTransport):
+    """Host side of the CAN protocol on a python-can bus."""
 
     def __init__(
         self,
@@ -30,26 +30,11 @@ class CanTransport:
     ) -> None:
         self.bus = bus
         self.asm = C.SampleAssembler(params)
-        self.lock = threading.Lock()
-        self.heartbeat_s = heartbeat_s
-        self.last_sent = 0.0
-        self.stats: dict[str, Any] = {}
-        self._stop = threading.Event()
-        self._thread = None
-        if heartbeat_thread:
-            self._thread = threading.Thread(target=self._beat, name="skinkit-can-heartbeat", daemon=True)
-            self._thread.start()
+        self._start_heartbeat(heartbeat_thread, heartbeat_s, "skinkit-can-heartbeat")
 
     @property
     def info(self) -> dict[str, Any]:
         return self.asm.info
-
-    def _beat(self) -> None:
-        while not self._stop.wait(self.heartbeat_s):
-            try:
-                self.send("heartbeat")
-            except F.DeviceFault:
-                return
 
     def send(self, command: str, **args: Any) -> None:
         msgs = C.encode_command(command, **args)
@@ -78,14 +63,8 @@ class CanTransport:
         self.stats = {"corrupted_frames": 0, "incomplete_samples": self.asm.incomplete}
         return rows, events
 
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(1.0)
-        try:
-            self.bus.shutdown()
-        except Exception:  # noqa: BLE001 - closing a dead bus must not mask the real error
-            pass
+    def _close_link(self) -> None:
+        self.bus.shutdown()
 
 
 class CanDriver(HostDriver):
@@ -121,11 +100,5 @@ class CanDriver(HostDriver):
                     f"can: cannot open {interface}:{channel} at {bitrate} bit/s: {exc}"
                 ) from None
         t = CanTransport(bus, self.params, heartbeat_thread=hb)
-        t.send("hello")
-        t_end = time.monotonic() + 3.0
-        while not t.info and time.monotonic() < t_end:
-            t.receive(0.05)
-        if not t.info:
-            t.close()
-            raise F.DeviceFault(f"can: no answer from a device on {interface}:{channel} within 3 s")
+        t.handshake(f"can: no answer from a device on {interface}:{channel} within 3 s")
         return t

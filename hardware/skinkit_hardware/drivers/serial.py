@@ -3,7 +3,6 @@ numbers and CRC-32 (``hardware/SERIAL_PROTOCOL.md``)."""
 
 from __future__ import annotations
 
-import threading
 import time
 from typing import Any
 
@@ -11,18 +10,15 @@ import numpy as np
 
 from skinkit_hardware import faults as F
 from skinkit_hardware.device import Event
+from skinkit_hardware.drivers.link import LinkTransport
 from skinkit_hardware.host import HostDriver
 from skinkit_hardware.params import RobotParameters
 from skinkit_hardware.wire import serial_codec as S
 
 
-class SerialTransport:
-    """Host side of the serial protocol on a pyserial port.
-
-    Heartbeats go out with every ``receive`` and, when ``heartbeat_thread`` is set, from a
-    background thread every ``heartbeat_s`` so that holding between runs does not trip the
-    device's watchdog. Without the thread, a host that stops reading goes silent.
-    """
+class SerialTransport(LinkTransport):
+    """Host side of the serial protocol on a pyserial port. Without the heartbeat thread, a
+    host that stops reading goes silent (the device's watchdog then trips)."""
 
     def __init__(
         self,
@@ -42,23 +38,8 @@ class SerialTransport:
         self.params = params
         self.reader = S.FrameReader()
         self.send_frame = S.Sender()
-        self.lock = threading.Lock()
-        self.heartbeat_s = heartbeat_s
-        self.last_sent = 0.0
         self.info: dict[str, Any] = {}
-        self.stats: dict[str, Any] = {}
-        self._stop = threading.Event()
-        self._thread = None
-        if heartbeat_thread:
-            self._thread = threading.Thread(target=self._beat, name="skinkit-serial-heartbeat", daemon=True)
-            self._thread.start()
-
-    def _beat(self) -> None:
-        while not self._stop.wait(self.heartbeat_s):
-            try:
-                self.send("heartbeat")
-            except F.DeviceFault:
-                return
+        self._start_heartbeat(heartbeat_thread, heartbeat_s, "skinkit-serial-heartbeat")
 
     def _write(self, data: bytes) -> None:
         import serial
@@ -105,14 +86,8 @@ class SerialTransport:
         out = np.concatenate(rows) if rows else np.empty((0, 15))
         return out, events
 
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(1.0)
-        try:
-            self.ser.close()
-        except Exception:  # noqa: BLE001 - closing a dead port must not mask the real error
-            pass
+    def _close_link(self) -> None:
+        self.ser.close()
 
 
 class SerialDriver(HostDriver):
@@ -132,13 +107,5 @@ class SerialDriver(HostDriver):
         if options:
             raise F.DeviceFault(f"serial driver: unknown option(s) {sorted(options)}")
         t = SerialTransport(port, baud, self.params, heartbeat_thread=hb)
-        t.send("hello")
-        t_end = time.monotonic() + 3.0
-        while not t.info and time.monotonic() < t_end:
-            t.receive(0.05)
-        if not t.info:
-            t.close()
-            raise F.DeviceFault(
-                f"serial: no answer from a device on {port} within 3 s (is the emulator running?)"
-            )
+        t.handshake(f"serial: no answer from a device on {port} within 3 s (is the emulator running?)")
         return t
