@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import threading
 import time
+from typing import Any
 
 from skinkit_hardware.faults import DeviceFault
 
@@ -53,3 +55,22 @@ class EmulatorProcess:
             for stream in (self.proc.stdout, self.proc.stderr):
                 if stream:
                     stream.close()
+
+
+def kill_after_samples(driver: Any, emu: EmulatorProcess, n: int = 200,
+                       timeout_s: float = 30.0) -> threading.Thread:
+    """Kill the emulator once ``driver`` has received ``n`` samples of its current run
+    (or after ``timeout_s`` [s]): fault injection at a known point of a protocol."""
+
+    def watch() -> None:
+        t_end = time.monotonic() + timeout_s
+        while time.monotonic() < t_end:
+            st = driver.last_run
+            if st is not None and st.received >= n:
+                break
+            time.sleep(0.01)
+        emu.kill()
+
+    th = threading.Thread(target=watch, daemon=True)
+    th.start()
+    return th

@@ -21,7 +21,7 @@ from skinkit_hardware.drivers.can import CanDriver  # noqa: E402
 from skinkit_hardware.drivers.sim import SimDriver  # noqa: E402
 from skinkit_hardware.emulator import serve  # noqa: E402
 from skinkit_hardware.params import RobotParameters  # noqa: E402
-from skinkit_hardware.testing import EmulatorProcess  # noqa: E402
+from skinkit_hardware.testing import EmulatorProcess, kill_after_samples  # noqa: E402
 from skinkit_hardware.wire import can_codec as C  # noqa: E402
 
 from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
@@ -38,23 +38,6 @@ def proto(periods: int = 1, **kw):
 
 def stack(blocks, c):
     return np.concatenate([getattr(b, c) for b in blocks])
-
-
-def kill_after_samples(driver, emu, n: int = 200, timeout_s: float = 30.0) -> threading.Thread:
-    """Kill the emulator once the driver has received ``n`` samples of the current run."""
-
-    def watch() -> None:
-        t_end = time.monotonic() + timeout_s
-        while time.monotonic() < t_end:
-            st = driver.last_run
-            if st is not None and st.received >= n:
-                break
-            time.sleep(0.01)
-        emu.kill()
-
-    th = threading.Thread(target=watch, daemon=True)
-    th.start()
-    return th
 
 
 def test_dbc_scales_match_the_sensor_model() -> None:
@@ -180,7 +163,6 @@ def test_can_stuck_sensor_and_watchdog() -> None:
 
 
 def test_can_silent_host_trips_the_watchdog() -> None:
-    import time
 
     from skinkit_hardware.params import Limits
 

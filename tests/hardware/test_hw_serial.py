@@ -3,7 +3,6 @@ equivalence with ``sim``, the wire format, and fault injection."""
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -16,7 +15,7 @@ from skinkit_hardware import faults as F  # noqa: E402
 from skinkit_hardware.drivers.serial import SerialDriver, SerialTransport  # noqa: E402
 from skinkit_hardware.drivers.sim import SimDriver  # noqa: E402
 from skinkit_hardware.params import Limits, RobotParameters  # noqa: E402
-from skinkit_hardware.testing import EmulatorProcess  # noqa: E402
+from skinkit_hardware.testing import EmulatorProcess, kill_after_samples  # noqa: E402
 from skinkit_hardware.wire import serial_codec as S  # noqa: E402
 
 from skinkit.acquisition import make_protocol, run_protocol  # noqa: E402
@@ -34,23 +33,6 @@ def proto(periods: int = 1, **kw):
 
 def stack(blocks, c):
     return np.concatenate([getattr(b, c) for b in blocks])
-
-
-def kill_after_samples(driver, emu, n: int = 200, timeout_s: float = 30.0) -> threading.Thread:
-    """Kill the emulator once the driver has received ``n`` samples of the current run."""
-
-    def watch() -> None:
-        t_end = time.monotonic() + timeout_s
-        while time.monotonic() < t_end:
-            st = driver.last_run
-            if st is not None and st.received >= n:
-                break
-            time.sleep(0.01)
-        emu.kill()
-
-    th = threading.Thread(target=watch, daemon=True)
-    th.start()
-    return th
 
 
 def serial_driver(emu, **kw) -> SerialDriver:
