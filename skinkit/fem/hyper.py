@@ -15,6 +15,14 @@ from skinkit.fem.tensors import I3, inv3, outer, sym_product, trace
 VOLUMETRIC_KINDS = ("quadratic", "log")
 
 
+def check_volumetric(kind: str) -> str:
+    """``kind`` if it names a volumetric energy in :data:`VOLUMETRIC_KINDS` (a law's
+    ``volumetric`` option), else a ValueError naming the choices."""
+    if kind not in VOLUMETRIC_KINDS:
+        raise ValueError(f"volumetric must be one of {VOLUMETRIC_KINDS}, got {kind!r}")
+    return kind
+
+
 def b2(v: Any) -> np.ndarray:
     """A batch of scalars shaped to scale ``(..., 3, 3)`` tensors."""
     return np.asarray(v)[..., None, None]

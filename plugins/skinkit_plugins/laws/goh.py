@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 
 from skinkit.fem.hyper import (
-    VOLUMETRIC_KINDS,
     b2,
     b4,
+    check_volumetric,
     iso_hessian,
     iso_I1,
     iso_I4,
@@ -52,8 +52,7 @@ class GOH:
         self.switch = switch
         if families not in (1, 2):
             raise ValueError(f"families must be 1 or 2, got {families!r}")
-        if volumetric not in VOLUMETRIC_KINDS:
-            raise ValueError(f"volumetric must be one of {VOLUMETRIC_KINDS}, got {volumetric!r}")
+        check_volumetric(volumetric)
         self.families = int(families)
         self.frame_angle = float(frame_angle)
         self.volumetric = volumetric

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from skinkit.fem.hyper import (
-    VOLUMETRIC_KINDS,
+    check_volumetric,
     iso_I1,
     iso_I2,
     kinematics,
@@ -29,8 +29,7 @@ class MooneyRivlin:
     complex_safe = True
 
     def __init__(self, volumetric: str = "quadratic") -> None:
-        if volumetric not in VOLUMETRIC_KINDS:
-            raise ValueError(f"volumetric must be one of {VOLUMETRIC_KINDS}, got {volumetric!r}")
+        check_volumetric(volumetric)
         self.volumetric = volumetric
 
     def parameters(self) -> list[Parameter]:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.hyper import VOLUMETRIC_KINDS, volumetric_energy
+from skinkit.fem.hyper import check_volumetric, volumetric_energy
 from skinkit.schemas import Parameter
 
 
@@ -34,8 +34,7 @@ class Ogden:
     def __init__(self, terms: int = 1, volumetric: str = "quadratic") -> None:
         if int(terms) != terms or terms < 1:
             raise ValueError(f"terms must be a positive integer, got {terms!r}")
-        if volumetric not in VOLUMETRIC_KINDS:
-            raise ValueError(f"volumetric must be one of {VOLUMETRIC_KINDS}, got {volumetric!r}")
+        check_volumetric(volumetric)
         self.terms = int(terms)
         self.volumetric = volumetric
 
