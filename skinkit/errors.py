@@ -39,3 +39,25 @@ class StoreError(SkinkitError):
 
 class PluginError(SkinkitError):
     """A plugin could not be found, imported, or does not satisfy its protocol."""
+
+
+class EffectError(SkinkitError):
+    """An effect that does not exist, does not fit a model, or has a parameter out of range.
+
+    ``entry`` names the model-file entry or effect concerned (``"effects[1].l1"``).
+    """
+
+    def __init__(self, entry: str, problem: str) -> None:
+        self.entry = entry
+        self.problem = problem
+        super().__init__(f"{entry}: {problem}")
+
+
+class ForwardError(SkinkitError):
+    """A forward model cannot predict a session: a missing channel, a profile that does
+    not cover the mesh, a protocol it cannot be driven by. ``entry`` names what is wrong."""
+
+    def __init__(self, entry: str, problem: str) -> None:
+        self.entry = entry
+        self.problem = problem
+        super().__init__(f"{entry}: {problem}")

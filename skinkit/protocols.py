@@ -131,17 +131,55 @@ class Optimiser(Protocol):
 class Effect(Protocol):
     """A candidate unmodelled effect (``skinkit.effects``) for the sim-to-real gap diagnosis.
 
-    ``parameters()`` declares what the effect adds to a model; ``apply(model, p)`` returns a
-    copy of a model description (a mapping, as read from a model file) with the effect
-    added and its parameters set from ``p``.
+    ``kinds``: the model kinds the effect applies to (``"fe"``, ``"lumped"``).
+    ``parameters()`` declares what the effect adds to a model, with units, admissible
+    bounds and a typical magnitude as the value; ``null()`` gives the parameter values at
+    which a model with the effect is exactly the model without it (name -> SI value).
+    ``apply(model, p)`` returns a copy of a model description (a mapping, as read from a
+    model file) with the effect added and its parameters set from ``p`` (name -> SI value);
+    it raises :class:`skinkit.errors.EffectError` when the effect does not fit the model.
+
+    In the description, an effect may bind a parameter to a model quantity the forward
+    model differentiates (``model["bindings"]["<effect>.<parameter>"] = "<model parameter>"``,
+    e.g. ``"viscoelastic.g1" -> "skin.g1"``), or write a field, load or instrument table
+    whose parameters the forward model differentiates directly (see ``docs/effects.md``);
+    parameters it does neither for are differentiated by central differences.
     """
 
     name: str
+    kinds: tuple[str, ...]
 
     def parameters(self) -> Sequence[Parameter]:
         ...
 
+    def null(self) -> Mapping[str, float]:
+        ...
+
     def apply(self, model: Mapping[str, Any], p: Mapping[str, Any]) -> Mapping[str, Any]:
+        ...
+
+
+@runtime_checkable
+class ForwardModel(Protocol):
+    """A model that predicts what a session measured (built by :func:`skinkit.forward.load`).
+
+    ``parameters()``: every parameter of the model (law, pre-stretch, effect and lumped
+    parameters) with units, bounds and the model file's values.
+    ``predict(params, observations, sensitivities=False)``: a
+    :class:`~skinkit.schemas.Prediction` with, for every protocol of ``observations``, the
+    predicted values of every channel the model predicts, on exactly the observed times
+    and points (the channel that drives the model is not predicted). ``sensitivities``:
+    False, True (every parameter) or a list of parameter names; derivatives come in
+    ``ChannelPrediction.d`` per SI unit of each parameter.
+    """
+
+    name: str
+    kind: str
+
+    def parameters(self) -> ParameterSet:
+        ...
+
+    def predict(self, params: ParameterSet, observations: Any, sensitivities: Any = False) -> Any:
         ...
 
 
@@ -181,6 +219,7 @@ __all__ = [
     "GROUPS",
     "Driver",
     "Effect",
+    "ForwardModel",
     "Law",
     "Optimiser",
     "ParameterSet",

@@ -2,6 +2,13 @@
 
 from skinkit.schemas.camera import CameraModel, CameraRig
 from skinkit.schemas.images import ImageSequence
+from skinkit.schemas.observations import (
+    Channel,
+    ChannelPrediction,
+    Observations,
+    Prediction,
+    ProtocolObservations,
+)
 from skinkit.schemas.parameters import Parameter, ParameterSet
 from skinkit.schemas.protocol import Protocol
 from skinkit.schemas.results import EffectScore, FitResult, GapReport
@@ -11,13 +18,18 @@ from skinkit.schemas.surface import SurfaceProfile, SurfaceTrack
 __all__ = [
     "CameraModel",
     "CameraRig",
+    "Channel",
+    "ChannelPrediction",
     "EffectScore",
     "FitResult",
     "GapReport",
     "ImageSequence",
+    "Observations",
     "Parameter",
     "ParameterSet",
+    "Prediction",
     "Protocol",
+    "ProtocolObservations",
     "RobotRecord",
     "SurfaceProfile",
     "SurfaceTrack",

@@ -44,7 +44,9 @@ class Opt:
 
 class Eff:
     name = "tp-effect"
+    kinds = ("fe", "lumped")
     def parameters(self): return []
+    def null(self): return {}
     def apply(self, model, p): return model
 '''
 

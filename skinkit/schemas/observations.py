@@ -1,0 +1,279 @@
+"""What a session measured, channel by channel, and what a forward model predicts of it.
+
+Frames: every channel is in the **skin frame** — origin at the probe's contact point, x and y
+in the skin plane (the robot's x and y), z along the outward normal of the skin. The robot
+frame has z *into* the skin; :func:`skinkit.observe.read_observations` flips it, so that a
+finite-element model (top surface at z = 0, tissue below) and the data agree without any
+sign convention left to the user. ``tip_force`` is the force the probe applies to the skin.
+
+Channel shapes (T = samples of the channel, P = points):
+
+* ``tip_force`` ``(T, 3)`` [N], ``tip_position`` ``(T, 3)`` [m] (displacement of the tip from
+  its contact position);
+* ``points`` ``(P, T, 3)`` [m]: positions of tracked material points;
+* ``points_2d`` ``(P, T, 2)`` [m]: in-plane positions where only 2D tracking exists.
+
+``valid`` has the shape of ``values`` (False where a component was not measured or a point
+was lost); ``noise`` is the standard deviation of one sample of each component, shape
+``(3,)`` or ``(2,)``, in the channel's unit, with ``noise_source`` saying how it was
+estimated.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skinkit.errors import SchemaError
+from skinkit.schemas.protocol import Protocol
+from skinkit.schemas.surface import SurfaceProfile
+
+#: channel name -> (SI unit, number of leading point axes, components)
+CHANNELS: dict[str, tuple[str, int, int]] = {
+    "tip_force": ("N", 0, 3),
+    "tip_position": ("m", 0, 3),
+    "points": ("m", 1, 3),
+    "points_2d": ("m", 1, 2),
+}
+
+
+@dataclass
+class Channel:
+    """One observed quantity of one protocol.
+
+    Attributes:
+        name: one of :data:`CHANNELS`.
+        time_s: ``(T,)`` sample times [s] from the protocol's start, non-decreasing.
+        values: ``(T, 3)`` for tip channels, ``(P, T, k)`` for point channels [unit].
+        valid: bool, the shape of ``values``.
+        noise: ``(k,)`` standard deviation of one sample per component [unit], positive.
+        noise_source: how ``noise`` was estimated (``"rest segment"``, ``"tracker"``, ...).
+        reference: ``(P, 3)`` [m] reference (undeformed) positions of point channels, or None.
+    """
+
+    name: str
+    time_s: Any
+    values: Any
+    valid: Any = None
+    noise: Any = None
+    noise_source: str = "unknown"
+    reference: Any = None
+
+    def __post_init__(self) -> None:
+        if self.name not in CHANNELS:
+            raise SchemaError("Channel.name", f"must be one of {sorted(CHANNELS)}, got {self.name!r}")
+        unit, lead, k = CHANNELS[self.name]
+        f = f"Channel[{self.name}]"
+        self.time_s = np.asarray(self.time_s, dtype=float)
+        if self.time_s.ndim != 1 or not np.all(np.isfinite(self.time_s)):
+            raise SchemaError(f"{f}.time_s", "must be a finite (T,) array")
+        if np.any(np.diff(self.time_s) < 0):
+            raise SchemaError(f"{f}.time_s", "must be non-decreasing")
+        v = np.asarray(self.values, dtype=float)
+        T = self.time_s.size
+        want = (T, k) if lead == 0 else (None, T, k)
+        if v.ndim != len(want) or any(w is not None and w != s for w, s in zip(want, v.shape, strict=True)):
+            shape = "(T, %d)" % k if lead == 0 else "(P, T, %d)" % k
+            raise SchemaError(f"{f}.values", f"expected shape {shape} with T = {T}, got {v.shape}")
+        self.values = v
+        if self.valid is None:
+            self.valid = np.isfinite(v)
+        else:
+            self.valid = np.broadcast_to(np.asarray(self.valid, dtype=bool), v.shape).copy()
+        if np.any(~np.isfinite(v[self.valid])):
+            raise SchemaError(f"{f}.values", "a value marked valid is not finite")
+        if self.noise is None:
+            raise SchemaError(f"{f}.noise", "a noise level per component is required")
+        nz = np.broadcast_to(np.asarray(self.noise, dtype=float), (k,)).copy()
+        if not np.all(np.isfinite(nz)) or np.any(nz <= 0):
+            raise SchemaError(f"{f}.noise", f"must be positive and finite, got {nz.tolist()}")
+        self.noise = nz
+        if self.reference is not None:
+            ref = np.asarray(self.reference, dtype=float)
+            if lead == 0 or ref.shape != (v.shape[0], 3):
+                raise SchemaError(f"{f}.reference", f"expected (P, 3) for a point channel, got {ref.shape}")
+            self.reference = ref
+
+    @property
+    def unit(self) -> str:
+        return CHANNELS[self.name][0]
+
+    @property
+    def is_points(self) -> bool:
+        return CHANNELS[self.name][1] == 1
+
+    @property
+    def n_valid(self) -> int:
+        return int(self.valid.sum())
+
+    def normalised(self, predicted: np.ndarray) -> np.ndarray:
+        """``(predicted - values) / noise`` on valid entries, 0 elsewhere; shape of ``values``."""
+        r = np.where(self.valid, (np.asarray(predicted) - np.where(self.valid, self.values, 0.0)), 0.0)
+        return r / self.noise
+
+
+@dataclass
+class ProtocolObservations:
+    """Everything measured during one protocol.
+
+    Attributes:
+        protocol: what the robot was asked to do.
+        channels: channel name -> :class:`Channel`.
+        held_out: True when the protocol is kept for validation (not for fitting).
+    """
+
+    protocol: Protocol
+    channels: dict[str, Channel] = field(default_factory=dict)
+    held_out: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.protocol, Protocol):
+            raise SchemaError("ProtocolObservations.protocol", "must be a Protocol")
+        for k, c in self.channels.items():
+            if not isinstance(c, Channel) or c.name != k:
+                raise SchemaError(f"ProtocolObservations[{self.name}].channels[{k!r}]",
+                                  "must be a Channel of that name")
+
+    @property
+    def name(self) -> str:
+        return self.protocol.name
+
+    @property
+    def duration_s(self) -> float:
+        return max((float(c.time_s[-1]) for c in self.channels.values() if c.time_s.size), default=0.0)
+
+    def channel(self, name: str) -> Channel:
+        """The channel ``name``; a clear error naming the protocol when it is missing."""
+        try:
+            return self.channels[name]
+        except KeyError:
+            raise SchemaError(f"session protocol {self.name!r}",
+                              f"has no {name!r} channel (it has {sorted(self.channels)})") from None
+
+
+@dataclass
+class Observations:
+    """A session's measurements: protocols in recorded order, and the undeformed surface.
+
+    Attributes:
+        protocols: protocol name -> :class:`ProtocolObservations` (insertion order = session order).
+        profile: the profiled undeformed surface the points were embedded in, or None.
+        source: where the observations came from (a file path).
+    """
+
+    protocols: dict[str, ProtocolObservations]
+    profile: SurfaceProfile | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        for k, p in self.protocols.items():
+            if not isinstance(p, ProtocolObservations) or p.name != k:
+                raise SchemaError(f"Observations.protocols[{k!r}]", "must be ProtocolObservations of that name")
+
+    def __iter__(self) -> Iterator[ProtocolObservations]:
+        return iter(self.protocols.values())
+
+    def __len__(self) -> int:
+        return len(self.protocols)
+
+    def __getitem__(self, name: str) -> ProtocolObservations:
+        try:
+            return self.protocols[name]
+        except KeyError:
+            raise SchemaError("session", f"has no protocol {name!r} (it has {list(self.protocols)})") from None
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.protocols)
+
+    def select(self, names: Sequence[str]) -> Observations:
+        """The observations of ``names`` only (in session order); unknown names are an error."""
+        for n in names:
+            self[n]
+        keep = set(names)
+        return Observations({k: v for k, v in self.protocols.items() if k in keep}, self.profile, self.source)
+
+    def with_held_out(self, names: Sequence[str]) -> Observations:
+        """A copy with exactly ``names`` marked held out."""
+        for n in names:
+            self[n]
+        return Observations({k: ProtocolObservations(v.protocol, v.channels, k in set(names))
+                             for k, v in self.protocols.items()}, self.profile, self.source)
+
+    def fitted(self) -> Observations:
+        return Observations({k: v for k, v in self.protocols.items() if not v.held_out},
+                            self.profile, self.source)
+
+    def held_out(self) -> Observations:
+        return Observations({k: v for k, v in self.protocols.items() if v.held_out},
+                            self.profile, self.source)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready overview: per protocol, its channels with shapes and noise."""
+        return {"source": self.source,
+                "profile_points": None if self.profile is None else self.profile.n_points,
+                "protocols": {p.name: {"held_out": p.held_out, "channels": {
+                    c.name: {"shape": list(c.values.shape), "unit": c.unit, "noise": c.noise.tolist(),
+                             "noise_source": c.noise_source, "valid": c.n_valid}
+                    for c in p.channels.values()}} for p in self}}
+
+
+@dataclass
+class ChannelPrediction:
+    """A forward model's prediction of one channel.
+
+    Attributes:
+        values: the shape of the observed channel's ``values`` [unit].
+        d: parameter name -> derivative, each the shape of ``values`` [unit per parameter SI unit].
+    """
+
+    values: np.ndarray
+    d: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass
+class Prediction:
+    """Predictions of every channel a forward model predicts, protocol by protocol.
+
+    Attributes:
+        protocols: protocol -> channel -> :class:`ChannelPrediction`.
+        methods: parameter name -> how its derivatives were obtained (``"analytic"``,
+            ``"complex-step"``, ``"central-difference"``); empty without sensitivities.
+        inputs: protocol -> the channel that drove the model (not predicted).
+        info: solver figures (wall time, Newton iterations per step, ...).
+    """
+
+    protocols: dict[str, dict[str, ChannelPrediction]]
+    methods: dict[str, str] = field(default_factory=dict)
+    inputs: dict[str, str] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def items(self) -> Iterator[tuple[str, str, ChannelPrediction]]:
+        """``(protocol, channel, prediction)`` in order."""
+        for p, chans in self.protocols.items():
+            for c, cp in chans.items():
+                yield p, c, cp
+
+    def chi2(self, observations: Observations) -> tuple[float, int]:
+        """``(Σ normalised residual², number of valid samples)`` over every predicted channel."""
+        s, n = 0.0, 0
+        for p, c, cp in self.items():
+            ch = observations[p].channels[c]
+            r = ch.normalised(cp.values)
+            s += float(np.sum(r[ch.valid] ** 2))
+            n += ch.n_valid
+        return s, n
+
+
+def as_observations(obj: Any) -> Observations:
+    """``obj`` if it is :class:`Observations`; a clear error otherwise."""
+    if not isinstance(obj, Observations):
+        raise SchemaError("observations", f"expected Observations, got {type(obj).__name__}")
+    return obj
+
+
+__all__ = ["CHANNELS", "Channel", "ChannelPrediction", "Observations", "Prediction",
+           "ProtocolObservations", "as_observations"]
