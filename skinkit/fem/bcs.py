@@ -44,6 +44,17 @@ class Rigid:
     mode: str
     programme: Programme
     components: tuple[int, ...] = (0, 1, 2)
+    #: drive parameter name -> ``t -> (3,)`` derivative of the programme [N or m per SI unit]
+    derivatives: dict[str, Programme] = field(default_factory=dict)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Parameters of the programme (e.g. an instrument's bias) that sensitivities cover."""
+        return tuple(self.derivatives)
+
+    def derivative(self, name: str, t: float) -> np.ndarray:
+        """``(3,)`` ∂programme(t)/∂``name``."""
+        return np.asarray(self.derivatives[name](t), dtype=float)
 
     def __post_init__(self) -> None:
         if self.mode not in ("displacement", "force"):

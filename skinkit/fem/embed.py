@@ -172,3 +172,88 @@ def embed_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: floa
         raise ModelError(f"points[{bad}]", f"{pts[bad].tolist()} m lies outside the mesh")
     N, _ = _shape(local.T)
     return Embedding(found, local, mesh.elements[found], N.T.copy())
+
+
+def _vertical_axis(Xe: np.ndarray) -> tuple[int, float]:
+    """The local axis of the element that runs up the thickness, and which end is the top."""
+    xi = np.full((3, 1), 0.5)
+    _, dN = _shape(xi)
+    Jm = np.einsum("aj,ai->ij", dN[:, :, 0], Xe)    # dX_i/dξ_j
+    a = int(np.argmax(np.abs(Jm[2])))
+    return a, (1.0 if Jm[2, a] > 0 else 0.0)
+
+
+def surface_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: float = 1e-12
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Measured surface points ``(M, 3)`` [m] moved onto the mesh's top surface and then
+    ``depth`` [m] inwards along the surface's true normal.
+
+    Each point is projected along the surface normal: its in-plane position is moved until
+    the surface point below it has the point on its normal (a few fixed-point steps, exact
+    for a flat surface). Returns ``(positions (M, 3), unit outward normals (M, 3))``.
+    Raises :class:`ModelError` naming the first point that lies outside the top surface.
+    """
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ModelError("points", f"expected (M, 3) points, got shape {pts.shape}")
+    top = np.zeros(mesh.n_nodes, bool)
+    top[mesh.node_sets["top"]] = True
+    top_el = np.flatnonzero(top[mesh.elements].sum(axis=1) >= 9)
+    Xe_all = mesh.nodes[mesh.elements[top_el]]
+    axis, end = _vertical_axis(Xe_all[0])
+    lo, hi = Xe_all[..., :2].min(axis=1), Xe_all[..., :2].max(axis=1)
+    M = len(pts)
+    out = np.zeros((M, 3))
+    nrm = np.zeros((M, 3))
+    xy = pts[:, :2].copy()
+    free = [i for i in range(3) if i != axis]
+    for _ in range(4):
+        found = np.full(M, -1)
+        loc = np.zeros((M, 2))
+        pad = 1e-9 * float(np.ptp(mesh.nodes, axis=0).max())
+        inbox = np.all((xy[:, None] >= lo[None] - pad) & (xy[:, None] <= hi[None] + pad), axis=2)
+        for m in range(M):
+            for e in np.flatnonzero(inbox[m]):
+                Xe = Xe_all[e]
+                s = np.full(2, 0.5)
+                for _ in range(30):
+                    xi = np.zeros((3, 1))
+                    xi[free, 0] = s
+                    xi[axis, 0] = end
+                    N, dN = _shape(xi)
+                    x = N[:, 0] @ Xe
+                    Jm = np.einsum("aj,ai->ij", dN[:, :, 0], Xe)[:2][:, free]
+                    r = xy[m] - x[:2]
+                    try:
+                        ds = np.linalg.solve(Jm, r)
+                    except np.linalg.LinAlgError:
+                        break
+                    s = np.clip(s + ds, -0.5, 1.5)
+                    if np.max(np.abs(ds)) < tol:
+                        break
+                if np.all((s > -1e-8) & (s < 1 + 1e-8)):
+                    found[m] = e
+                    loc[m] = np.clip(s, 0, 1)
+                    break
+        if np.any(found < 0):
+            bad = int(np.flatnonzero(found < 0)[0])
+            raise ModelError(f"points[{bad}]", f"{pts[bad].tolist()} m lies outside the model's top surface")
+        for m in range(M):
+            xi = np.zeros((3, 1))
+            xi[free, 0] = loc[m]
+            xi[axis, 0] = end
+            N, dN = _shape(xi)
+            Xe = Xe_all[found[m]]
+            out[m] = N[:, 0] @ Xe
+            Jm = np.einsum("aj,ai->ij", dN[:, :, 0], Xe)
+            n = np.cross(Jm[:, free[0]], Jm[:, free[1]])
+            n = n / np.linalg.norm(n)
+            nrm[m] = n if n[2] > 0 else -n
+        # the measured point should lie on the normal through the surface point
+        off = pts - out
+        along = np.einsum("mi,mi->m", off, nrm)
+        new_xy = (pts - along[:, None] * nrm)[:, :2]
+        if np.max(np.abs(new_xy - xy)) < 1e-12 * max(1.0, float(np.abs(pts).max())):
+            break
+        xy = new_xy
+    return out - depth * nrm, nrm

@@ -35,6 +35,9 @@ class FEMesh:
     region: np.ndarray
     regions: list[str]
     node_sets: dict[str, np.ndarray] = field(default_factory=dict)
+    #: ``(N,)`` depth of each node below the top surface [m] in the unfitted mesh, kept when
+    #: the mesh is fitted to a measured surface (fields by depth follow the layers); None: from z
+    depth: np.ndarray | None = None
 
     @property
     def n_nodes(self) -> int:
@@ -57,8 +60,9 @@ class FEMesh:
         nodes = np.asarray(nodes, dtype=float)
         if nodes.shape != self.nodes.shape:
             raise ModelError("mesh.nodes", f"expected shape {self.nodes.shape}, got {nodes.shape}")
+        depth = self.depth if self.depth is not None else self.nodes[:, 2].max() - self.nodes[:, 2]
         return FEMesh(nodes, self.t, self.elements, self.region, list(self.regions),
-                      {k: v.copy() for k, v in self.node_sets.items()})
+                      {k: v.copy() for k, v in self.node_sets.items()}, depth.copy())
 
     def region_elements(self, name: str) -> np.ndarray:
         """Indices of the elements of region ``name``."""

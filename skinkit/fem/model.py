@@ -32,7 +32,9 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-TOP_KEYS = {"model", "geometry", "layers", "boundary", "indenter", "load", "solver", "output"}
+TOP_KEYS = {"model", "geometry", "layers", "boundary", "indenter", "load", "solver", "output",
+            # session-driven forward models (skinkit.forward) and candidate effects
+            "effects", "fields", "bindings", "instrument", "surface", "drive"}
 
 
 def quantity(value: Any, unit: str, entry: str) -> float:
@@ -104,6 +106,7 @@ class Model:
     points: np.ndarray | None = None
     point_depth: float = 0.0
     sensitivities: bool = False
+    fields: list = None  # type: ignore[assignment]
 
 
 def read_model(path: str | Path) -> dict[str, Any]:
@@ -201,7 +204,10 @@ def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tupl
                 raise ModelError("geometry.indenter_diameter", "no top node lies under the indenter")
             mesh.node_sets["indenter"] = np.flatnonzero(ind)
         return mesh, None
-    raise ModelError("geometry.kind", f"must be 'disc' or 'block', got {kind!r}")
+    if kind == "twopad":
+        from skinkit.fem.twopad import twopad_from_spec
+        return twopad_from_spec(g, layers), None
+    raise ModelError("geometry.kind", f"must be 'disc', 'block' or 'twopad', got {kind!r}")
 
 
 def _load(spec: Mapping[str, Any], unit: str) -> LoadProgramme:
@@ -251,8 +257,13 @@ def _load(spec: Mapping[str, Any], unit: str) -> LoadProgramme:
     raise ModelError("load.kind", f"must be 'ramp', 'sinusoid' or 'table', got {kind!r}")
 
 
-def build_model(spec: Mapping[str, Any]) -> Model:
-    """Validate a parsed model description and build mesh, problem, BCs and programme."""
+def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh | None = None) -> Model:
+    """Validate a parsed model description and build mesh, problem, BCs and programme.
+
+    ``require_load``: False for a model driven by a session (the ``[load]`` table, if any, is
+    then only a default programme). ``mesh``: use this mesh (e.g. fitted to a measured surface)
+    instead of building the geometry's.
+    """
     spec = copy.deepcopy(dict(spec))
     _check_keys(spec, TOP_KEYS, "model file")
     name = str(spec.get("model", {}).get("name", "model"))
@@ -274,7 +285,10 @@ def build_model(spec: Mapping[str, Any]) -> Model:
                              F0=F0, prestress=pre))
     if len({n for n, _, _ in layers}) != len(layers):
         raise ModelError("layers", "layer names must be unique")
-    mesh, _ = _mesh(spec, layers)
+    if mesh is None:
+        mesh, _ = _mesh(spec, layers)
+    from skinkit.fem.fields import read_fields
+    fields = read_fields(spec.get("fields"), [n for n, _, _ in layers], quantity)
     sol = dict(spec.get("solver", {}))
     _check_keys(sol, {"linear", "rtol", "atol", "max_iter", "max_cuts", "line_search", "intorder"}, "solver")
     intorder = int(sol.pop("intorder", 4))
@@ -282,7 +296,7 @@ def build_model(spec: Mapping[str, Any]) -> Model:
         options = SolverOptions(**sol)
     except TypeError as exc:
         raise ModelError("solver", str(exc)) from None
-    problem = Problem(mesh, mats, intorder=intorder)
+    problem = Problem(mesh, mats, intorder=intorder, fields=fields)
     bd = dict(spec.get("boundary", {}))
     _check_keys(bd, {"fixed"}, "boundary")
     fixed = list(bd.get("fixed", ["outer", "bottom"] if "outer" in mesh.node_sets else ["bottom"]))
@@ -302,10 +316,10 @@ def build_model(spec: Mapping[str, Any]) -> Model:
         nodes = mesh.node_sets["indenter"]
         fixed_nodes = np.concatenate([mesh.node_sets[s] for s in fixed]) if fixed else np.zeros(0, int)
         nodes = np.setdiff1d(nodes, fixed_nodes)
-        load = _load(spec, unit)
+        load = _load(spec, unit) if (require_load or "load" in spec) else _no_load()
         bc.rigid = Rigid(nodes, mode, load.value, tuple(ind.get("components", (0, 1, 2))))
     else:
-        load = _load(spec, unit)
+        load = _load(spec, unit) if (require_load or "load" in spec) else _no_load()
     outp = dict(spec.get("output", {}))
     _check_keys(outp, {"points", "point_depth", "sensitivities"}, "output")
     points = None
@@ -316,4 +330,24 @@ def build_model(spec: Mapping[str, Any]) -> Model:
         points = np.array([vector(p, "m", f"output.points[{i}]") for i, p in enumerate(raw)])
     depth = quantity(outp.get("point_depth", 0.0), "m", "output.point_depth")
     return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed, points, depth,
-                 bool(outp.get("sensitivities", False)))
+                 bool(outp.get("sensitivities", False)), fields)
+
+
+def _no_load() -> LoadProgramme:
+    """The placeholder programme of a session-driven model (the session gives the drive)."""
+    return LoadProgramme(np.array([1.0]), False, lambda t: np.zeros(3), "driven by the session")
+
+
+def layer_table(spec: Mapping[str, Any]) -> list[tuple[str, float, int]]:
+    """``(name, thickness [m], element layers)`` of every ``[[layers]]`` table, top down."""
+    out = []
+    for i, L in enumerate(_get(spec, "layers", "")):
+        out.append((str(_get(L, "name", f"layers[{i}]")),
+                    quantity(_get(L, "thickness", f"layers[{i}]"), "m", f"layers[{i}].thickness"),
+                    int(L.get("elements", 2))))
+    return out
+
+
+def build_mesh(spec: Mapping[str, Any]) -> FEMesh:
+    """The mesh of a model description (before any surface fitting)."""
+    return _mesh(spec, layer_table(spec))[0]

@@ -6,7 +6,7 @@ quasi-linear viscoelastic histories where a law has a Prony series.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,6 +22,7 @@ from skinkit.fem.assembly import (
     geometry,
 )
 from skinkit.fem.errors import ModelError
+from skinkit.fem.fields import Field
 from skinkit.fem.mesh import FEMesh
 from skinkit.fem.tensors import I3, push_with
 from skinkit.fem.threads import single_threaded_blas
@@ -76,8 +77,10 @@ class Problem:
     """
 
     def __init__(self, mesh: FEMesh, materials: list[Material], intorder: int = DEFAULT_INTORDER,
-                 geom: Geometry | None = None) -> None:
+                 geom: Geometry | None = None, fields: Sequence[Field] = ()) -> None:
         self.mesh = mesh
+        #: the time [s] (or load factor) the solver is at: time-dependent fields read it
+        self.t = 0.0
         self.geom = geom if geom is not None else geometry(mesh, intorder)
         names = [m.region for m in materials]
         for r in mesh.regions:
@@ -110,11 +113,79 @@ class Problem:
             self.slices.append(slice(start, start + m.elements.size))
             start += m.elements.size
         nq = self.geom.w.shape[1]
+        self.fields = list(fields)
+        self._field_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._static_phi: dict[int, np.ndarray | None] = {}
+        for f in self.fields:
+            for layer in f.layers:
+                if layer not in [m.region for m in materials]:
+                    raise ModelError(f"fields[{f.name}].layers", f"no layer {layer!r}")
+        for k, m in enumerate(materials):
+            if self.fields_of(k):
+                self._field_points[k] = self._quadrature_points(m.elements)
+                static = [f for f in self.fields_of(k) if f.kind != "softening"]
+                phi = None
+                for f in static:
+                    v = f.value(*self._field_points[k], 0.0)
+                    phi = v if phi is None else phi * v
+                self._static_phi[k] = phi
         self.state: dict[int, viscoelastic.PronyState] = {}
         for k, m in enumerate(materials):
             pr = m.prony()
             if pr is not None:
                 self.state[k] = viscoelastic.PronyState.zeros(len(pr[0]), (m.elements.size, nq))
+
+    def _quadrature_points(self, elements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Reference positions ``(n, n_q, 3)`` [m] and depths below the top ``(n, n_q)`` [m]."""
+        el = self.mesh.elements[elements]
+        Xq = np.einsum("qa,eai->eqi", self.geom.N, self.mesh.nodes[el])
+        depth_n = self.mesh.depth if self.mesh.depth is not None else \
+            self.mesh.nodes[:, 2].max() - self.mesh.nodes[:, 2]
+        dq = np.einsum("qa,ea->eq", self.geom.N, depth_n[el])
+        return Xq, dq
+
+    def fields_of(self, k: int) -> list[Field]:
+        """The fields acting on material ``k``."""
+        return [f for f in self.fields if self.materials[k].region in f.layers]
+
+    def scale(self, k: int, sub: slice | None = None) -> np.ndarray | None:
+        """φ ``(n_el_k, n_q)`` of material ``k`` at the current time (None: no field)."""
+        fs = self.fields_of(k)
+        if not fs:
+            return None
+        phi = self._static_phi[k]
+        for f in fs:
+            if f.kind == "softening":
+                v = f.value(*self._field_points[k], self.t)
+                phi = v if phi is None else phi * v
+        return phi if sub is None else phi[sub]
+
+    def scale_derivative(self, k: int, name: str) -> np.ndarray | None:
+        """∂φ/∂``name`` ``(n_el_k, n_q)`` for a field parameter ``"<field>.<key>"`` (None if
+        that field does not act on material ``k``)."""
+        fs = self.fields_of(k)
+        target = [f for f in fs if name in f.parameter_names]
+        if not target:
+            return None
+        f = target[0]
+        Xq, dq = self._field_points[k]
+        d = f.derivative(name[len(f.name) + 1:], Xq, dq, self.t)
+        for g in fs:
+            if g is not f:
+                d = d * g.value(Xq, dq, self.t)
+        return d
+
+    def elastic_response(self, k: int, Ce: np.ndarray, with_tangent: bool, sub: slice | None = None):
+        """``(Se, CCe)``: material ``k``'s elastic stress and tangent in its natural configuration
+        (``Ce = F0ᵀ C F0``), scaled by its fields."""
+        m = self.materials[k]
+        S, CC = lawkit.response(m.law, Ce, m.params, with_tangent)
+        phi = self.scale(k, sub)
+        if phi is not None:
+            S = phi[..., None, None] * S
+            if CC is not None:
+                CC = phi[..., None, None, None, None] * CC
+        return S, CC
 
     @property
     def n_dof(self) -> int:
@@ -132,7 +203,7 @@ class Problem:
         C = np.swapaxes(F, -1, -2) @ F
         if m.F0 is not None:
             C = np.swapaxes(m.F0, -1, -2) @ C @ m.F0
-        S, CC = lawkit.response(m.law, C, m.params, with_tangent)
+        S, CC = self.elastic_response(k, C, with_tangent, sub)
         if k in self.state and dt is not None:
             g, tau = m.prony()
             st = self.state[k]
@@ -190,7 +261,7 @@ class Problem:
             C = np.swapaxes(F, -1, -2) @ F
             if m.F0 is not None:
                 C = np.swapaxes(m.F0, -1, -2) @ C @ m.F0
-            Se = lawkit.response(m.law, C, m.params, False)[0]
+            Se = self.elastic_response(k, C, False)[0]
             g, tau = m.prony()
             _, _, h_new = viscoelastic.trial(st, g, tau, dt, Se)
             st.h = h_new

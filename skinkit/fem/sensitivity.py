@@ -3,27 +3,46 @@
 At a converged state the reduced residual vanishes, ``r(u(p), p) = 0``, so
 ``K du/dp = -∂r/∂p`` with ``K`` the tangent at that state: one factorisation (the
 converged tangent) and one back-substitution per parameter give every derivative, instead
-of one nonlinear solve per parameter as finite differences need. ``∂r/∂p`` is assembled
-from ``∂S/∂p`` at fixed deformation (complex step for complex-safe laws, central
-differences otherwise; pre-stretch parameters by central differences of the stress).
+of one nonlinear solve per parameter as finite differences need.
 
-Outputs differentiated: the full displacement ``du/dp`` (hence embedded points), the
-indenter's reference-point motion (force control) and its reaction force (displacement
-control), and the reactions on any node set.
+Parameters differentiated (every one the model has, static or through a viscous history):
+
+* **law parameters** ``"<region>.<name>"``: ∂S/∂p at fixed deformation (complex step for
+  complex-safe laws, central differences otherwise), Prony parameters through the
+  recurrence of the history;
+* **pre-stretch** ``"<region>.prestretch.l1|l2|angle"``: the natural state ``F0`` moves, so
+  ``Ce = F0ᵀ C F0`` and the push-forward ``F0 S F0ᵀ`` both change (∂F0/∂p by complex step);
+* **field parameters** ``"<field>.<key>"``: ∂φ/∂p times the law's elastic stress;
+* **drive parameters** (named by the rigid region's programme, e.g. instrument biases):
+  the applied force (force control) or the imposed motion (displacement control) changes.
+
+Through a viscous history (Prony recurrence hⁿ = e hⁿ⁻¹ + β (Sₑⁿ − Sₑⁿ⁻¹), S = g∞ Sₑ + Σ g h) the
+derivative of the stress at fixed displacement carries the derivatives of the history; the
+converged algorithmic tangent gives duⁿ/dp, from which the total dSₑⁿ/dp and dhⁿ/dp are
+updated for the next step. Outputs: ``du/dp`` (hence embedded points), the indenter's
+motion (force control) and its reaction force (both controls), every nodal reaction.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from skinkit.fem import lawkit
+from skinkit.fem import lawkit, viscoelastic
 from skinkit.fem.assembly import element_residual, full_vector
-from skinkit.fem.problem import Problem, prestretch
+from skinkit.fem.problem import Problem
 from skinkit.fem.solver import NewtonSolver
 from skinkit.fem.tensors import push_with
+
+#: Prony parameters of a QLV law (relative moduli and relaxation times)
+_PRONY = re.compile(r"^(g|tau)[0-9]+$")
+
+#: pre-stretch parameters of a material with ``prestress = (l1, l2, angle)`` (local names)
+PRESTRESS_NAMES = ("prestretch.l1", "prestretch.l2", "prestretch.angle")
+_CS = 1e-30
 
 
 def _b5(a) -> np.ndarray:
@@ -31,11 +50,18 @@ def _b5(a) -> np.ndarray:
     return np.asarray(a)[:, None, None, None, None]
 
 
-#: Prony parameters of a QLV law (relative moduli and relaxation times)
-_PRONY = re.compile(r"^(g|tau)[0-9]+$")
+def _F0(l1, l2, angle):
+    """Complex-safe ``prestretch`` (no checks): Q diag(l1, l2, 1/(l1 l2)) Qᵀ."""
+    c, s = np.cos(angle), np.sin(angle)
+    Q = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=np.result_type(l1, l2, angle, float))
+    return Q @ np.diag(np.array([l1, l2, 1.0 / (l1 * l2)])) @ Q.T
 
-#: pre-stretch parameters of a material with ``prestress = (l1, l2, angle)``
-PRESTRESS_NAMES = ("prestretch.l1", "prestretch.l2", "prestretch.angle")
+
+def dF0(prestress: tuple[float, float, float], i: int) -> np.ndarray:
+    """∂F0/∂(l1, l2, angle)[i] ``(3, 3)`` by the complex step."""
+    q: list[Any] = list(prestress)
+    q[i] = q[i] + 1j * _CS
+    return np.imag(_F0(*q)) / _CS
 
 
 @dataclass
@@ -43,9 +69,9 @@ class Sensitivities:
     """Derivatives at one converged state.
 
     Attributes:
-        names: ``"<region>.<parameter>"`` for each parameter, in column order.
+        names: parameter names, in column order.
         du: ``(n_dof, n_par)`` displacement derivatives [m per parameter unit].
-        tip_displacement: ``(3, n_par)`` reference-point motion derivatives (force control).
+        tip_displacement: ``(3, n_par)`` reference-point motion derivatives (NaN in untied directions).
         tip_force: ``(3, n_par)`` indenter force derivatives [N per parameter unit].
         reaction: ``(n_dof, n_par)`` nodal internal-force derivatives.
     """
@@ -57,107 +83,91 @@ class Sensitivities:
     reaction: np.ndarray
 
 
-def parameter_list(problem: Problem) -> list[tuple[int, str]]:
-    """``(material index, parameter name)`` of every law and pre-stretch parameter."""
-    out = []
+@dataclass(frozen=True)
+class _Par:
+    """One parameter: its name, its kind and, for material parameters, the material."""
+
+    name: str
+    kind: str            # "law", "prony", "prestretch", "field", "drive"
+    k: int = -1          # material (law, prony, prestretch)
+    local: str = ""      # law parameter name, or prestretch index as str
+
+
+def parameter_list(problem: Problem, drive_names: tuple[str, ...] = ()) -> list[_Par]:
+    """Every differentiable parameter of ``problem`` (and of its drive)."""
+    out: list[_Par] = []
     for k, m in enumerate(problem.materials):
+        pr = m.prony() is not None
         for n in lawkit.parameter_names(m.law):
-            out.append((k, n))
+            kind = "prony" if pr and _PRONY.match(n) else "law"
+            out.append(_Par(f"{m.region}.{n}", kind, k, n))
         if m.prestress is not None:
-            out.extend((k, n) for n in PRESTRESS_NAMES)
+            out.extend(_Par(f"{m.region}.{n}", "prestretch", k, str(i)) for i, n in enumerate(PRESTRESS_NAMES))
+    for f in problem.fields:
+        out.extend(_Par(n, "field") for n in f.parameter_names)
+    out.extend(_Par(n, "drive") for n in drive_names)
     return out
 
 
-def _dS(problem: Problem, k: int, name: str, F: np.ndarray) -> np.ndarray:
-    """∂S/∂p at fixed F for material ``k`` (PK2 w.r.t. the mesh configuration)."""
-    m = problem.materials[k]
-    C = np.swapaxes(F, -1, -2) @ F
-    if name in PRESTRESS_NAMES:
-        i = PRESTRESS_NAMES.index(name)
-        base = list(m.prestress)
-        h = 1e-6 * max(abs(base[i]), 1.0)
-
-        def S_at(v):
-            q = list(base)
-            q[i] = v
-            F0 = prestretch(*q)
-            Ce = np.swapaxes(F0, -1, -2) @ C @ F0
-            return push_with(F0, lawkit.stress(m.law, Ce, m.params))[0]
-        return (S_at(base[i] + h) - S_at(base[i] - h)) / (2 * h)
-    Ce = C if m.F0 is None else np.swapaxes(m.F0, -1, -2) @ C @ m.F0
-    dS = lawkit.stress_parameter_derivative(m.law, Ce, m.params, name)
-    if m.F0 is not None:
-        dS = push_with(m.F0, dS)[0]
-    return dS
-
-
-def sensitivities(solver: NewtonSolver, u: np.ndarray, t: float) -> Sensitivities:
-    """Derivatives of the converged state ``u`` (at load ``t``) of a static problem.
-
-    Viscous laws respond elastically in a static solve, so their Prony parameters get zero
-    derivatives here; through a time history use :class:`HistorySensitivity`. Costs one
-    tangent assembly and factorisation at ``u`` plus one back-substitution per parameter
-    (all right-hand sides at once).
-    """
-    prob = solver.problem
-    g = prob.geom
-    pars = parameter_list(prob)
-    re, Ke = prob.evaluate(u, True)
-    K = solver.pattern.matrix(Ke)
-    solver.linear.factor(K)
-    n_el = g.edofs.shape[0]
-    dre_all = np.zeros((len(pars), n_el, g.edofs.shape[1]))
-    for j, (k, name) in enumerate(pars):
-        sl = prob.slices[k]
-        F = prob._F(u, k)
-        dS = _dS(prob, k, name, F)
-        dre_all[j, sl] = element_residual(g.dN[sl], g.w[sl], F, dS)
-    rhs = np.stack([solver.pattern.vector(dre_all[j]) for j in range(len(pars))], axis=1)
-    dq = -solver.linear.solve(rhs) if rhs.size else np.zeros((solver.dofmap.n_unknowns, 0))
-    dq = dq.reshape(solver.dofmap.n_unknowns, -1)
-    mp = solver.dofmap.map
-    du = np.zeros((prob.n_dof, len(pars)))
-    du[mp >= 0] = dq[mp[mp >= 0]]
-    # total derivative of the internal forces: explicit part + tangent times du/dp
-    react = np.zeros((prob.n_dof, len(pars)))
-    for j in range(len(pars)):
-        dre = dre_all[j] + np.einsum("eij,ej->ei", Ke, du[g.edofs, j])
-        react[:, j] = full_vector(g.edofs, dre, prob.n_dof)
-    dm = solver.dofmap
-    tip_u = tip_f = None
-    if dm.rigid_dofs is not None:
-        tip_u = np.full((3, len(pars)), np.nan)
-        tip_u[dm.rigid_components] = du[dm.rigid_dofs[0]]
-        tip_f = react.reshape(-1, 3, len(pars))[dm.bc.rigid.nodes].sum(axis=0)
-    names = [f"{prob.materials[k].region}.{n}" for k, n in pars]
-    return Sensitivities(names, du, tip_u, tip_f, react)
+def parameter_names(problem: Problem, drive_names: tuple[str, ...] = ()) -> list[str]:
+    """Names of :func:`parameter_list`."""
+    return [p.name for p in parameter_list(problem, drive_names)]
 
 
 class HistorySensitivity:
-    """Direct differentiation through a viscoelastic time history.
+    """Direct differentiation of a load history, static or viscous.
 
-    Call :meth:`step` after each converged time step and before the problem commits it
-    (``NewtonSolver.run(..., sensitivities=True)`` does so). With the Prony recurrence
-    hⁿ = e hⁿ⁻¹ + β (Sₑⁿ - Sₑⁿ⁻¹), S = g∞ Sₑ + Σ g h, the derivative of the stress at fixed
-    displacement carries the derivatives of the history (dhⁿ⁻¹/dp, dSₑⁿ⁻¹/dp, and those of
-    e, β, g for the Prony parameters); the converged algorithmic tangent then gives duⁿ/dp,
-    from which the total dSₑⁿ/dp and dhⁿ/dp are updated for the next step. Pre-stretch
-    parameters are not differentiated through histories (law parameters are).
+    Call :meth:`step` after each converged increment and before the problem commits it
+    (``NewtonSolver.run(..., sensitivities=True)`` does so); with ``dt = None`` the state is
+    static (viscous laws answer elastically, as in a static solve). ``only``: restrict to
+    these parameter names (the others are not computed).
     """
 
-    def __init__(self, solver: NewtonSolver) -> None:
+    def __init__(self, solver: NewtonSolver, only: list[str] | None = None) -> None:
         self.solver = solver
         prob = solver.problem
-        self.pars = [(k, n) for k, n in parameter_list(prob) if n not in PRESTRESS_NAMES]
-        self.names = [f"{prob.materials[k].region}.{n}" for k, n in self.pars]
+        rigid = solver.dofmap.bc.rigid
+        drive = tuple(getattr(rigid, "parameter_names", ())) if rigid is not None else ()
+        pars = parameter_list(prob, drive)
+        if only is not None:
+            known = {p.name for p in pars}
+            unknown = sorted(set(only) - known)
+            if unknown:
+                from skinkit.fem.errors import ModelError
+                raise ModelError("sensitivities", f"no parameter(s) {unknown} in the model; it has "
+                                 f"{sorted(known)}")
+            pars = [p for p in pars if p.name in set(only)]
+        self.pars = pars
+        self.names = [p.name for p in pars]
         nq = prob.geom.w.shape[1]
-        npar = len(self.pars)
+        npar = len(pars)
         self.dSe: dict[int, np.ndarray] = {}
         self.dh: dict[int, np.ndarray] = {}
         for k, st in prob.state.items():
             ne = prob.materials[k].elements.size
             self.dSe[k] = np.zeros((npar, ne, nq, 3, 3))
             self.dh[k] = np.zeros((npar, st.h.shape[0], ne, nq, 3, 3))
+
+    # -- explicit derivatives at fixed displacement ------------------------------------------
+    def _explicit_dSe(self, k: int, p: _Par, Ce: np.ndarray, C: np.ndarray, Se: np.ndarray,
+                      CCe: np.ndarray | None, law_S: np.ndarray | None) -> np.ndarray | None:
+        """∂Sₑ/∂p (natural configuration, scaled by the fields) at fixed displacement."""
+        prob = self.solver.problem
+        m = prob.materials[k]
+        if p.kind == "law" and p.k == k:
+            d = lawkit.stress_parameter_derivative(m.law, Ce, m.params, p.local)
+            phi = prob.scale(k)
+            return d if phi is None else phi[..., None, None] * d
+        if p.kind == "prestretch" and p.k == k:
+            dF = dF0(m.prestress, int(p.local))
+            dCe = np.swapaxes(dF, -1, -2) @ C @ m.F0 + np.swapaxes(m.F0, -1, -2) @ C @ dF
+            return 0.5 * np.einsum("eqIJKL,eqKL->eqIJ", CCe, dCe)
+        if p.kind == "field":
+            dphi = prob.scale_derivative(k, p.name)
+            if dphi is None:
+                return None
+            return dphi[..., None, None] * law_S
+        return None
 
     def _prony_partials(self, k: int, name: str, dt: float):
         """(∂g∞, ∂g (n,), ∂e (n,), ∂β (n,)) of the Prony factors w.r.t. parameter ``name``."""
@@ -175,18 +185,23 @@ class HistorySensitivity:
                 dbeta[i] = (-de[i] * tau[i] + (1 - e[i])) / dt
         return dginf, dg, de, dbeta
 
-    def _partials_of(self, k: int, kk: int, name: str, dt: float, gg: np.ndarray):
-        """Prony partials when parameter ``(kk, name)`` belongs to material ``k``, else zeros."""
-        if kk == k:
-            return self._prony_partials(k, name, dt)
-        return 0.0, 0 * gg, 0 * gg, 0 * gg
+    def _partials(self, k: int, p: _Par, dt: float | None, n_terms: int):
+        if p.kind == "prony" and p.k == k and dt is not None and dt > 0:
+            return self._prony_partials(k, p.local, dt)
+        if p.kind == "prony" and p.k == k:   # instantaneous (static) response: only g matters via g∞
+            z = np.zeros(n_terms)
+            return 0.0, z, z, z
+        z = np.zeros(n_terms)
+        return 0.0, z, z, z
 
-    def step(self, u: np.ndarray, t: float, dt: float) -> Sensitivities:
-        """Sensitivities at the converged ``u`` of the step of length ``dt`` [s] ending at ``t``."""
-        from skinkit.fem import viscoelastic
+    def step(self, u: np.ndarray, t: float, dt: float | None) -> Sensitivities:
+        """Sensitivities at the converged ``u`` of the increment of length ``dt`` [s] ending at
+        ``t`` (``dt`` None: static)."""
         solver, prob, g = self.solver, self.solver.problem, self.solver.problem.geom
         npar = len(self.pars)
-        re, Ke = prob.evaluate(u, True, dt)
+        prob.t = t
+        viscous = dt is not None and prob.viscous
+        re, Ke = prob.evaluate(u, True, dt if viscous else None)
         K = solver.pattern.matrix(Ke)
         solver.linear.factor(K)
         n_el = g.edofs.shape[0]
@@ -197,49 +212,90 @@ class HistorySensitivity:
             F = prob._F(u, k)
             C = np.swapaxes(F, -1, -2) @ F
             Ce = C if m.F0 is None else np.swapaxes(m.F0, -1, -2) @ C @ m.F0
-            Se, CCe = lawkit.response(m.law, Ce, m.params, True)
-            cache[k] = (F, Se, CCe)
-            pr = m.prony()
-            for j, (kk, name) in enumerate(self.pars):
-                is_prony = pr is not None and _PRONY.match(name) is not None
-                if kk == k and not is_prony:
-                    dSe_p = lawkit.stress_parameter_derivative(m.law, Ce, m.params, name)
-                else:
-                    dSe_p = np.zeros_like(Se)
+            Se, CCe = prob.elastic_response(k, Ce, True)
+            need_law_S = any(p.kind == "field" for p in self.pars) and prob.fields_of(k)
+            law_S = lawkit.response(m.law, Ce, m.params, False)[0] if need_law_S else None
+            cache[k] = (F, C, Ce, Se, CCe)
+            pr = m.prony() if viscous else None
+            h_new = None
+            S_nat = Se
+            if pr is not None:
+                gg, tau = pr
+                e, beta, _ = viscoelastic.step_factors(gg, tau, dt)
+                st = prob.state[k]
+                h_new = _b5(e) * st.h + _b5(beta) * (Se - st.Se)[None]
+                S_nat = (1 - gg.sum()) * Se + np.tensordot(gg, h_new, axes=(0, 0))
+            elif m.prony() is not None:
+                # a static solve of a viscous law: the instantaneous (elastic) response
+                S_nat = Se
+            for j, p in enumerate(self.pars):
+                dSe_p = self._explicit_dSe(k, p, Ce, C, Se, CCe, law_S)
+                if p.kind == "prony" and p.k == k and pr is None:
+                    dSe_p = None   # no history: the instantaneous response has no Prony terms
                 if pr is None:
-                    dS = dSe_p if kk == k else None
+                    dS = dSe_p
                 else:
-                    gg, tau = pr
-                    e, beta, _ = viscoelastic.step_factors(gg, tau, dt)
-                    st = prob.state[k]
-                    h_new = _b5(e) * st.h + _b5(beta) * (Se - st.Se)[None]
-                    dginf, dg, de, dbeta = self._partials_of(k, kk, name, dt, gg)
-                    dh = (_b5(e) * self.dh[k][j] + _b5(beta) * (dSe_p - self.dSe[k][j])[None]
+                    dSe_p0 = np.zeros_like(Se) if dSe_p is None else dSe_p
+                    dginf, dg, de, dbeta = self._partials(k, p, dt, len(gg))
+                    dh = (_b5(e) * self.dh[k][j] + _b5(beta) * (dSe_p0 - self.dSe[k][j])[None]
                           + _b5(de) * st.h + _b5(dbeta) * (Se - st.Se)[None])
-                    dS = (dginf * Se + (1 - gg.sum()) * dSe_p
+                    dS = (dginf * Se + (1 - gg.sum()) * dSe_p0
                           + np.tensordot(np.asarray(dg), h_new, axes=(0, 0))
                           + np.tensordot(gg, dh, axes=(0, 0)))
+                if m.F0 is not None:
+                    if dS is not None:
+                        dS = push_with(m.F0, dS)[0]
+                    if p.kind == "prestretch" and p.k == k:
+                        dF = dF0(m.prestress, int(p.local))
+                        extra = dF @ S_nat @ m.F0.T + m.F0 @ S_nat @ dF.T
+                        dS = extra if dS is None else dS + extra
                 if dS is None:
                     continue
-                if m.F0 is not None:
-                    dS = push_with(m.F0, dS)[0]
                 dre[j, sl] = element_residual(g.dN[sl], g.w[sl], F, dS)
-        rhs = np.stack([solver.pattern.vector(dre[j]) for j in range(npar)], axis=1)
-        dq = -solver.linear.solve(rhs).reshape(solver.dofmap.n_unknowns, -1)
-        mp = solver.dofmap.map
-        du = np.zeros((prob.n_dof, npar))
+        # right-hand sides: explicit material part, plus the drive
+        rhs = np.stack([solver.pattern.vector(dre[j]) for j in range(npar)], axis=1) if npar else \
+            np.zeros((solver.dofmap.n_unknowns, 0))
+        dm = solver.dofmap
+        rigid = dm.bc.rigid
+        dup = np.zeros((prob.n_dof, npar))
+        for j, p in enumerate(self.pars):
+            if p.kind != "drive":
+                continue
+            dv = np.asarray(rigid.derivative(p.name, t), dtype=float)[dm.rigid_components]
+            if dm.force_mode:
+                rhs[dm.n_free:, j] -= dv   # r = f_int - f_ext: ∂r/∂p = -∂f_ext/∂p
+            else:
+                dup[dm.rigid_dofs, j] = dv[None, :]
+                rhs[:, j] += solver.pattern.vector(np.einsum("eij,ej->ei", Ke, dup[g.edofs, j]))
+        dq = -solver.linear.solve(rhs).reshape(dm.n_unknowns, -1) if npar else rhs
+        mp = dm.map
+        du = dup.copy()
         du[mp >= 0] = dq[mp[mp >= 0]]
         react = np.zeros((prob.n_dof, npar))
         for j in range(npar):
             dre_tot = dre[j] + np.einsum("eij,ej->ei", Ke, du[g.edofs, j])
             react[:, j] = full_vector(g.edofs, dre_tot, prob.n_dof)
-        # update the history derivatives with the total dSe/dp of this step
+        if viscous:
+            self._update_history(u, du, dt, cache)
+        tip_u = tip_f = None
+        if dm.rigid_dofs is not None:
+            tip_u = np.full((3, npar), np.nan)
+            tip_u[dm.rigid_components] = du[dm.rigid_dofs[0]]
+            tip_f = react.reshape(-1, 3, npar)[rigid.nodes].sum(axis=0)
+        return Sensitivities(list(self.names), du, tip_u, tip_f, react)
+
+    def _update_history(self, u: np.ndarray, du: np.ndarray, dt: float, cache: dict) -> None:
+        """Carry the total dSₑ/dp and dh/dp of this step to the next."""
+        prob, g = self.solver.problem, self.solver.problem.geom
+        npar = len(self.pars)
         for k, m in enumerate(prob.materials):
             pr = m.prony()
             if pr is None:
                 continue
             sl = prob.slices[k]
-            F, Se, CCe = cache[k]
+            F, C, Ce, Se, CCe = cache[k]
+            need_law_S = any(p.kind == "field" for p in self.pars) and prob.fields_of(k)
+            law_S = lawkit.response(m.law, Ce, m.params, False)[0] if need_law_S else None
             gg, tau = pr
             e, beta, _ = viscoelastic.step_factors(gg, tau, dt)
             st = prob.state[k]
@@ -248,22 +304,28 @@ class HistorySensitivity:
             dC = np.swapaxes(dF, -1, -2) @ F + np.swapaxes(F, -1, -2) @ dF
             if m.F0 is not None:
                 dC = np.swapaxes(m.F0, -1, -2) @ dC @ m.F0
-            for j, (kk, name) in enumerate(self.pars):
-                is_prony = _PRONY.match(name) is not None
+            for j, p in enumerate(self.pars):
                 dSe_tot = 0.5 * np.einsum("eqIJKL,eqKL->eqIJ", CCe, dC[j])
-                if kk == k and not is_prony:
-                    Ce = np.swapaxes(F, -1, -2) @ F
-                    if m.F0 is not None:
-                        Ce = np.swapaxes(m.F0, -1, -2) @ Ce @ m.F0
-                    dSe_tot = dSe_tot + lawkit.stress_parameter_derivative(m.law, Ce, m.params, name)
-                _, _, de, dbeta = self._partials_of(k, kk, name, dt, gg)
+                if p.kind != "prony":
+                    ex = self._explicit_dSe(k, p, Ce, C, Se, CCe, law_S)
+                    if ex is not None:
+                        dSe_tot = dSe_tot + ex
+                _, _, de, dbeta = self._partials(k, p, dt, len(gg))
                 self.dh[k][j] = (_b5(e) * self.dh[k][j] + _b5(beta) * (dSe_tot - self.dSe[k][j])[None]
                                  + _b5(de) * st.h + _b5(dbeta) * (Se - st.Se)[None])
                 self.dSe[k][j] = dSe_tot
-        dm = solver.dofmap
-        tip_u = tip_f = None
-        if dm.rigid_dofs is not None:
-            tip_u = np.full((3, npar), np.nan)
-            tip_u[dm.rigid_components] = du[dm.rigid_dofs[0]]
-            tip_f = react.reshape(-1, 3, npar)[dm.bc.rigid.nodes].sum(axis=0)
-        return Sensitivities(list(self.names), du, tip_u, tip_f, react)
+
+
+def sensitivities(solver: NewtonSolver, u: np.ndarray, t: float, only: list[str] | None = None
+                  ) -> Sensitivities:
+    """Derivatives of the converged static state ``u`` (at load ``t``).
+
+    Viscous laws respond elastically in a static solve, so their Prony parameters get zero
+    derivatives; through a time history use :class:`HistorySensitivity`. Costs one tangent
+    assembly and factorisation at ``u`` plus one back-substitution per parameter.
+    """
+    return HistorySensitivity(solver, only).step(u, t, None)
+
+
+__all__ = ["PRESTRESS_NAMES", "HistorySensitivity", "Sensitivities", "dF0", "parameter_list",
+           "parameter_names", "sensitivities"]

@@ -90,6 +90,7 @@ class NewtonSolver:
         self.pattern = SparsePattern(problem.geom.edofs, self.dofmap.map, self.dofmap.n_unknowns,
                                      upper=self.linear.upper)
         self.timings = Timings()
+        self.steps_taken = 0
         # after the linear solver has loaded its libraries, so the controller sees them all
         threads.warm()
 
@@ -106,15 +107,21 @@ class NewtonSolver:
             self.timings.tangent += dt_
         return r, K, re
 
-    def increment(self, u: np.ndarray, t: float, dt: float | None):
+    def increment(self, u: np.ndarray, t: float, dt: float | None, guess: np.ndarray | None = None):
         """Solve one increment to time ``t`` from the converged ``u``.
 
         Returns ``(u, iterations, |r|)``; raises :class:`SolverError` (not converged) or
         :class:`InvertedElementError`. The residual is checked before a tangent is built, so
-        a converged iterate costs no tangent.
+        a converged iterate costs no tangent. ``guess``: a first iterate extrapolated from the
+        previous increments (its prescribed values are overwritten); without it, the tangent
+        predictor spreads the prescribed increment through the body.
         """
         o = self.options
-        u, r, ref = self._predict(u, t, dt)
+        self.problem.t = t
+        if guess is not None:
+            u, r, ref = self._extrapolated(u, guess, t, dt)
+        else:
+            u, r, ref = self._predict(u, t, dt)
         norm = float(np.linalg.norm(r))
         tol = max(o.rtol * ref, o.atol)
         for it in range(o.max_iter + 1):
@@ -137,6 +144,16 @@ class NewtonSolver:
             norm = float(np.linalg.norm(r))
         raise SolverError(f"no convergence in {o.max_iter} iterations at t = {t:g} "
                           f"(|r| = {norm:.3g} N, reference {ref:.3g} N)")
+
+    def _extrapolated(self, u_old: np.ndarray, guess: np.ndarray, t: float, dt: float | None):
+        """The extrapolated first iterate, its residual and the increment's reference force."""
+        u = guess.copy()
+        self.dofmap.apply_prescribed(u, t)
+        r, _, re = self._residual(u, t, dt, False)
+        reactions = float(np.linalg.norm(full_vector(self.problem.geom.edofs, re, self.problem.n_dof)))
+        # the reference: the load, the reactions carried, or the unbalance of the old state
+        ref = max(float(np.linalg.norm(self.dofmap.external(t))), reactions, float(np.linalg.norm(r)) * 1e-3)
+        return u, r, ref
 
     def _predict(self, u_old: np.ndarray, t: float, dt: float | None):
         """Tangent predictor: spread the prescribed increment through the body linearly.
@@ -217,17 +234,22 @@ class NewtonSolver:
                           self.dofmap.rigid_force(rf), rf)
 
     def run(self, times: Sequence[float], u0: np.ndarray | None = None, viscous_time: bool = False,
-            progress: Callable[[float], None] | None = None, sensitivities: bool = False) -> Solution:
+            progress: Callable[[float], None] | None = None, sensitivities: bool | Sequence[str] = False,
+            extrapolate: bool = True) -> Solution:
         """Solve at each of ``times`` (increasing); cut increments that fail.
 
         ``viscous_time``: ``times`` are seconds and viscous histories advance; otherwise
         they are load factors and viscous laws answer elastically. ``sensitivities``: also
-        differentiate every output step with respect to every parameter (direct
-        differentiation, through the viscous history when there is one); the results are in
-        ``solution.extra["sensitivities"]``, one per output time.
+        differentiate every output step with respect to every parameter (True) or to the
+        named ones (direct differentiation, through the viscous history when there is one);
+        the results are in ``solution.extra["sensitivities"]``, one per output time.
+        ``extrapolate``: start each increment from a quadratic extrapolation of the last
+        converged states (falls back to the tangent predictor after a failure).
         """
         from skinkit.fem import sensitivity as sens_mod
-        tracker = sens_mod.HistorySensitivity(self) if sensitivities and viscous_time else None
+        only = None if isinstance(sensitivities, bool) else list(sensitivities)
+        want_sens = bool(sensitivities) if isinstance(sensitivities, bool) else True
+        tracker = sens_mod.HistorySensitivity(self, only) if want_sens else None
         sens_out = []
         times = [float(x) for x in times]
         if any(b <= a for a, b in zip(times, times[1:], strict=False)):
@@ -235,6 +257,7 @@ class NewtonSolver:
         u = np.zeros(self.problem.n_dof) if u0 is None else np.asarray(u0, dtype=float).copy()
         t_prev = 0.0 if not times or times[0] > 0 else times[0]
         out_u, out_steps = [], []
+        hist: list[tuple[float, np.ndarray]] = [(t_prev, u.copy())]
         for t_target in times:
             if t_target <= t_prev and out_steps:
                 continue
@@ -246,8 +269,9 @@ class NewtonSolver:
                 t_new = min(t_cur + h, t_target)
                 dt = (t_new - t_cur) if viscous_time else None
                 saved = self.problem.save_state()
+                guess = _extrapolate(hist, t_new) if extrapolate and cuts == 0 else None
                 try:
-                    u_new, its, norm = self.increment(u, t_new, dt)
+                    u_new, its, norm = self.increment(u, t_new, dt, guess)
                 except (SolverError, InvertedElementError) as exc:
                     self.problem.restore_state(saved)
                     cuts += 1
@@ -259,25 +283,42 @@ class NewtonSolver:
                 # a success ends the run of cuts; the increment grows back towards its size
                 cuts = 0
                 h = min(base, 2 * h)
-                if tracker is not None:
+                self.steps_taken += 1
+                if tracker is not None and viscous_time:
                     last_sens = tracker.step(u_new, t_new, t_new - t_cur)
                 if viscous_time:
+                    self.problem.t = t_new
                     self.problem.commit(u_new, t_new - t_cur)
                 u = u_new
                 t_cur = t_new
+                hist = (hist + [(t_cur, u.copy())])[-3:]
             out_u.append(u.copy())
             out_steps.append(self.step_result(u, t_target, its, norm, None if not viscous_time else 0.0))
-            if sensitivities:
-                sens_out.append(last_sens if tracker is not None
-                                else sens_mod.sensitivities(self, u, t_target))
+            if tracker is not None:
+                sens_out.append(last_sens if viscous_time else tracker.step(u, t_target, None))
             if progress is not None:
                 progress(t_target)
             t_prev = t_target
         sol = Solution(np.array(times), np.array(out_u), out_steps, self.timings, self.dofmap,
                        self.linear)
-        if sensitivities:
+        if tracker is not None:
             sol.extra["sensitivities"] = sens_out
         return sol
+
+
+def _extrapolate(hist: list[tuple[float, np.ndarray]], t: float) -> np.ndarray | None:
+    """Lagrange extrapolation of the displacement to ``t`` from the last (up to 3) states."""
+    if len(hist) < 2:
+        return None
+    ts = [a for a, _ in hist]
+    out = np.zeros_like(hist[-1][1])
+    for i, (ti, ui) in enumerate(hist):
+        w = 1.0
+        for j, tj in enumerate(ts):
+            if j != i:
+                w *= (t - tj) / (ti - tj)
+        out += w * ui
+    return out
 
 
 def solve(problem: Problem, bc: BoundaryConditions, times: Sequence[float] = (1.0,),

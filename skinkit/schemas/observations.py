@@ -228,10 +228,17 @@ class ChannelPrediction:
     Attributes:
         values: the shape of the observed channel's ``values`` [unit].
         d: parameter name -> derivative, each the shape of ``values`` [unit per parameter SI unit].
+        predicted: bool, the shape of ``values``: entries the model predicts (None: all). A
+            frictionless indenter, for example, predicts no in-plane tip motion.
     """
 
     values: np.ndarray
     d: dict[str, np.ndarray] = field(default_factory=dict)
+    predicted: np.ndarray | None = None
+
+    def mask(self, channel: Channel) -> np.ndarray:
+        """Entries that are both observed (valid) and predicted."""
+        return channel.valid if self.predicted is None else channel.valid & self.predicted
 
 
 @dataclass
@@ -263,8 +270,9 @@ class Prediction:
         for p, c, cp in self.items():
             ch = observations[p].channels[c]
             r = ch.normalised(cp.values)
-            s += float(np.sum(r[ch.valid] ** 2))
-            n += ch.n_valid
+            m = cp.mask(ch)
+            s += float(np.sum(r[m] ** 2))
+            n += int(m.sum())
         return s, n
 
 

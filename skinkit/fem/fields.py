@@ -1,0 +1,140 @@
+"""Smooth factors φ(X, t) on a layer's elastic response (``[[fields]]`` in a model file).
+
+The elastic stress and tangent of every quadrature point of the field's layers are
+multiplied by φ; inside a viscoelastic law the factor acts on the elastic response, so
+relaxation acts on the softened or stiffened material. φ = 1 is the model without the
+field, exactly. Several fields on one layer multiply. Every numeric parameter is
+differentiable: φ is analytic in its parameters, so ∂φ/∂p comes from the complex step
+(exact to rounding).
+
+Kinds (see ``docs/effects.md``):
+
+* ``inclusion``: φ = 1 + (ratio − 1) w, w = ½ [1 − tanh((r − radius)/δ)], r the in-plane
+  distance from (x, y), δ = ``width`` (default radius/4);
+* ``band``: φ = 1 + (ratio − 1) w, w = ½ [tanh((d − depth + hw)/δ) − tanh((d − depth − hw)/δ)],
+  d the depth below the top surface, hw = ``half_width``, δ = ``width`` (default hw/2);
+* ``softening``: φ(t) = 1 − softening · level(t), level(t) in [0, 1] set by whoever drives the
+  model (the largest load seen so far over the largest of the session).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skinkit.fem.errors import ModelError
+
+_CS = 1e-30
+
+#: kind -> (required parameters, optional parameters, default values of optional ones)
+KINDS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "inclusion": (("x", "y", "radius", "ratio"), ("width",)),
+    "band": (("depth", "half_width", "ratio"), ("width",)),
+    "softening": (("softening",), ()),
+}
+UNITS = {"x": "m", "y": "m", "radius": "m", "ratio": "1", "width": "m", "depth": "m",
+         "half_width": "m", "softening": "1"}
+
+
+@dataclass
+class Field:
+    """One field: ``name`` (its parameters are ``"<name>.<key>"``), ``kind``, the ``layers``
+    it acts on and its parameter values [SI]. ``level`` gives the softening level at time t."""
+
+    name: str
+    kind: str
+    layers: list[str]
+    params: dict[str, float]
+    level: Callable[[float], float] = field(default=lambda t: 0.0)
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ModelError(f"fields[{self.name}].kind", f"must be one of {sorted(KINDS)}, got {self.kind!r}")
+        need, opt = KINDS[self.kind]
+        missing = [k for k in need if k not in self.params]
+        if missing:
+            raise ModelError(f"fields[{self.name}]", f"missing parameter(s) {missing}")
+        extra = sorted(set(self.params) - set(need) - set(opt))
+        if extra:
+            raise ModelError(f"fields[{self.name}]", f"unknown parameter(s) {extra} for kind {self.kind!r}")
+        p = self.params
+        if "ratio" in p and not p["ratio"] > 0:
+            raise ModelError(f"fields[{self.name}].ratio", f"must be positive, got {p['ratio']}")
+        for k in ("radius", "half_width", "width"):
+            if k in p and not p[k] > 0:
+                raise ModelError(f"fields[{self.name}].{k}", f"must be positive, got {p[k]}")
+        if self.kind == "softening" and not 0 <= p["softening"] < 1:
+            raise ModelError(f"fields[{self.name}].softening", f"must be in [0, 1), got {p['softening']}")
+
+    @property
+    def parameter_names(self) -> list[str]:
+        """Differentiable parameters, as ``"<field>.<key>"``."""
+        return [f"{self.name}.{k}" for k in self.params]
+
+    def _phi(self, p: Mapping[str, Any], Xq: np.ndarray, depth: np.ndarray, t: float):
+        if self.kind == "softening":
+            return 1.0 - p["softening"] * float(self.level(t)) + 0.0 * depth
+        if self.kind == "inclusion":
+            # sqrt of the squares, not hypot: complex-step safe (quadrature points never sit on r = 0)
+            r = np.sqrt((Xq[..., 0] - p["x"]) ** 2 + (Xq[..., 1] - p["y"]) ** 2)
+            d = p.get("width", p["radius"] / 4)
+            w = 0.5 * (1 - np.tanh((r - p["radius"]) / d))
+        else:
+            hw = p["half_width"]
+            d = p.get("width", hw / 2)
+            w = 0.5 * (np.tanh((depth - p["depth"] + hw) / d) - np.tanh((depth - p["depth"] - hw) / d))
+        return 1.0 + (p["ratio"] - 1.0) * w
+
+    def value(self, Xq: np.ndarray, depth: np.ndarray, t: float) -> np.ndarray:
+        """φ ``(n_el, n_q)`` at quadrature points ``Xq`` ``(n_el, n_q, 3)`` [m] of depth ``depth``."""
+        return np.asarray(self._phi(self.params, Xq, depth, t), dtype=float)
+
+    def derivative(self, key: str, Xq: np.ndarray, depth: np.ndarray, t: float) -> np.ndarray:
+        """∂φ/∂``key`` ``(n_el, n_q)`` [1 per SI unit of the parameter] (complex step)."""
+        if key not in self.params:
+            raise ModelError(f"fields[{self.name}]", f"has no parameter {key!r}")
+        p: dict[str, Any] = dict(self.params)
+        p[key] = p[key] + 1j * _CS
+        return np.imag(np.asarray(self._phi(p, Xq.astype(complex), depth.astype(complex), t))) / _CS
+
+
+def read_fields(tables: Any, layer_names: list[str], quantity: Callable[[Any, str, str], float]) -> list[Field]:
+    """``[[fields]]`` tables -> :class:`Field` list (errors name ``fields[i].<key>``)."""
+    if tables is None:
+        return []
+    if not isinstance(tables, list):
+        raise ModelError("fields", "must be an array of tables ([[fields]])")
+    out = []
+    names = set()
+    for i, t in enumerate(tables):
+        e = f"fields[{i}]"
+        if not isinstance(t, Mapping):
+            raise ModelError(e, "must be a table")
+        name = str(t.get("name", ""))
+        if not name or name in names:
+            raise ModelError(f"{e}.name", f"needs a unique name, got {name!r}")
+        names.add(name)
+        kind = str(t.get("kind", ""))
+        if kind not in KINDS:
+            raise ModelError(f"{e}.kind", f"must be one of {sorted(KINDS)}, got {kind!r}")
+        layers = t.get("layers", [])
+        if isinstance(layers, str):
+            layers = [layers]
+        if not layers or any(n not in layer_names for n in layers):
+            raise ModelError(f"{e}.layers", f"must name layers of the model {layer_names}, got {layers!r}")
+        need, opt = KINDS[kind]
+        unknown = sorted(set(t) - {"name", "kind", "layers"} - set(need) - set(opt))
+        if unknown:
+            raise ModelError(e, f"unknown key(s) {unknown} for a {kind!r} field; it takes {list(need + opt)}")
+        params = {k: quantity(t[k], UNITS[k], f"{e}.{k}") for k in need + opt if k in t}
+        try:
+            out.append(Field(name, kind, list(layers), params))
+        except ModelError as exc:
+            raise ModelError(f"{e}", str(exc)) from None
+    return out
+
+
+__all__ = ["KINDS", "Field", "read_fields"]

@@ -1,0 +1,131 @@
+"""``[[effects]]`` tables of a model file: resolve the plugins, check the values, apply them.
+
+An ``[[effects]]`` table names an effect plugin (``name``) and gives any subset of its
+parameters (numbers in SI or ``"<number> <unit>"`` strings); the others take the effect's
+null value, so ``[[effects]] name = "prestress"`` alone leaves the model unchanged.
+Effect parameters are named ``"<effect>.<parameter>"`` in the model's parameter set.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from skinkit import registry
+from skinkit.errors import EffectError, PluginError
+from skinkit.schemas import Parameter, ParameterSet
+
+
+@dataclass
+class AppliedEffect:
+    """One effect of a model: the plugin, its declared parameters and the values in use [SI]."""
+
+    name: str
+    plugin: Any
+    declared: dict[str, Parameter]
+    values: dict[str, float]
+
+    def parameter_set(self) -> list[Parameter]:
+        """The effect's parameters under their model names (``"<effect>.<local>"``), values in use."""
+        out = []
+        for local, d in self.declared.items():
+            out.append(Parameter(f"{self.name}.{local}", self.values[local], d.unit, d.lower, d.upper,
+                                 free=True))
+        return out
+
+
+def effect_plugin(name: str, entry: str = "effects") -> Any:
+    """The effect plugin ``name``; :class:`EffectError` naming ``entry`` if it is not installed."""
+    try:
+        return registry.create("skinkit.effects", name)
+    except PluginError as exc:
+        raise EffectError(entry, f"unknown effect {name!r}: {exc}") from None
+
+
+def _quantity(value: Any, unit: str, entry: str) -> float:
+    from skinkit.fem.errors import ModelError
+    from skinkit.fem.model import quantity
+
+    try:
+        return quantity(value, unit, entry)
+    except ModelError as exc:
+        raise EffectError(entry, exc.problem if hasattr(exc, "problem") else str(exc)) from None
+
+
+def check_value(effect: str, p: Parameter, value: float, entry: str) -> float:
+    """``value`` [SI] if it lies in ``p``'s admissible range, else an :class:`EffectError`."""
+    if not math.isfinite(value):
+        raise EffectError(entry, f"must be finite, got {value}")
+    if not p.lower <= value <= p.upper:
+        raise EffectError(entry, f"{value:g} {p.unit} is outside the admissible range "
+                          f"[{p.lower:g}, {p.upper:g}] {p.unit} of effect {effect!r}")
+    return value
+
+
+def resolve(tables: Any, kind: str) -> list[AppliedEffect]:
+    """Validate ``[[effects]]`` tables for a model of ``kind`` (``"fe"`` or ``"lumped"``)."""
+    if tables is None:
+        return []
+    if not isinstance(tables, list):
+        raise EffectError("effects", "must be an array of tables ([[effects]])")
+    out: list[AppliedEffect] = []
+    seen: set[str] = set()
+    for i, t in enumerate(tables):
+        entry = f"effects[{i}]"
+        if not isinstance(t, Mapping) or "name" not in t:
+            raise EffectError(entry, "needs a 'name' (an effect of the skinkit.effects group)")
+        name = str(t["name"])
+        if name in seen:
+            raise EffectError(f"{entry}.name", f"effect {name!r} is given twice")
+        seen.add(name)
+        plugin = effect_plugin(name, f"{entry}.name")
+        kinds = tuple(getattr(plugin, "kinds", ()))
+        if kind not in kinds:
+            raise EffectError(f"{entry}.name", f"effect {name!r} applies to {', '.join(kinds) or 'no'} "
+                              f"models, not to a {kind!r} model")
+        declared = {p.name: p for p in plugin.parameters()}
+        null = dict(plugin.null())
+        unknown = sorted(set(t) - set(declared) - {"name"})
+        if unknown:
+            raise EffectError(entry, f"unknown parameter(s) {unknown} for effect {name!r}; "
+                              f"it has {sorted(declared)}")
+        values = {}
+        for local, d in declared.items():
+            e = f"{entry}.{local}"
+            v = _quantity(t[local], d.unit, e) if local in t else float(null.get(local, d.value))
+            values[local] = check_value(name, d, v, e)
+        out.append(AppliedEffect(name, plugin, declared, values))
+    return out
+
+
+def apply_all(spec: Mapping[str, Any], effects: list[AppliedEffect],
+              values: Mapping[str, float] | None = None) -> dict[str, Any]:
+    """The description with every effect applied in order (values: ``"<effect>.<local>"`` ->
+    SI value overriding those in use). The input is not modified."""
+    out = copy.deepcopy(dict(spec))
+    out.pop("effects", None)
+    for eff in effects:
+        p = dict(eff.values)
+        if values:
+            for local in p:
+                key = f"{eff.name}.{local}"
+                if key in values:
+                    p[local] = check_value(eff.name, eff.declared[local], float(values[key]), key)
+        try:
+            out = dict(eff.plugin.apply(out, p))
+        except EffectError:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:
+            raise EffectError(f"effects.{eff.name}", f"cannot be applied to this model: {exc}") from None
+    return out
+
+
+def effect_parameters(effects: list[AppliedEffect]) -> ParameterSet:
+    """Every effect parameter under its model name."""
+    return ParameterSet([p for e in effects for p in e.parameter_set()])
+
+
+__all__ = ["AppliedEffect", "apply_all", "check_value", "effect_parameters", "effect_plugin", "resolve"]

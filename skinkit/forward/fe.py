@@ -1,0 +1,538 @@
+"""The finite-element forward model: a model file driven by a session, predicting what it measured.
+
+For each protocol of the session the recorded tip force (``[indenter] mode = "force"``, the
+thesis's choice) or tip position (``"displacement"``) drives the rigid indenter; the top of
+the mesh is fitted to the session's profile (``[surface] fit``); the tracked points are put on
+the fitted surface and embedded ``[output] point_depth`` below it along the true normal; the
+model is solved at steps no longer than ``[drive] max_step`` (and at every camera frame) and
+its tip motion or force and the points' positions are interpolated onto exactly the observed
+times (cubic in time between solved steps; frames are solved steps).
+
+Sensitivities: law, pre-stretch, field and drive parameters by direct differentiation
+(``skinkit.fem.sensitivity``), through viscous histories; instrument parameters analytically
+(``skinkit.forward.instrument``); effect parameters bound to any of these under the
+effect's name; anything else (geometry) by central differences of whole solves.
+
+Protocols are independent solves: they run in worker processes (``workers``, default one
+per core) or on a Dask cluster (``scheduler``); every solve uses one thread, so the numbers
+do not depend on where or how many solves run at once.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skinkit.errors import ForwardError, SchemaError
+from skinkit.forward import drive as drive_mod
+from skinkit.forward.effects import AppliedEffect, apply_all
+from skinkit.schemas import ChannelPrediction, Observations, Parameter, ParameterSet, Prediction
+
+#: default largest solver step [s]: 20 steps per period of the thesis's 0.1 Hz protocols
+DEFAULT_MAX_STEP = 0.5
+
+
+@dataclass
+class ProtocolJob:
+    """Everything one worker needs to solve one protocol (picklable)."""
+
+    name: str
+    spec: dict[str, Any]
+    nodes: np.ndarray | None              # fitted mesh node positions, or None (the geometry's)
+    mode: str                             # "force" | "displacement"
+    times: np.ndarray                     # (n,) solver output times [s]
+    drive: np.ndarray                     # (n, 3) drive at those times [N or m], skin frame
+    drive_d: dict[str, np.ndarray]        # drive parameter -> (n, 3) derivative
+    level: np.ndarray | None              # (n,) softening level, or None
+    embed: tuple[np.ndarray, np.ndarray] | None   # (element (P,), local (P, 3)) of tracked points
+    sens: list[str]                       # FE parameter names to differentiate
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np.ndarray]:
+    tt = np.concatenate([[0.0], times])
+    vv = np.vstack([np.zeros((1, values.shape[1])), values]) if values.ndim == 2 else \
+        np.concatenate([[values[0] * 0], values])
+
+    def f(t: float) -> np.ndarray:
+        if values.ndim == 1:
+            return float(np.interp(t, tt, vv))
+        return np.array([np.interp(t, tt, vv[:, c]) for c in range(vv.shape[1])])
+    return f
+
+
+def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
+    """Solve one protocol; the outputs at ``[0, *job.times]`` (the first row is the unloaded
+    state) with their derivatives. Runs with one thread (see the module docstring)."""
+    from threadpoolctl import threadpool_limits
+
+    from skinkit.fem.model import build_model
+    from skinkit.fem.solver import NewtonSolver
+
+    with threadpool_limits(limits=1):
+        t0 = time.perf_counter()
+        spec = copy.deepcopy(job.spec)
+        spec.setdefault("indenter", {})["mode"] = job.mode
+        from skinkit.fem.model import build_mesh
+        mesh = build_mesh(spec)
+        if job.nodes is not None:
+            mesh = mesh.with_nodes(job.nodes)
+        model = build_model(spec, require_load=False, mesh=mesh)
+        rigid = model.bc.rigid
+        if rigid is None:
+            raise ForwardError("indenter", "the model has no indenter (rigid region) for the drive")
+        rigid.programme = _interp_table(job.times, job.drive)
+        rigid.derivatives = {n: _interp_table(job.times, d) for n, d in job.drive_d.items()}
+        for f in model.problem.fields:
+            if f.kind == "softening":
+                f.level = _interp_table(job.times, job.level if job.level is not None else 0 * job.times)
+        solver = NewtonSolver(model.problem, model.bc, model.options)
+        sol = solver.run(job.times, viscous_time=model.problem.viscous, sensitivities=job.sens or False,
+                         extrapolate=job.options.get("extrapolate", True))
+        n = len(job.times) + 1
+        P = 0 if job.embed is None else len(job.embed[0])
+        npar = len(job.sens)
+        tip_u = np.zeros((n, 3))
+        tip_f = np.zeros((n, 3))
+        pts = np.zeros((n, P, 3))
+        d_tip_u = np.zeros((n, 3, npar))
+        d_tip_f = np.zeros((n, 3, npar))
+        d_pts = np.zeros((n, P, 3, npar))
+        emb = None
+        if job.embed is not None:
+            from skinkit.fem.embed import Embedding, _shape
+            el, loc = job.embed
+            Nv, _ = _shape(loc.T)
+            emb = Embedding(el, loc, mesh.elements[el], Nv.T.copy())
+            pts[0] = emb.positions(mesh.nodes)
+            J = emb.position_jacobian(mesh.n_dof)
+        for i, st in enumerate(sol.steps):
+            tip_u[i + 1] = np.nan_to_num(st.tip_displacement)
+            tip_f[i + 1] = st.tip_force
+            if emb is not None:
+                pts[i + 1] = emb.positions(mesh.nodes, sol.u[i])
+        if npar:
+            for i, sv in enumerate(sol.extra["sensitivities"]):
+                col = [sv.names.index(nm) for nm in job.sens]
+                d_tip_u[i + 1] = np.nan_to_num(sv.tip_displacement[:, col])
+                d_tip_f[i + 1] = sv.tip_force[:, col]
+                if emb is not None:
+                    d_pts[i + 1] = (J @ sv.du[:, col]).reshape(P, 3, npar)
+        untied = [c for c in range(3) if c not in rigid.components]
+        tm = solver.timings
+        info = {"wall_s": time.perf_counter() - t0, "steps": len(job.times),
+                "increments": solver.steps_taken, "newton_iterations": tm.iterations,
+                "newton_per_step": tm.iterations / max(solver.steps_taken, 1),
+                "assembly_s": tm.assembly, "linear_solve_s": tm.solve, "n_dof": mesh.n_dof,
+                "linear_solver": solver.linear.name}
+        return {"name": job.name, "times": np.concatenate([[0.0], job.times]), "tip_u": tip_u,
+                "tip_f": tip_f, "points": pts, "d_tip_u": d_tip_u, "d_tip_f": d_tip_f, "d_points": d_pts,
+                "untied": untied, "col_names": list(job.sens), "info": info}
+
+
+def _instrument() -> Any:
+    """The instrument transforms (``skinkit.forward.instrument``)."""
+    from skinkit.forward import instrument
+
+    return instrument
+
+
+def _cubic(t_knots: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Cubic-spline interpolation along axis 0 (not-a-knot; linear with < 4 knots)."""
+    from scipy.interpolate import CubicSpline
+
+    t = np.clip(t, t_knots[0], t_knots[-1])
+    if len(t_knots) < 4:
+        flat = y.reshape(len(t_knots), -1)
+        out = np.stack([np.interp(t, t_knots, flat[:, j]) for j in range(flat.shape[1])], axis=1)
+        return out.reshape((len(t),) + y.shape[1:])
+    return CubicSpline(t_knots, y, axis=0)(t)
+
+
+class FEForwardModel:
+    """A finite-element model file as a :class:`skinkit.protocols.ForwardModel` (module docstring)."""
+
+    kind = "fe"
+
+    def __init__(self, spec: Mapping[str, Any], effects: list[AppliedEffect], *,
+                 workers: int | None = None, scheduler: str | Any | None = None) -> None:
+        self.base = copy.deepcopy(dict(spec))
+        self.base.pop("effects", None)
+        self.effects = effects
+        self.name = str(self.base.get("model", {}).get("name", "model"))
+        self.workers = workers
+        self.scheduler = scheduler
+        self._pool = None
+        self.last_info: dict[str, Any] = {}
+        eff = apply_all(self.base, effects)
+        from skinkit.fem.model import build_model
+        self._check = build_model(eff, require_load=False)   # validates the description now
+        self._pset = self._parameters(eff)
+
+    # -- parameters ------------------------------------------------------------------------
+    def _parameters(self, eff: Mapping[str, Any]) -> ParameterSet:
+        from skinkit.fem.sensitivity import PRESTRESS_NAMES
+        out: list[Parameter] = []
+        bound = dict(eff.get("bindings", {}))
+        hidden = set(bound.values())
+        effect_names = {f"{e.name}.{k}" for e in self.effects for k in e.declared}
+        for k, m in enumerate(self._check.problem.materials):
+            for q in m.law.parameters():
+                nm = f"{m.region}.{q.name}"
+                if nm not in hidden:
+                    out.append(Parameter(nm, float(m.params[q.name]), q.unit, q.lower, q.upper))
+            if m.prestress is not None:
+                for i, (pn, unit, lo, hi) in enumerate(zip(PRESTRESS_NAMES, ("1", "1", "rad"),
+                                                           (0.5, 0.5, -math.pi / 2), (2.0, 2.0, math.pi / 2),
+                                                           strict=True)):
+                    nm = f"{m.region}.{pn}"
+                    if nm not in hidden:
+                        out.append(Parameter(nm, m.prestress[i], unit, lo, hi))
+        from skinkit.fem.fields import UNITS
+        for f in self._check.problem.fields:
+            for key, v in f.params.items():
+                nm = f"{f.name}.{key}"
+                if nm not in effect_names:
+                    out.append(Parameter(nm, v, UNITS[key], -math.inf, math.inf))
+        for ent in eff.get("instrument", []) or []:
+            nm = str(ent.get("parameter", ""))
+            if nm and nm not in effect_names and nm not in {p.name for p in out}:
+                out.append(Parameter(nm, float(ent.get("value", 0.0)), "1"))
+        for e in self.effects:
+            out.extend(e.parameter_set())
+        return ParameterSet(out)
+
+    def parameters(self) -> ParameterSet:
+        """Every parameter of the model, values from the model file (effects at their values)."""
+        return self._pset
+
+    # -- descriptions at given parameter values -------------------------------------------------
+    def description(self, params: ParameterSet | Mapping[str, float]) -> dict[str, Any]:
+        """The model description with ``params`` (name -> SI value) written in (effects applied)."""
+        values = params.values() if isinstance(params, ParameterSet) else dict(params)
+        unknown = sorted(set(values) - set(self._pset.names))
+        if unknown:
+            raise SchemaError("parameters", f"unknown parameter(s) {unknown} for model {self.name!r}")
+        spec = apply_all(self.base, self.effects, values)
+        layers = {str(L["name"]): L for L in spec["layers"]}
+        for nm, v in values.items():
+            region, _, local = nm.partition(".")
+            if region in layers and local.startswith("prestretch."):
+                pre = layers[region].setdefault("prestress", {})
+                st = list(pre.get("stretch", [1.0, 1.0]))
+                if local == "prestretch.angle":
+                    pre["angle"] = float(v)
+                else:
+                    st[int(local[-1]) - 1] = float(v)
+                    pre["stretch"] = [float(x) for x in st]
+            elif region in layers:
+                layers[region].setdefault("parameters", {})[local] = float(v)
+        for f in spec.get("fields", []) or []:
+            for key in list(f):
+                nm = f"{f['name']}.{key}"
+                if nm in values and nm not in {f"{e.name}.{k}" for e in self.effects for k in e.declared}:
+                    f[key] = float(values[nm])
+        for ent in spec.get("instrument", []) or []:
+            nm = str(ent.get("parameter", ""))
+            if nm in values and nm not in {f"{e.name}.{k}" for e in self.effects for k in e.declared}:
+                ent["value"] = float(values[nm])
+        return spec
+
+    def _classify(self, spec: Mapping[str, Any], names: Sequence[str]) -> dict[str, tuple[str, str]]:
+        """parameter -> (method, internal name): "fe" (engine), "instrument", "fd"."""
+        from skinkit.fem.model import build_model
+        probe = build_model(spec, require_load=False)
+        from skinkit.fem.sensitivity import parameter_names as fe_names
+        fe = set(fe_names(probe.problem))
+        inst = {str(e.get("parameter")) for e in spec.get("instrument", []) or []}
+        bind = dict(spec.get("bindings", {}))
+        out = {}
+        for nm in names:
+            target = bind.get(nm, nm)
+            if target in fe:
+                out[nm] = ("fe", target)
+            elif target in inst:
+                out[nm] = ("instrument", target)
+            else:
+                out[nm] = ("fd", nm)
+        return out
+
+    # -- prediction --------------------------------------------------------------------------
+    def predict(self, params: ParameterSet, observations: Observations,
+                sensitivities: bool | Sequence[str] = False,
+                progress: Callable[[str, float], None] | None = None) -> Prediction:
+        """Predictions of every observed channel but the drive (see the module docstring)."""
+        if not isinstance(observations, Observations):
+            raise SchemaError("observations", f"expected Observations, got {type(observations).__name__}")
+        names = self._pset.names if sensitivities is True else \
+            ([] if not sensitivities else list(sensitivities))
+        unknown = sorted(set(names) - set(self._pset.names))
+        if unknown:
+            raise SchemaError("sensitivities", f"unknown parameter(s) {unknown} for model {self.name!r}")
+        spec = self.description(params)
+        cls = self._classify(spec, names)
+        fe_names = sorted({v[1] for v in cls.values() if v[0] == "fe"})
+        inst_names = sorted({v[1] for v in cls.values() if v[0] == "instrument"})
+        t0 = time.perf_counter()
+        results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names)
+        pred = self._assemble(spec, observations, results, jobs_meta, cls, inst_names)
+        fd = [nm for nm, (m, _) in cls.items() if m == "fd"]
+        if fd:
+            self._central_differences(params, observations, pred, fd)
+        for nm, (m, _) in cls.items():
+            pred.methods[nm] = {"fe": "analytic", "instrument": "analytic", "fd": "central-difference"}[m]
+        infos = [r["info"] for r in results.values()]
+        steps = sum(i["increments"] for i in infos)
+        pred.info = {"wall_s": time.perf_counter() - t0, "protocols": {k: r["info"] for k, r in results.items()},
+                     "newton_per_step": sum(i["newton_iterations"] for i in infos) / max(steps, 1),
+                     "n_dof": infos[0]["n_dof"] if infos else 0}
+        self.last_info = pred.info
+        return pred
+
+    def _surface(self, spec: Mapping[str, Any], observations: Observations):
+        """The mesh (fitted to the session's profile when asked) and the point embedding per channel."""
+        from skinkit.fem.embed import fit_surface
+        from skinkit.fem.errors import ModelError
+        from skinkit.fem.model import build_mesh, layer_table, quantity
+        surf = dict(spec.get("surface", {}) or {})
+        unknown = sorted(set(surf) - {"fit", "outside"})
+        if unknown:
+            raise ForwardError("surface", f"unknown key(s) {unknown}; allowed are ['fit', 'outside']")
+        fit = surf.get("fit", "auto")
+        if fit not in (True, False, "auto"):
+            raise ForwardError("surface.fit", f"must be true, false or \"auto\", got {fit!r}")
+        outside = surf.get("outside", "error")
+        if outside not in ("error", "nearest"):
+            raise ForwardError("surface.outside", f"must be \"error\" or \"nearest\", got {outside!r}")
+        mesh = build_mesh(spec)
+        nodes = None
+        if fit is True and observations.profile is None:
+            raise ForwardError("surface.fit", f"the session {observations.source!r} has no profile to fit")
+        if fit and observations.profile is not None:
+            prof = observations.profile.points
+            top = mesh.nodes[mesh.node_sets["top"]]
+            from scipy.spatial import Delaunay
+            hull = Delaunay(prof[:, :2])
+            keep = np.zeros(mesh.n_nodes, bool)
+            for s in ("outer", "indenter", "pad_fixed"):
+                if s in mesh.node_sets:
+                    keep[mesh.node_sets[s]] = True
+            outside_pts = (hull.find_simplex(top[:, :2]) < 0) & ~keep[mesh.node_sets["top"]]
+            if outside_pts.any() and outside == "error":
+                xy = top[outside_pts, :2]
+                raise ForwardError("surface", f"the session's profile does not cover the mesh: "
+                                   f"{int(outside_pts.sum())} of {len(top)} top nodes lie outside it "
+                                   f"(e.g. at {np.round(xy[0] * 1e3, 2).tolist()} mm); profile spans "
+                                   f"x {prof[:, 0].min() * 1e3:.1f}..{prof[:, 0].max() * 1e3:.1f} mm, "
+                                   f"y {prof[:, 1].min() * 1e3:.1f}..{prof[:, 1].max() * 1e3:.1f} mm; set "
+                                   "[surface] outside = \"nearest\" to extrapolate, or fit = false")
+            skin = layer_table(spec)[0][1]
+            try:
+                mesh = fit_surface(mesh, prof, skin, keep=("outer", "indenter", "pad_fixed")).mesh
+            except ModelError as exc:
+                raise ForwardError("surface", str(exc)) from None
+            nodes = mesh.nodes
+        depth = quantity(dict(spec.get("output", {}) or {}).get("point_depth", 0.0), "m", "output.point_depth")
+        return mesh, nodes, depth
+
+    def _embed(self, mesh, ch, depth: float, where: str):
+        from skinkit.fem.embed import embed_points, surface_points
+        from skinkit.fem.errors import ModelError
+        ref = np.asarray(ch.reference, dtype=float)
+        if ref.shape[1] == 2:
+            ref = np.column_stack([ref, np.zeros(len(ref))])
+        try:
+            on, _ = surface_points(mesh, ref, depth)
+            emb = embed_points(mesh, on)
+        except ModelError as exc:
+            raise ForwardError(where, f"tracked point outside the model: {exc}") from None
+        return emb.element, emb.local
+
+    def _drive_channel(self, spec: Mapping[str, Any]) -> tuple[str, str]:
+        mode = str(dict(spec.get("indenter", {}) or {}).get("mode", "force"))
+        if mode not in ("force", "displacement"):
+            raise ForwardError("indenter.mode", f"must be 'force' or 'displacement', got {mode!r}")
+        return mode, ("tip_force" if mode == "force" else "tip_position")
+
+    def _solve_all(self, spec, observations: Observations, fe_names: list[str], inst_names: list[str]):
+        from skinkit.fem.model import quantity
+        inst_mod = _instrument()
+        mode, drive_name = self._drive_channel(spec)
+        dr = dict(spec.get("drive", {}) or {})
+        unknown = sorted(set(dr) - {"max_step"})
+        if unknown:
+            raise ForwardError("drive", f"unknown key(s) {unknown}; allowed are ['max_step']")
+        max_step = quantity(dr.get("max_step", DEFAULT_MAX_STEP), "s", "drive.max_step")
+        if not max_step > 0:
+            raise ForwardError("drive.max_step", f"must be positive, got {max_step}")
+        mesh, nodes, depth = self._surface(spec, observations)
+        entries = inst_mod.parse(spec.get("instrument"))
+        jobs, meta = [], {}
+        drives = {}
+        for po in observations:
+            if drive_name not in po.channels:
+                raise ForwardError(f"session protocol {po.name!r}",
+                                   f"has no {drive_name!r} channel to drive the model "
+                                   f"([indenter] mode = {mode!r}); it has {sorted(po.channels)}")
+            ch = po.channels[drive_name]
+            frames = [c.time_s for c in po.channels.values() if c.is_points]
+            times = drive_mod.step_times(float(ch.time_s[-1]), max_step,
+                                         np.concatenate(frames) if frames else None)
+            rec = drive_mod.fill_invalid(ch.values, ch.valid)
+            true, dtrue = inst_mod.drive(entries, drive_name, ch.time_s, rec, inst_names)
+            window = float(np.median(np.diff(times))) if len(times) > 1 else float(times[0])
+            dsteps = drive_mod.smooth_at(ch.time_s, true, times, window)
+            dd = {n: drive_mod.smooth_at(ch.time_s, d, times, window) for n, d in dtrue.items()}
+            drives[po.name] = (times, dsteps, dd)
+            embeds = {}
+            for c in po.channels.values():
+                if c.is_points:
+                    embeds[c.name] = self._embed(mesh, c, depth, f"session protocol {po.name!r}.{c.name}")
+            meta[po.name] = {"drive": drive_name, "embeds": embeds}
+        # softening level over the session, protocols in order
+        ref = max((float(np.linalg.norm(d[1], axis=1).max()) for d in drives.values()), default=0.0)
+        running = 0.0
+        for po in observations:
+            times, dsteps, dd = drives[po.name]
+            level = drive_mod.running_level(dsteps, running, ref)
+            running = max(running, float(np.linalg.norm(dsteps, axis=1).max()))
+            emb = None
+            embeds = meta[po.name]["embeds"]
+            if embeds:
+                els = np.concatenate([e[0] for e in embeds.values()])
+                locs = np.concatenate([e[1] for e in embeds.values()])
+                emb = (els, locs)
+            jobs.append(ProtocolJob(po.name, spec, nodes, mode, times, dsteps, dd, level, emb,
+                                    list(fe_names) + list(dd)))
+        results = self._run(jobs)
+        return results, meta
+
+    def _run(self, jobs: list[ProtocolJob]) -> dict[str, dict[str, Any]]:
+        if self.scheduler is not None:
+            return self._run_dask(jobs)
+        workers = self.workers if self.workers is not None else (os.cpu_count() or 1)
+        workers = max(1, min(workers, len(jobs)))
+        if workers == 1:
+            return {j.name: solve_protocol(j) for j in jobs}
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        if self._pool is None or self._pool_size != workers:
+            self.close()
+            self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+            self._pool_size = workers
+        return {r["name"]: r for r in self._pool.map(solve_protocol, jobs)}
+
+    def _run_dask(self, jobs: list[ProtocolJob]) -> dict[str, dict[str, Any]]:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise ForwardError("--scheduler", "needs dask.distributed (pip install 'skinkit[cluster]')") from None
+        sched = self.scheduler
+        address = sched if isinstance(sched, str) else getattr(sched, "scheduler_address", sched)
+        try:
+            client = Client(address, timeout="10s", set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise ForwardError("--scheduler", f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
+        try:
+            futures = client.map(solve_protocol, jobs, pure=False)
+            return {r["name"]: r for r in client.gather(futures)}
+        finally:
+            client.close()
+
+    def close(self) -> None:
+        """Shut the worker processes down (they are kept between predictions otherwise)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def __del__(self) -> None:  # pragma: no cover - interpreter shutdown order varies
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    def _assemble(self, spec, observations: Observations, results, meta, cls, inst_names) -> Prediction:
+        inst_mod = _instrument()
+        entries = inst_mod.parse(spec.get("instrument"))
+        out: dict[str, dict[str, ChannelPrediction]] = {}
+        inputs: dict[str, str] = {}
+        for po in observations:
+            r = results[po.name]
+            tk = r["times"]
+            drive_name = meta[po.name]["drive"]
+            inputs[po.name] = drive_name
+            # the job's derivative columns: FE names then drive parameters
+            col_names = r["col_names"]
+            true: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+            for cname in ("tip_position", "tip_force"):
+                if cname == drive_name:
+                    ch = po.channels[cname]
+                    true[cname] = (ch.values, {})
+                    continue
+                key, dkey = ("tip_u", "d_tip_u") if cname == "tip_position" else ("tip_f", "d_tip_f")
+                if cname not in po.channels:
+                    continue
+                ch = po.channels[cname]
+                vals = _cubic(tk, r[key], ch.time_s)
+                d = {nm: _cubic(tk, r[dkey][..., j], ch.time_s) for j, nm in enumerate(col_names)}
+                true[cname] = (vals, d)
+            start = 0
+            for cname, (el, _) in meta[po.name]["embeds"].items():
+                P = len(el)
+                ch = po.channels[cname]
+                k = ch.values.shape[2]
+                pts = np.moveaxis(_cubic(tk, r["points"][:, start:start + P], ch.time_s), 0, 1)[..., :k]
+                d = {nm: np.moveaxis(_cubic(tk, r["d_points"][:, start:start + P, :, j], ch.time_s), 0, 1)[..., :k]
+                     for j, nm in enumerate(col_names)}
+                true[cname] = (pts, d)
+                start += P
+            chans: dict[str, ChannelPrediction] = {}
+            for cname, (vals, d) in true.items():
+                if cname == drive_name:
+                    continue
+                ch = po.channels[cname]
+                mvals, md = inst_mod.measure(entries, cname, ch.time_s, vals, d, true, inst_names)
+                mask = None
+                if cname == "tip_position" and r["untied"]:
+                    mask = np.ones(ch.values.shape, bool)
+                    mask[:, r["untied"]] = False
+                dd = {}
+                for nm, (m, internal) in cls.items():
+                    if m == "fd":
+                        continue
+                    if internal in md:
+                        dd[nm] = md[internal]
+                    else:
+                        dd[nm] = np.zeros_like(mvals)
+                chans[cname] = ChannelPrediction(mvals, dd, mask)
+            out[po.name] = chans
+        return Prediction(out, {}, inputs, {})
+
+    def _central_differences(self, params: ParameterSet, observations: Observations, pred: Prediction,
+                             names: list[str]) -> None:
+        """Derivatives of the parameters no analytic route covers, by central differences of
+        whole solves (step 1e-4 of the parameter's scale, one-sided at a bound)."""
+        for nm in names:
+            p = params.param(nm)
+            scale = abs(p.value) if p.value != 0 else (
+                0.01 * (p.upper - p.lower) if math.isfinite(p.upper - p.lower) else 1.0)
+            h = 1e-4 * max(scale, 1e-12)
+            hi = min(p.value + h, p.upper)
+            lo = max(p.value - h, p.lower)
+            if hi == lo:
+                raise ForwardError(nm, "cannot be differentiated: its bounds leave no room for a step")
+            up = self.predict(params.with_values({nm: hi}), observations)
+            dn = self.predict(params.with_values({nm: lo}), observations)
+            for proto, chans in pred.protocols.items():
+                for cname, cp in chans.items():
+                    cp.d[nm] = (up.protocols[proto][cname].values - dn.protocols[proto][cname].values) / (hi - lo)
+
+
+__all__ = ["DEFAULT_MAX_STEP", "FEForwardModel", "ProtocolJob", "solve_protocol"]

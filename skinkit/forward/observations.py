@@ -1,0 +1,216 @@
+"""Reading what a session measured into :class:`~skinkit.schemas.Observations`.
+
+Sources: an experiment file (``.h5``: every robot record, the track named after each
+protocol, the undeformed profile) or a CSV robot record (``.csv``, one protocol).
+
+Frames: robot records are stored in the robot frame (z into the skin); observations are in
+the skin frame (z out of the skin), so the z components of ``tip_position`` and ``tip_force``
+change sign here, and nowhere else.
+
+Noise, per channel and component (:func:`sample_noise`), in this order of preference:
+
+1. **rest segment** — the samples before the signal first leaves its starting level (by
+   more than five times the second-difference estimate below), detrended by a quadratic;
+   used when at least 50 samples are at rest;
+2. **second differences** — 1.4826 MAD(Δ²x)/√6: for white noise Var(Δ²x) = 6σ², and a signal
+   that is smooth at the sampling rate contributes almost nothing; robust to spikes;
+3. a floor at the **sensor resolution** (the smallest step between distinct values, /√12).
+
+Tracks: the track's ``noise_m`` attribute when its producer knows its uncertainty
+("tracker"); otherwise **neighbour differences** — each point's displacement against the
+mean of its six nearest neighbours', 1.4826 MAD / √(1 + 1/6) per component, over all
+frames (smooth fields contribute little; the MAD ignores the high-gradient minority).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skinkit.errors import SchemaError, StoreError
+from skinkit.schemas import Channel, Observations, ProtocolObservations, RobotRecord, SurfaceTrack
+
+#: robot frame -> skin frame (z flips)
+_FLIP = np.array([1.0, 1.0, -1.0])
+_MIN_REST = 50
+_MAD = 1.4826
+
+
+def _mad(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan")
+    return float(_MAD * np.median(np.abs(x - np.median(x))))
+
+
+def _resolution(x: np.ndarray) -> float:
+    u = np.unique(x[np.isfinite(x)])
+    if u.size < 2:
+        return 0.0
+    d = np.diff(u)
+    d = d[d > 1e-15 * max(np.abs(u).max(), 1e-300)]
+    return float(d.min()) if d.size else 0.0
+
+
+def sample_noise(x: np.ndarray) -> tuple[float, str]:
+    """Standard deviation of one sample of ``x`` ``(T,)`` and how it was estimated (see module)."""
+    x = np.asarray(x, dtype=float)
+    ok = np.isfinite(x)
+    if ok.sum() < 8:
+        return float("nan"), "too few samples"
+    xs = x[ok]
+    sd2 = _mad(np.diff(xs, 2)) / np.sqrt(6.0)
+    res = _resolution(xs)
+    floor = res / np.sqrt(12.0)
+    est, src = sd2, "second differences"
+    if np.isfinite(sd2) and sd2 > 0:
+        start = np.median(xs[:min(20, xs.size)])
+        away = np.flatnonzero(np.abs(xs - start) > 5 * sd2 + res)
+        n_rest = int(away[0]) if away.size else xs.size
+        if n_rest >= _MIN_REST:
+            t = np.arange(n_rest, dtype=float)
+            seg = xs[:n_rest]
+            fit = np.polyval(np.polyfit(t, seg, 2), t)
+            rest = float(np.std(seg - fit, ddof=3))
+            if rest > 0:
+                est, src = rest, f"rest segment ({n_rest} samples)"
+    if not (np.isfinite(est) and est > floor):
+        if floor > 0:
+            est, src = floor, "sensor resolution"
+        elif not (np.isfinite(est) and est > 0):
+            est, src = float("nan"), "constant signal"
+    return float(est), src
+
+
+def _channel_noise(values: np.ndarray, name: str, where: str) -> tuple[np.ndarray, str]:
+    """Per-component noise of a ``(T, k)`` channel; NaN components get a nominal 1 (they are invalid)."""
+    out, srcs = [], set()
+    for j in range(values.shape[1]):
+        col = values[:, j]
+        if not np.isfinite(col).any():
+            out.append(1.0)
+            continue
+        s, src = sample_noise(col)
+        if not (np.isfinite(s) and s > 0):
+            raise SchemaError(where, f"cannot estimate the noise of {name} component {'xyz'[j]} ({src}); "
+                              "give the record more samples or a rest segment")
+        out.append(s)
+        srcs.add(src.split(" (")[0])
+    return np.array(out), ", ".join(sorted(srcs)) or "none"
+
+
+def channels_from_record(record: RobotRecord, where: str = "record") -> dict[str, Channel]:
+    """``tip_force`` and ``tip_position`` channels (skin frame) of a robot record."""
+    out: dict[str, Channel] = {}
+    for name in ("tip_force", "tip_position"):
+        v = getattr(record, name)
+        if v is None or not np.isfinite(v).any():
+            continue
+        v = np.asarray(v, dtype=float) * _FLIP
+        noise, src = _channel_noise(v, name, f"{where}.{name}")
+        out[name] = Channel(name, record.time_s - record.time_s[0], v, np.isfinite(v), noise, src)
+    return out
+
+
+def track_noise(track: SurfaceTrack) -> tuple[np.ndarray, str]:
+    """Per-component noise [m] of a track by neighbour differences (module docstring)."""
+    from scipy.spatial import cKDTree
+
+    d = track.displacements()
+    ref = np.nanmean(np.where(track.valid[..., None], track.points, np.nan), axis=1)
+    ok = np.all(np.isfinite(ref), axis=1)
+    if ok.sum() < 8:
+        return np.full(3, np.nan), "too few points"
+    idx = np.flatnonzero(ok)
+    k = min(6, idx.size - 1)
+    _, nb = cKDTree(ref[idx]).query(ref[idx], k + 1)
+    nbmean = np.nanmean(d[idx][nb[:, 1:]], axis=1)
+    diff = d[idx] - nbmean
+    out = np.array([_mad(diff[..., j].ravel()) for j in range(3)]) / np.sqrt(1 + 1 / k)
+    return out, "neighbour differences"
+
+
+def channel_from_track(track: SurfaceTrack, attrs: dict[str, Any], where: str) -> Channel:
+    """A ``points`` channel, or ``points_2d`` when the track's attribute ``dimensions`` is 2."""
+    two_d = int(attrs.get("dimensions", 3)) == 2
+    k = 2 if two_d else 3
+    if "noise_m" in attrs:
+        noise = np.broadcast_to(np.asarray(attrs["noise_m"], dtype=float), (3,))[:k]
+        src = "tracker"
+    else:
+        noise, src = track_noise(track)
+        noise = noise[:k]
+        if two_d:
+            noise = np.full(2, float(np.nanmean(noise)))
+    if not np.all(np.isfinite(noise) & (noise > 0)):
+        raise SchemaError(where, f"cannot estimate the tracking noise ({src})")
+    pts = track.points[..., :k]
+    valid = np.repeat(track.valid[..., None], k, axis=2)
+    ref = np.where(track.valid[:, :1, None], track.points[:, :1, :], np.nan)[:, 0, :]
+    ref = np.where(np.isfinite(ref), ref, 0.0)
+    t = track.time_s
+    return Channel("points_2d" if two_d else "points", t, np.where(valid, pts, np.nan), valid, noise, src,
+                   reference=ref)
+
+
+def _read_experiment(path: Path, held_out: Sequence[str]) -> Observations:
+    from skinkit.store import open_experiment
+
+    protocols: dict[str, ProtocolObservations] = {}
+    with open_experiment(path) as exp:
+        tracks = set(exp.track_names())
+        names = exp.record_names()
+        # session order: by the time each record was written (its protocol order), else name
+        order = []
+        for n in names:
+            info = exp.record_info(n)
+            order.append((info.get("extra", {}).get("session_index", len(order)), n, info))
+        for _, name, info in sorted(order):
+            rec = exp.read_record(name)
+            chans = channels_from_record(rec, f"{path}:{name}")
+            if name in tracks:
+                tr = exp.read_track(name)
+                attrs = exp.track_attrs(name) if hasattr(exp, "track_attrs") else {}
+                ch = channel_from_track(tr, attrs, f"{path}:tracks/{name}")
+                chans[ch.name] = ch
+            ho = bool(info.get("extra", {}).get("held_out", False)) or name in held_out
+            protocols[name] = ProtocolObservations(rec.protocol, chans, ho)
+        profiles = exp.profile_names()
+        profile = None
+        if profiles:
+            profile = exp.read_profile("undeformed" if "undeformed" in profiles else profiles[0])
+    if not protocols:
+        raise StoreError(str(path), "records", "the session holds no robot record")
+    return Observations(protocols, profile, str(path))
+
+
+def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = (), axis: str = "z"
+                      ) -> Observations:
+    """The observations of a session file: an experiment file or a CSV record.
+
+    ``held_out``: protocol names to mark held out (in addition to those the file marks).
+    ``axis``: the tip axis of one-axis CSV columns (``displacement_mm``, ``force_N``).
+    Raises :class:`StoreError` / :class:`SchemaError` naming the file and what is wrong.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise StoreError(str(p), "", "no such session file")
+    if p.suffix.lower() == ".csv":
+        from skinkit.store import read_robot_csv
+
+        rec = read_robot_csv(p, axis=axis)
+        obs = Observations({rec.protocol.name: ProtocolObservations(
+            rec.protocol, channels_from_record(rec, str(p)), rec.protocol.name in held_out)}, None, str(p))
+    else:
+        obs = _read_experiment(p, held_out)
+    unknown = sorted(set(held_out) - set(obs.names))
+    if unknown:
+        raise SchemaError("--holdout", f"no protocol(s) {unknown} in {p} (it has {obs.names})")
+    return obs
+
+
+__all__ = ["channel_from_track", "channels_from_record", "read_observations", "sample_noise", "track_noise"]
