@@ -16,6 +16,7 @@ _BENCHES: dict[str, str] = {
     "sysid": "skinkit.bench.sysid:bench_sysid",
     "fem": "skinkit.bench.fem:bench_fem",
     "vision": "skinkit.bench.vision:bench_vision",
+    "forward": "skinkit.bench.forward:bench_forward",
 }
 
 

@@ -34,7 +34,7 @@ else:  # pragma: no cover
 
 TOP_KEYS = {"model", "geometry", "layers", "boundary", "indenter", "load", "solver", "output",
             # session-driven forward models (skinkit.forward) and candidate effects
-            "effects", "fields", "bindings", "instrument", "surface", "drive"}
+            "effects", "fields", "bindings", "instrument", "surface", "drive", "session"}
 
 
 def quantity(value: Any, unit: str, entry: str) -> float:

@@ -204,6 +204,7 @@ class HistorySensitivity:
         re, Ke = prob.evaluate(u, True, dt if viscous else None)
         K = solver.pattern.matrix(Ke)
         solver.linear.factor(K)
+        solver.factored = True
         n_el = g.edofs.shape[0]
         dre = np.zeros((npar, n_el, g.edofs.shape[1]))
         cache = {}

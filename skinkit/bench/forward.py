@@ -1,0 +1,158 @@
+"""``skinkit bench forward``: one session predicted serially, on 2 worker processes and on a
+Dask ``LocalCluster`` (same numbers, speed-up), and the in vivo 0.1 Hz protocol at scale.
+
+Part 1: the coarse in vivo model (``docs/models/invivo_quick.toml``, GOH + QLV skin) driven
+by the tip trajectories of four Table 12 protocols (normal indentation, in-plane 0° and 90°,
+out of plane 330°) with 36 tracked points, with sensitivities to every parameter; solved in
+this process (``workers = 1``), on 2 worker processes and on a 2-worker Dask cluster. Every
+solve runs on one thread, so the three must agree to the last bit; the ratio of wall times
+is the speed-up of protocol-level parallelism.
+
+Part 2: the in vivo model of ``docs/models/invivo_goh_qlv.toml`` (~10,000 unknowns, GOH + QLV)
+through the 0.1 Hz normal-indentation protocol (three periods, 1.5 mm peak to peak, 60
+steps): wall time, Newton iterations per step, assembly against linear-solve time.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from skinkit.schemas import Channel, Observations, ProtocolObservations
+
+_DOCS = Path(__file__).resolve().parents[2] / "docs" / "models"
+PROTOCOLS = ("normal_indentation", "in_plane_000", "in_plane_090", "out_of_plane_330")
+
+
+def ring_points(radii_m: tuple[float, ...] = (3e-3, 5e-3, 7e-3), n_angles: int = 12) -> np.ndarray:
+    """``(len(radii) * n_angles, 3)`` surface points on rings around the probe [m]."""
+    th = np.linspace(0, 2 * np.pi, n_angles, endpoint=False)
+    return np.array([[r * np.cos(a), r * np.sin(a), 0.0] for r in radii_m for a in th])
+
+
+def trajectory_observations(names: tuple[str, ...] = PROTOCOLS, rate_hz: float = 50.0,
+                            points: np.ndarray | None = None) -> Observations:
+    """Observations whose drive is each protocol's programmed tip trajectory (skin frame)."""
+    from skinkit.acquisition.library import make_protocol, programme
+
+    out = {}
+    pts = ring_points() if points is None else points
+    for n in names:
+        proto = make_protocol(n)
+        prog = programme(proto)
+        t = np.arange(0, prog.duration_s + 1e-9, 1.0 / rate_hz)
+        x = np.stack([np.interp(t, prog.time_s, prog.setpoints[:, j]) for j in range(3)], axis=1)
+        x[:, 2] *= -1.0   # robot frame (z into the skin) -> skin frame
+        frames = np.arange(0, prog.duration_s + 1e-9, 1.0)
+        chans = {"tip_position": Channel("tip_position", t, x, noise=1e-6),
+                 "tip_force": Channel("tip_force", t, np.zeros_like(x), noise=1e-3),
+                 "points": Channel("points", frames, np.repeat(pts[:, None], frames.size, 1), noise=5e-6,
+                                   reference=pts)}
+        out[n] = ProtocolObservations(proto, chans)
+    return Observations(out, None, "bench")
+
+
+def _flat(pred) -> np.ndarray:
+    parts = []
+    for _, _, cp in pred.items():
+        parts.append(cp.values.ravel())
+        parts.extend(cp.d[k].ravel() for k in sorted(cp.d))
+    return np.concatenate(parts)
+
+
+def run_parallel(model_path: Path = _DOCS / "invivo_quick.toml") -> dict[str, Any]:
+    """Part 1 of the module docstring."""
+    from dask.distributed import LocalCluster
+
+    from skinkit.forward import load
+
+    spec = _displacement_driven(model_path)
+    obs = trajectory_observations()
+    out: dict[str, Any] = {"model": str(model_path), "protocols": list(PROTOCOLS)}
+    results = {}
+    for label, kw in (("serial", {"workers": 1}), ("2_workers", {"workers": 2})):
+        m = load(spec, **kw)
+        if label == "2_workers":   # start the pool outside the timing, as a fit would
+            m.predict(m.parameters(), obs.select(PROTOCOLS[:2]))
+        t0 = time.perf_counter()
+        pred = m.predict(m.parameters(), obs, sensitivities=True)
+        out[f"wall_s_{label}"] = time.perf_counter() - t0
+        results[label] = _flat(pred)
+        out["newton_per_step"] = pred.info["newton_per_step"]
+        out["n_parameters"] = len(pred.methods)
+        out["n_dof"] = pred.info["n_dof"]
+        m.close()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        m = load(spec, scheduler=cluster.scheduler_address)
+        m.predict(m.parameters(), obs.select(PROTOCOLS[:2]))
+        t0 = time.perf_counter()
+        pred = m.predict(m.parameters(), obs, sensitivities=True)
+        out["wall_s_dask"] = time.perf_counter() - t0
+        results["dask"] = _flat(pred)
+    a = results["serial"]
+    out["identical"] = bool(all(np.array_equal(a, results[k]) for k in ("2_workers", "dask")))
+    out["max_abs_difference"] = float(max(np.max(np.abs(a - results[k])) for k in ("2_workers", "dask")))
+    out["speedup_2_workers"] = out["wall_s_serial"] / out["wall_s_2_workers"]
+    out["speedup_dask"] = out["wall_s_serial"] / out["wall_s_dask"]
+    return out
+
+
+def _displacement_driven(path: Path) -> dict[str, Any]:
+    from skinkit.forward import read_description
+
+    spec = read_description(path)
+    spec["indenter"] = {**spec.get("indenter", {}), "mode": "displacement"}
+    spec.pop("load", None)
+    return spec
+
+
+def run_invivo(model_path: Path = _DOCS / "invivo_goh_qlv.toml", sensitivities: bool = False) -> dict[str, Any]:
+    """Part 2 of the module docstring."""
+    from skinkit.forward import load
+
+    spec = _displacement_driven(model_path)
+    spec["drive"] = {"max_step": "0.5 s"}
+    obs = trajectory_observations(("normal_indentation",))
+    m = load(spec, workers=1)
+    t0 = time.perf_counter()
+    pred = m.predict(m.parameters(), obs, sensitivities=sensitivities)
+    wall = time.perf_counter() - t0
+    info = pred.info["protocols"]["normal_indentation"]
+    return {"model": str(model_path), "n_dof": info["n_dof"], "wall_s": wall, "steps": info["steps"],
+            "increments": info["increments"], "newton_iterations": info["newton_iterations"],
+            "newton_per_step": info["newton_per_step"], "assembly_s": info["assembly_s"],
+            "linear_solve_s": info["linear_solve_s"], "linear_solver": info["linear_solver"],
+            "sensitivities": sensitivities}
+
+
+@click.command("forward")
+@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
+@click.option("--skip-invivo", is_flag=True, help="Only the parallel part (the in vivo part takes minutes).")
+def bench_forward(as_json: bool, skip_invivo: bool) -> None:
+    """Forward model: serial vs 2 workers vs Dask (identical, speed-up); the in vivo 0.1 Hz protocol."""
+    res = run_parallel()
+    if not skip_invivo:
+        inv = run_invivo()
+        res["invivo"] = inv
+        res["invivo_newton_per_step"] = inv["newton_per_step"]
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    click.echo(f"session: {len(res['protocols'])} protocols of {res['model']} ({res['n_dof']} dof, "
+               f"{res['n_parameters']} sensitivities)")
+    click.echo(f"  serial     {res['wall_s_serial']:8.2f} s")
+    click.echo(f"  2 workers  {res['wall_s_2_workers']:8.2f} s   speed-up {res['speedup_2_workers']:.2f}x")
+    click.echo(f"  Dask       {res['wall_s_dask']:8.2f} s   speed-up {res['speedup_dask']:.2f}x")
+    click.echo(f"  identical numbers: {res['identical']} (max |difference| {res['max_abs_difference']:.3g})")
+    click.echo(f"  Newton iterations per step: {res['newton_per_step']:.2f}")
+    if "invivo" in res:
+        v = res["invivo"]
+        click.echo(f"in vivo 0.1 Hz normal indentation ({v['n_dof']} dof, {v['steps']} steps): "
+                   f"{v['wall_s']:.1f} s, {v['newton_per_step']:.2f} Newton iterations per step, "
+                   f"assembly {v['assembly_s']:.1f} s, linear solve {v['linear_solve_s']:.1f} s "
+                   f"({v['linear_solver']})")
