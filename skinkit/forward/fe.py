@@ -76,6 +76,11 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
     from skinkit.fem.model import build_model
     from skinkit.fem.solver import NewtonSolver
 
+    from skinkit.fem import linsolve
+
+    # load the sparse solver's libraries (MKL) first: a thread limit set before a library is
+    # loaded does not reach it, and a solve with two threads differs in the last bits
+    linsolve.make(str(dict(job.spec.get("solver", {}) or {}).get("linear", "auto")))
     with threadpool_limits(limits=1):
         t0 = time.perf_counter()
         spec = copy.deepcopy(job.spec)
