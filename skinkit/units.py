@@ -38,6 +38,10 @@ _UNITS: dict[str, tuple[str, float]] = {
     # lumped mechanics
     "N/m": ("N/m", 1.0), "kN/m": ("N/m", 1e3), "N/mm": ("N/m", 1e3),
     "N s/m": ("N s/m", 1.0), "N/A": ("N/A", 1.0),
+    # compliances and rates (instrument effects, elastic supports)
+    "m/N": ("m/N", 1.0), "mm/N": ("m/N", 1e-3), "um/N": ("m/N", 1e-6), "µm/N": ("m/N", 1e-6),
+    "m/Pa": ("m/Pa", 1.0), "mm/kPa": ("m/Pa", 1e-6), "um/kPa": ("m/Pa", 1e-9), "mm/Pa": ("m/Pa", 1e-3),
+    "N/s": ("N/s", 1.0), "mN/s": ("N/s", 1e-3), "m/s": ("m/s", 1.0), "mm/s": ("m/s", 1e-3),
     # angle
     "rad": ("rad", 1.0), "deg": ("rad", np.pi / 180.0),
     # image plane
