@@ -74,6 +74,16 @@ class BoundaryConditions:
     n_dof: int
     prescribed: list[Prescribed] = field(default_factory=list)
     rigid: Rigid | None = None
+    #: distributed elastic supports: (dofs, stiffness per dof [N/m]) — traction = -u / compliance
+    springs: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+
+    def support(self, nodes: np.ndarray, stiffness_N_per_m: np.ndarray) -> BoundaryConditions:
+        """Hold ``nodes`` by springs to ground, ``stiffness_N_per_m`` ``(len(nodes),)`` in every
+        direction; returns self."""
+        k = np.asarray(stiffness_N_per_m, dtype=float)
+        dofs = (3 * np.asarray(nodes)[:, None] + np.arange(3)[None, :]).ravel()
+        self.springs.append((dofs, np.repeat(k, 3)))
+        return self
 
     def fix(self, nodes: np.ndarray, components=(0, 1, 2)) -> BoundaryConditions:
         """Fix ``components`` of ``nodes`` at zero; returns self for chaining."""
@@ -117,6 +127,30 @@ class DofMap:
         if self.force_mode:
             self.map[self.rigid_dofs] = self.n_free + np.arange(rd.shape[1])[None, :]
         self.n_unknowns = self.n_free + (self.rigid_dofs.shape[1] if self.force_mode else 0)
+        # springs act on free dofs only (a dof also fixed stays fixed)
+        self.spring_dofs = np.zeros(0, dtype=np.int64)
+        self.spring_k = np.zeros(0)
+        if bc.springs:
+            d = np.concatenate([a for a, _ in bc.springs])
+            k = np.concatenate([b for _, b in bc.springs])
+            free_ = self.map[d] >= 0
+            self.spring_dofs, self.spring_k = d[free_], k[free_]
+
+    def spring_forces(self, u: np.ndarray) -> np.ndarray:
+        """``(n_unknowns,)`` spring forces k u on the reduced unknowns [N]."""
+        f = np.zeros(self.n_unknowns)
+        if self.spring_dofs.size:
+            np.add.at(f, self.map[self.spring_dofs], self.spring_k * u[self.spring_dofs])
+        return f
+
+    def spring_matrix(self):
+        """Sparse ``(n_unknowns, n_unknowns)`` diagonal spring stiffness, or None."""
+        if not self.spring_dofs.size:
+            return None
+        import scipy.sparse as sp
+        diag = np.zeros(self.n_unknowns)
+        np.add.at(diag, self.map[self.spring_dofs], self.spring_k)
+        return sp.diags(diag, format="csr")
 
     def apply_prescribed(self, u: np.ndarray, t: float) -> None:
         """Write the prescribed values at ``t`` into ``u`` (in place)."""

@@ -298,9 +298,10 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         raise ModelError("solver", str(exc)) from None
     problem = Problem(mesh, mats, intorder=intorder, fields=fields)
     bd = dict(spec.get("boundary", {}))
-    _check_keys(bd, {"fixed"}, "boundary")
+    _check_keys(bd, {"fixed", "compliance"}, "boundary")
     fixed = list(bd.get("fixed", ["outer", "bottom"] if "outer" in mesh.node_sets else ["bottom"]))
     bc = BoundaryConditions(mesh.n_dof)
+    fixed = _elastic_supports(bd.get("compliance"), mesh, fixed, bc)
     for s in fixed:
         if s not in mesh.node_sets:
             raise ModelError("boundary.fixed", f"no node set {s!r}; sets are {sorted(mesh.node_sets)}")
@@ -331,6 +332,48 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
     depth = quantity(outp.get("point_depth", 0.0), "m", "output.point_depth")
     return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed, points, depth,
                  bool(outp.get("sensitivities", False)), fields)
+
+
+def _elastic_supports(d: Any, mesh: FEMesh, fixed: list[str], bc: BoundaryConditions) -> list[str]:
+    """``[boundary] compliance = { sets = [...], value = c }``: the named sets (otherwise fixed)
+    are held by a distributed elastic support, traction = -u / c with c [m/Pa]; c = 0 keeps
+    them fixed, exactly. Returns the sets still fixed."""
+    if d is None:
+        return fixed
+    if not isinstance(d, Mapping):
+        raise ModelError("boundary.compliance", "must be a table { sets = [...], value = ... }")
+    _check_keys(d, {"sets", "value"}, "boundary.compliance")
+    sets = d.get("sets", [])
+    if isinstance(sets, str):
+        sets = [sets]
+    for s in sets:
+        if s not in mesh.node_sets:
+            raise ModelError("boundary.compliance.sets", f"no node set {s!r}; sets are {sorted(mesh.node_sets)}")
+    c = quantity(_get(d, "value", "boundary.compliance"), "m/Pa", "boundary.compliance.value")
+    if c < 0 or not math.isfinite(c):
+        raise ModelError("boundary.compliance.value", f"must be zero or positive, got {c}")
+    if c == 0:
+        return fixed
+    for s in sets:
+        area = nodal_areas(mesh, mesh.node_sets[s])
+        nodes = mesh.node_sets[s]
+        bc.support(nodes, area[nodes] / c)
+    return [s for s in fixed if s not in sets]
+
+
+def nodal_areas(mesh: FEMesh, nodes: np.ndarray) -> np.ndarray:
+    """``(N,)`` ∫ Nₐ dA over the boundary faces whose nodes all lie in ``nodes`` [m²]."""
+    from skfem import ElementHex2, FacetBasis, LinearForm, asm
+
+    m2 = mesh.skfem_mesh()
+    inset = np.zeros(mesh.n_nodes, bool)
+    inset[nodes] = True
+    bf = m2.boundary_facets()
+    facets = bf[np.all(inset[m2.facets[:, bf]], axis=0)]
+    if facets.size == 0:
+        raise ModelError("boundary.compliance.sets", "the set has no boundary face to support")
+    fb = FacetBasis(m2, ElementHex2(), facets=facets, intorder=4)
+    return asm(LinearForm(lambda v, w: v), fb)
 
 
 def _no_load() -> LoadProgramme:

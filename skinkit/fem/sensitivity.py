@@ -202,7 +202,7 @@ class HistorySensitivity:
         prob.t = t
         viscous = dt is not None and prob.viscous
         re, Ke = prob.evaluate(u, True, dt if viscous else None)
-        K = solver.pattern.matrix(Ke)
+        K = solver.tangent(Ke)
         solver.linear.factor(K)
         solver.factored = True
         n_el = g.edofs.shape[0]

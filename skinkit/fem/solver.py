@@ -24,6 +24,12 @@ from skinkit.fem.errors import InvertedElementError, SolverError
 from skinkit.fem.problem import Problem
 
 
+def sp_triu(A):
+    """The upper triangle of a sparse matrix (the half PARDISO's symmetric mode reads)."""
+    import scipy.sparse as sp
+    return sp.triu(A, format="csr")
+
+
 @dataclass
 class SolverOptions:
     """Newton and stepping controls.
@@ -90,6 +96,7 @@ class NewtonSolver:
         self.linear = linsolve.make(self.options.linear)
         self.pattern = SparsePattern(problem.geom.edofs, self.dofmap.map, self.dofmap.n_unknowns,
                                      upper=self.linear.upper)
+        self._springs = self.dofmap.spring_matrix()
         self.timings = Timings()
         self.steps_taken = 0
         #: a factorisation of a recent tangent is held by the linear solver
@@ -97,12 +104,19 @@ class NewtonSolver:
         # after the linear solver has loaded its libraries, so the controller sees them all
         threads.warm()
 
+    def tangent(self, Ke: np.ndarray):
+        """The reduced tangent from element tangents ``Ke``, with any elastic supports."""
+        K = self.pattern.matrix(Ke)
+        if self._springs is not None:
+            K = (K + (sp_triu(self._springs) if self.linear.upper else self._springs)).tocsr()
+        return K
+
     def _residual(self, u: np.ndarray, t: float, dt: float | None, with_tangent: bool):
         t0 = time.perf_counter()
         re, Ke = self.problem.evaluate(u, with_tangent, dt)
         self._last_re = re
-        r = self.pattern.vector(re) - self.dofmap.external(t)
-        K = self.pattern.matrix(Ke) if with_tangent else None
+        r = self.pattern.vector(re) - self.dofmap.external(t) + self.dofmap.spring_forces(u)
+        K = self.tangent(Ke) if with_tangent else None
         dt_ = time.perf_counter() - t0
         self.timings.assembly += dt_
         if with_tangent:
@@ -202,8 +216,8 @@ class NewtonSolver:
         t0 = time.perf_counter()
         re, Ke = self.problem.evaluate(u_old, True, dt)
         re = re + np.einsum("eij,ej->ei", Ke, dup[self.problem.geom.edofs])
-        rhs = self.pattern.vector(re) - self.dofmap.external(t)
-        K = self.pattern.matrix(Ke)
+        rhs = self.pattern.vector(re) - self.dofmap.external(t) + self.dofmap.spring_forces(u_new)
+        K = self.tangent(Ke)
         self.timings.assembly += time.perf_counter() - t0
         self.timings.tangent += time.perf_counter() - t0
         self.timings.tangent_assemblies += 1
