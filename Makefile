@@ -12,7 +12,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml plugins/pyproject.toml hardware/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,dev,bench]" -e ./plugins -e ./hardware
+	$(BIN)/python -m pip install --quiet -e ".[test,dev,bench,cluster]" -e ./plugins -e ./hardware
 	touch $(STAMP)
 
 demo: venv

@@ -31,6 +31,7 @@ _COMMANDS: dict[str, str] = {
     "convergence": "skinkit.cli.fem:convergence",
     "sysid": "skinkit.cli.sysid:sysid",
     "vision": "skinkit.cli.vision:vision",
+    "predict": "skinkit.cli.predict:predict",
 }
 
 

@@ -1,0 +1,110 @@
+"""``skinkit predict``: a model file driven by a session; how far its predictions are from the data."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from skinkit.errors import SkinkitError
+
+
+def _names(text: str | None) -> list[str]:
+    return [s.strip() for s in text.split(",") if s.strip()] if text else []
+
+
+@click.command("predict")
+@click.argument("model_file", type=click.Path(dir_okay=False))
+@click.argument("session", type=click.Path(dir_okay=False))
+@click.option("--protocols", default=None, help="only these protocols (comma-separated)")
+@click.option("--holdout", default=None, help="mark these protocols held out (comma-separated)")
+@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE",
+              help="override a parameter (SI value or '<number> <unit>'), repeatable")
+@click.option("--sensitivities", is_flag=True, help="also compute every parameter's sensitivities")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="worker processes for the protocols (default: one per core)")
+@click.option("--scheduler", default=None, help="a Dask scheduler address to solve the protocols on")
+@click.option("--axis", type=click.Choice(["x", "y", "z"]), default=None,
+              help="tip axis of a one-axis CSV record (default: the model's, else z)")
+@click.option("--out", "out_file", type=click.Path(dir_okay=False), default=None,
+              help="write the predictions (HDF5) here")
+@click.option("--json", "as_json", is_flag=True, help="print the residual summary as JSON")
+def predict(model_file: str, session: str, protocols: str | None, holdout: str | None, sets: tuple[str, ...],
+            sensitivities: bool, workers: int | None, scheduler: str | None, axis: str | None,
+            out_file: str | None, as_json: bool) -> None:
+    """Predict SESSION (experiment file or CSV record) with MODEL_FILE; report the residuals."""
+    from skinkit.fem.model import quantity
+    from skinkit.forward import load, read_observations
+    from skinkit.forward.residuals import summarise
+
+    model = load(model_file, workers=workers, scheduler=scheduler)
+    if axis is None:
+        axis = str(getattr(model, "axis", "z")) if str(getattr(model, "axis", "z")) in "xyz" else "z"
+    obs = read_observations(session, held_out=_names(holdout), axis=axis)
+    if protocols:
+        obs = obs.select(_names(protocols))
+    params = model.parameters()
+    values = {}
+    for item in sets:
+        name, eq, val = item.partition("=")
+        if not eq:
+            raise SkinkitError(f"--set {item!r}: expected NAME=VALUE")
+        name = name.strip()
+        if name not in params:
+            raise SkinkitError(f"--set {name!r}: no such parameter; the model has {params.names}")
+        values[name] = quantity(val.strip() if not _is_number(val) else float(val), params.param(name).unit,
+                                f"--set {name}")
+    params = params.with_values(values) if values else params
+    pred = model.predict(params, obs, sensitivities=sensitivities)
+    summary = summarise(pred, obs)
+    summary["model"] = model.name
+    summary["session"] = str(session)
+    summary["inputs"] = pred.inputs
+    summary["methods"] = pred.methods
+    summary["solver"] = {k: v for k, v in pred.info.items() if k != "protocols"}
+    if out_file:
+        _write(Path(out_file), pred, summary)
+        summary["file"] = out_file
+    if hasattr(model, "close"):
+        model.close()
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, default=float))
+        return
+    click.echo(f"{model.name} on {session}: chi2/sample {summary['chi2_per_sample']:.3g} over "
+               f"{summary['samples']} samples (noise alone: {summary['noise_only_range_999'][0]:.3g}.."
+               f"{summary['noise_only_range_999'][1]:.3g})")
+    for proto, chans in summary["protocols"].items():
+        for cname, c in chans.items():
+            rms = ", ".join(f"{v:.3g}" for v in c["rms"])
+            click.echo(f"  {proto:24s} {cname:13s} chi2/n {c['chi2_per_sample']:9.3g}  rms [{rms}] {c['unit']}"
+                       f"{'  (held out)' if c['held_out'] else ''}")
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _write(path: Path, pred, summary: dict) -> None:
+    """Predictions and sensitivities as HDF5 (written to a temporary name, then renamed)."""
+    import os
+
+    import h5py
+
+    tmp = path.with_name(path.name + ".part")
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["summary"] = json.dumps(summary, default=float)
+            for proto, cname, cp in pred.items():
+                g = f.require_group(f"{proto}/{cname}")
+                g.create_dataset("values", data=cp.values)
+                for k, d in cp.d.items():
+                    g.create_dataset(f"d/{k}", data=d)
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise SkinkitError(f"--out {path}: cannot write ({exc.strerror or exc})") from None
