@@ -1,0 +1,225 @@
+"""The finite-element forward model driven by a session: sensitivities, workers, surfaces, errors."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from skinkit.errors import ForwardError, SchemaError
+from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations, SurfaceProfile
+
+pytestmark = pytest.mark.needs_plugins
+
+#: a small layered disc: QLV skin with pre-stretch, an inclusion, a softening history
+SPEC = {
+    "model": {"name": "small"},
+    "geometry": {"kind": "disc", "diameter": "20 mm", "indenter_diameter": "4 mm", "n_inner": 2, "n_ring": 2},
+    "layers": [
+        {"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "qlv",
+         "options": {"elastic": "neo-hookean-ni", "terms": 1},
+         "parameters": {"mu": "15 kPa", "K": "500 kPa", "g1": 0.3, "tau1": "2 s"},
+         "prestress": {"stretch": [1.05, 1.02], "angle": "20 deg"}},
+        {"name": "subdermal", "thickness": "3.5 mm", "elements": 1, "law": "neo-hookean-enu",
+         "parameters": {"E": "10 kPa", "nu": 0.45}},
+    ],
+    "fields": [
+        {"name": "inc", "kind": "inclusion", "layers": ["skin"], "x": "2 mm", "y": "1 mm", "radius": "2 mm",
+         "ratio": 2.0},
+        {"name": "band", "kind": "band", "layers": ["subdermal"], "depth": "2 mm", "half_width": "0.5 mm",
+         "ratio": 0.5},
+        {"name": "soft", "kind": "softening", "layers": ["skin"], "softening": 0.2},
+    ],
+    "indenter": {"mode": "force"},
+    "drive": {"max_step": "1 s"},
+    "solver": {"rtol": 1e-12},
+}
+REF = np.array([[3e-3, 0, 0], [0, 4e-3, 0], [-5e-3, -2e-3, 0], [1e-3, 1e-3, 0]])
+
+
+def session(mode: str = "force", two: bool = False) -> Observations:
+    """Two protocols of a 0.1 Hz sinusoid (normal and oblique) at 100 Hz, points at 1 Hz."""
+    T = np.arange(0, 10.0001, 0.01)
+    s = 0.5 * (1 - np.cos(2 * np.pi * 0.1 * T))
+    out = {}
+    for name, direc in (("normal", (0, 0, -1)), ("oblique", (0.3, 0.2, -1)))[: 2 if two else 1]:
+        d = np.asarray(direc, float)
+        F = 0.01 * s[:, None] * d
+        X = 0.5e-3 * s[:, None] * d
+        tf = np.arange(0, 10.0001, 1.0)
+        chans = {"tip_force": Channel("tip_force", T, F, noise=1e-4),
+                 "tip_position": Channel("tip_position", T, X if mode == "displacement" else 0 * X, noise=1e-6),
+                 "points": Channel("points", tf, np.repeat(REF[:, None], tf.size, 1), noise=5e-6, reference=REF)}
+        out[name] = ProtocolObservations(Protocol(name), chans)
+    return Observations(out, None, "test")
+
+
+@pytest.fixture(scope="module")
+def forward():
+    from skinkit.forward import load
+    try:  # TEMPORARY until skinkit.forward.instrument lands
+        import skinkit.forward.instrument  # noqa: F401
+    except ImportError:
+        import types
+
+        import skinkit.forward.fe as fe
+        fe._instrument = lambda: types.SimpleNamespace(
+            parse=lambda e: [], drive=lambda e, n, t, v, names: (v, {}),
+            measure=lambda e, n, t, v, d, tr, names: (v, d))
+    return lambda spec, **kw: load(spec, **{"workers": 1, **kw})
+
+
+@pytest.mark.parametrize("mode", ["force", "displacement"])
+def test_sensitivities_match_central_differences(forward, mode):
+    """Every law, Prony, pre-stretch and field parameter, through the viscous history.
+
+    Tolerance: the central difference with h = 1e-6 of the parameter's size has a
+    truncation error ~h² |f'''| (1e-12 relative) and a solver error ~rtol |f| / h = 1e-6
+    relative; 2e-5 of the channel's largest derivative leaves a margin of 20."""
+    spec = copy.deepcopy(SPEC)
+    spec["indenter"]["mode"] = mode
+    m = forward(spec)
+    obs = session(mode)
+    pset = m.parameters()
+    pred = m.predict(pset, obs, sensitivities=True)
+    assert set(pred.methods) == set(pset.names)
+    assert set(pred.methods.values()) == {"analytic"}
+    worst = 0.0
+    for p in pset:
+        h = 1e-6 * max(abs(p.value), 1e-3)
+        up = m.predict(pset.with_values({p.name: p.value + h}), obs)
+        dn = m.predict(pset.with_values({p.name: p.value - h}), obs)
+        for (proto, c, cp), (_, _, u), (_, _, d) in zip(pred.items(), up.items(), dn.items(), strict=True):
+            fd = (u.values - d.values) / (2 * h)
+            scale = max(np.abs(fd).max(), np.abs(cp.d[p.name]).max())
+            if scale == 0:
+                continue
+            err = np.abs(cp.d[p.name] - fd).max() / scale
+            worst = max(worst, err)
+            assert err < 2e-5, (p.name, proto, c, err)
+    assert worst > 0
+
+
+def test_workers_give_identical_numbers(forward):
+    """Two protocols in this process and on two worker processes: the same bits."""
+    obs = session(two=True)
+    a = forward(SPEC, workers=1)
+    b = forward(SPEC, workers=2)
+    pa = a.predict(a.parameters(), obs, sensitivities=["skin.mu", "skin.prestretch.l1"])
+    pb = b.predict(b.parameters(), obs, sensitivities=["skin.mu", "skin.prestretch.l1"])
+    b.close()
+    for (_, _, x), (_, _, y) in zip(pa.items(), pb.items(), strict=True):
+        assert np.array_equal(x.values, y.values)
+        for k in x.d:
+            assert np.array_equal(x.d[k], y.d[k])
+
+
+def test_predictions_on_exactly_the_observed_times_and_points(forward):
+    m = forward(SPEC)
+    obs = session()
+    pred = m.predict(m.parameters(), obs)
+    assert pred.inputs == {"normal": "tip_force"}
+    assert set(pred.protocols["normal"]) == {"tip_position", "points"}
+    for c in ("tip_position", "points"):
+        assert pred.protocols["normal"][c].values.shape == obs["normal"].channels[c].values.shape
+    # the unloaded first frame: points where they were measured
+    assert np.allclose(pred.protocols["normal"]["points"].values[:, 0], REF, atol=1e-12)
+    # pushing into the skin moves the tip down, by less than the skin's thickness
+    z = pred.protocols["normal"]["tip_position"].values[:, 2]
+    assert z.min() < 0 and z.min() > -5e-3
+
+
+def test_fields_at_unit_factor_are_the_model_without_them(forward):
+    """φ = 1 exactly: ratio 1 and softening 0 give the bits of the model without fields."""
+    spec = copy.deepcopy(SPEC)
+    bare = copy.deepcopy(SPEC)
+    bare.pop("fields")
+    spec["fields"][0]["ratio"] = 1.0
+    spec["fields"][1]["ratio"] = 1.0
+    spec["fields"][2]["softening"] = 0.0
+    obs = session()
+    a, b = forward(spec), forward(bare)
+    pa = a.predict(a.parameters(), obs)
+    pb = b.predict(b.parameters(), obs)
+    for (_, _, x), (_, _, y) in zip(pa.items(), pb.items(), strict=True):
+        assert np.max(np.abs(x.values - y.values)) <= 1e-12 * np.max(np.abs(y.values))
+
+
+def _cap(R: float = 0.05, n: int = 41, half: float = 0.012) -> SurfaceProfile:
+    """A spherical cap z = sqrt(R² - r²) - R (top at 0) sampled on a grid [m]."""
+    g = np.linspace(-half, half, n)
+    X, Y = np.meshgrid(g, g)
+    Z = np.sqrt(R ** 2 - X ** 2 - Y ** 2) - R
+    pts = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+    return SurfaceProfile(pts, np.ones(len(pts)))
+
+
+def test_points_embedded_along_the_true_normal():
+    """On a sphere of radius R the normal points to the centre. A measured surface point is
+    moved onto the fitted surface and then d along its normal: exactly d along the returned
+    normal, which is the sphere's to the slope error of the fitted surface, and on the sphere
+    of radius R - d to the height error of the fit (bounded by twice the fit's own largest
+    misfit at the profile points, plus the µm of interpolating between them)."""
+    from skinkit.fem.embed import fit_surface, surface_points
+    from skinkit.fem.model import build_mesh
+    mesh = build_mesh(SPEC)
+    R = 0.05
+    fit = fit_surface(mesh, _cap(R).points, 1.5e-3, keep=())
+    th = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    xy = np.column_stack([5e-3 * np.cos(th), 5e-3 * np.sin(th)])
+    top = np.column_stack([xy, np.sqrt(R ** 2 - (xy ** 2).sum(1)) - R])
+    d = 0.5e-3
+    on, n0 = surface_points(fit.mesh, top, 0.0)
+    emb, n = surface_points(fit.mesh, top, d)
+    assert np.allclose(on - emb, d * n, atol=1e-15)
+    centre = np.array([0, 0, -R])
+    tol = 2 * fit.max_abs + 1e-6
+    assert np.allclose(np.linalg.norm(on - centre, axis=1), R, atol=tol)
+    assert np.allclose(np.linalg.norm(emb - centre, axis=1), R - d, atol=tol)
+    # the normal: the sphere's, within the slope error (height error over the element size)
+    assert np.allclose(n, (on - centre) / np.linalg.norm(on - centre, axis=1)[:, None], atol=tol / 1e-3)
+    # the measured point lies on the normal through its surface point (projection along it)
+    off = top - on
+    assert np.allclose(off - np.einsum("mi,mi->m", off, n)[:, None] * n, 0, atol=1e-9)
+
+
+def test_profile_that_does_not_cover_the_mesh_is_refused(forward):
+    spec = copy.deepcopy(SPEC)
+    spec["surface"] = {"fit": True}
+    obs = session()
+    small = _cap(half=0.004)
+    obs = Observations(obs.protocols, small, "test")
+    m = forward(spec)
+    with pytest.raises(ForwardError, match="does not cover the mesh"):
+        m.predict(m.parameters(), obs)
+    spec["surface"]["outside"] = "nearest"
+    pred = forward(spec).predict(m.parameters(), obs)
+    assert np.isfinite(pred.protocols["normal"]["tip_position"].values).all()
+
+
+def test_session_lacking_the_drive_channel_is_named(forward):
+    obs = session()
+    po = obs["normal"]
+    chans = {k: v for k, v in po.channels.items() if k != "tip_force"}
+    bad = Observations({"normal": ProtocolObservations(po.protocol, chans)}, None, "x")
+    m = forward(SPEC)
+    with pytest.raises(ForwardError, match="'normal'.*tip_force"):
+        m.predict(m.parameters(), bad)
+
+
+def test_point_outside_the_model_is_named(forward):
+    obs = session()
+    po = obs["normal"]
+    far = np.array([[0.05, 0, 0]])
+    ch = Channel("points", po.channels["points"].time_s, np.repeat(far[:, None], 11, 1), noise=5e-6, reference=far)
+    bad = Observations({"normal": ProtocolObservations(po.protocol, {**po.channels, "points": ch})}, None, "x")
+    m = forward(SPEC)
+    with pytest.raises(ForwardError, match="outside"):
+        m.predict(m.parameters(), bad)
+
+
+def test_unknown_parameter_is_named(forward):
+    m = forward(SPEC)
+    with pytest.raises(SchemaError, match="nope"):
+        m.predict(m.parameters(), session(), sensitivities=["nope"])
