@@ -111,7 +111,8 @@ def _displacement_driven(path: Path) -> dict[str, Any]:
     return spec
 
 
-def run_invivo(model_path: Path = _DOCS / "invivo_goh_qlv.toml", sensitivities: bool = False) -> dict[str, Any]:
+def run_invivo(model_path: Path = _DOCS / "invivo_goh_qlv.toml",
+               sensitivities: bool = False) -> dict[str, Any]:
     """Part 2 of the module docstring."""
     from skinkit.forward import load
 

@@ -77,7 +77,8 @@ def predict(model_file: str, session: str, protocols: str | None, holdout: str |
     for proto, chans in summary["protocols"].items():
         for cname, c in chans.items():
             rms = ", ".join(f"{v:.3g}" for v in c["rms"])
-            click.echo(f"  {proto:24s} {cname:13s} chi2/n {c['chi2_per_sample']:9.3g}  rms [{rms}] {c['unit']}"
+            click.echo(f"  {proto:24s} {cname:13s} chi2/n {c['chi2_per_sample']:9.3g}  "
+                       f"rms [{rms}] {c['unit']}"
                        f"{'  (held out)' if c['held_out'] else ''}")
 
 

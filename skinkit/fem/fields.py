@@ -52,7 +52,8 @@ class Field:
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
-            raise ModelError(f"fields[{self.name}].kind", f"must be one of {sorted(KINDS)}, got {self.kind!r}")
+            raise ModelError(f"fields[{self.name}].kind",
+                             f"must be one of {sorted(KINDS)}, got {self.kind!r}")
         need, opt = KINDS[self.kind]
         missing = [k for k in need if k not in self.params]
         if missing:
@@ -101,7 +102,8 @@ class Field:
         return np.imag(np.asarray(self._phi(p, Xq.astype(complex), depth.astype(complex), t))) / _CS
 
 
-def read_fields(tables: Any, layer_names: list[str], quantity: Callable[[Any, str, str], float]) -> list[Field]:
+def read_fields(tables: Any, layer_names: list[str],
+                quantity: Callable[[Any, str, str], float]) -> list[Field]:
     """``[[fields]]`` tables -> :class:`Field` list (errors name ``fields[i].<key>``)."""
     if tables is None:
         return []

@@ -348,7 +348,8 @@ def _elastic_supports(d: Any, mesh: FEMesh, fixed: list[str], bc: BoundaryCondit
         sets = [sets]
     for s in sets:
         if s not in mesh.node_sets:
-            raise ModelError("boundary.compliance.sets", f"no node set {s!r}; sets are {sorted(mesh.node_sets)}")
+            raise ModelError("boundary.compliance.sets",
+                             f"no node set {s!r}; sets are {sorted(mesh.node_sets)}")
     c = quantity(_get(d, "value", "boundary.compliance"), "m/Pa", "boundary.compliance.value")
     if c < 0 or not math.isfinite(c):
         raise ModelError("boundary.compliance.value", f"must be zero or positive, got {c}")

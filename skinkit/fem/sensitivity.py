@@ -102,7 +102,8 @@ def parameter_list(problem: Problem, drive_names: tuple[str, ...] = ()) -> list[
             kind = "prony" if pr and _PRONY.match(n) else "law"
             out.append(_Par(f"{m.region}.{n}", kind, k, n))
         if m.prestress is not None:
-            out.extend(_Par(f"{m.region}.{n}", "prestretch", k, str(i)) for i, n in enumerate(PRESTRESS_NAMES))
+            out.extend(_Par(f"{m.region}.{n}", "prestretch", k, str(i))
+                       for i, n in enumerate(PRESTRESS_NAMES))
     for f in problem.fields:
         out.extend(_Par(n, "field") for n in f.parameter_names)
     out.extend(_Par(n, "drive") for n in drive_names)

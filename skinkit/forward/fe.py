@@ -73,10 +73,9 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
     state) with their derivatives. Runs with one thread (see the module docstring)."""
     from threadpoolctl import threadpool_limits
 
+    from skinkit.fem import linsolve
     from skinkit.fem.model import build_model
     from skinkit.fem.solver import NewtonSolver
-
-    from skinkit.fem import linsolve
 
     # load the sparse solver's libraries (MKL) first: a thread limit set before a library is
     # loaded does not reach it, and a solve with two threads differs in the last bits
@@ -188,7 +187,7 @@ class FEForwardModel:
         bound = dict(eff.get("bindings", {}))
         hidden = set(bound.values())
         effect_names = {f"{e.name}.{k}" for e in self.effects for k in e.declared}
-        for k, m in enumerate(self._check.problem.materials):
+        for m in self._check.problem.materials:
             for q in m.law.parameters():
                 nm = f"{m.region}.{q.name}"
                 if nm not in hidden:
@@ -295,7 +294,8 @@ class FEForwardModel:
             pred.methods[nm] = {"fe": "analytic", "instrument": "analytic", "fd": "central-difference"}[m]
         infos = [r["info"] for r in results.values()]
         steps = sum(i["increments"] for i in infos)
-        pred.info = {"wall_s": time.perf_counter() - t0, "protocols": {k: r["info"] for k, r in results.items()},
+        pred.info = {"wall_s": time.perf_counter() - t0,
+                     "protocols": {k: r["info"] for k, r in results.items()},
                      "newton_per_step": sum(i["newton_iterations"] for i in infos) / max(steps, 1),
                      "n_dof": infos[0]["n_dof"] if infos else 0}
         self.last_info = pred.info
@@ -344,7 +344,8 @@ class FEForwardModel:
             except ModelError as exc:
                 raise ForwardError("surface", str(exc)) from None
             nodes = mesh.nodes
-        depth = quantity(dict(spec.get("output", {}) or {}).get("point_depth", 0.0), "m", "output.point_depth")
+        depth = quantity(dict(spec.get("output", {}) or {}).get("point_depth", 0.0), "m",
+                         "output.point_depth")
         return mesh, nodes, depth
 
     def _embed(self, mesh, ch, depth: float, where: str):
@@ -430,7 +431,8 @@ class FEForwardModel:
         from concurrent.futures import ProcessPoolExecutor
         if self._pool is None or self._pool_size != workers:
             self.close()
-            self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(max_workers=workers,
+                                             mp_context=multiprocessing.get_context("spawn"))
             self._pool_size = workers
         return {r["name"]: r for r in self._pool.map(solve_protocol, jobs)}
 
@@ -438,13 +440,15 @@ class FEForwardModel:
         try:
             from dask.distributed import Client
         except ImportError:
-            raise ForwardError("--scheduler", "needs dask.distributed (pip install 'skinkit[cluster]')") from None
+            raise ForwardError("--scheduler",
+                               "needs dask.distributed (pip install 'skinkit[cluster]')") from None
         sched = self.scheduler
         address = sched if isinstance(sched, str) else getattr(sched, "scheduler_address", sched)
         try:
             client = Client(address, timeout="10s", set_as_default=False)
         except (OSError, TimeoutError) as exc:
-            raise ForwardError("--scheduler", f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
+            raise ForwardError("--scheduler",
+                               f"cannot reach the Dask scheduler at {address!r}: {exc}") from None
         try:
             futures = client.map(solve_protocol, jobs, pure=False)
             return {r["name"]: r for r in client.gather(futures)}
@@ -494,7 +498,8 @@ class FEForwardModel:
                 ch = po.channels[cname]
                 k = ch.values.shape[2]
                 pts = np.moveaxis(_cubic(tk, r["points"][:, start:start + P], ch.time_s), 0, 1)[..., :k]
-                d = {nm: np.moveaxis(_cubic(tk, r["d_points"][:, start:start + P, :, j], ch.time_s), 0, 1)[..., :k]
+                dp = r["d_points"][:, start:start + P]
+                d = {nm: np.moveaxis(_cubic(tk, dp[..., j], ch.time_s), 0, 1)[..., :k]
                      for j, nm in enumerate(col_names)}
                 true[cname] = (pts, d)
                 start += P
@@ -537,7 +542,8 @@ class FEForwardModel:
             dn = self.predict(params.with_values({nm: lo}), observations)
             for proto, chans in pred.protocols.items():
                 for cname, cp in chans.items():
-                    cp.d[nm] = (up.protocols[proto][cname].values - dn.protocols[proto][cname].values) / (hi - lo)
+                    diff = up.protocols[proto][cname].values - dn.protocols[proto][cname].values
+                    cp.d[nm] = diff / (hi - lo)
 
 
 __all__ = ["DEFAULT_MAX_STEP", "FEForwardModel", "ProtocolJob", "solve_protocol"]

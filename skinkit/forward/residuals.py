@@ -37,8 +37,8 @@ def summarise(prediction: Prediction, observations: Observations) -> dict[str, A
         z = r / ch.noise
         n = int(m.sum())
         c2 = float(np.sum(z[m] ** 2))
-        rms = np.sqrt(np.sum(r ** 2, axis=tuple(range(r.ndim - 1))) / np.maximum(m.sum(axis=tuple(range(r.ndim - 1))),
-                                                                               1))
+        lead = tuple(range(r.ndim - 1))
+        rms = np.sqrt(np.sum(r ** 2, axis=lead) / np.maximum(m.sum(axis=lead), 1))
         out["protocols"].setdefault(proto, {})[cname] = {
             "samples": n, "chi2": c2, "chi2_per_sample": c2 / n if n else float("nan"),
             "rms": rms.tolist(), "noise": ch.noise.tolist(), "unit": ch.unit,

@@ -76,7 +76,7 @@ class Channel:
         T = self.time_s.size
         want = (T, k) if lead == 0 else (None, T, k)
         if v.ndim != len(want) or any(w is not None and w != s for w, s in zip(want, v.shape, strict=True)):
-            shape = "(T, %d)" % k if lead == 0 else "(P, T, %d)" % k
+            shape = f"(T, {k})" if lead == 0 else f"(P, T, {k})"
             raise SchemaError(f"{f}.values", f"expected shape {shape} with T = {T}, got {v.shape}")
         self.values = v
         if self.valid is None:
@@ -171,7 +171,8 @@ class Observations:
     def __post_init__(self) -> None:
         for k, p in self.protocols.items():
             if not isinstance(p, ProtocolObservations) or p.name != k:
-                raise SchemaError(f"Observations.protocols[{k!r}]", "must be ProtocolObservations of that name")
+                raise SchemaError(f"Observations.protocols[{k!r}]",
+                                  "must be ProtocolObservations of that name")
 
     def __iter__(self) -> Iterator[ProtocolObservations]:
         return iter(self.protocols.values())
@@ -183,7 +184,8 @@ class Observations:
         try:
             return self.protocols[name]
         except KeyError:
-            raise SchemaError("session", f"has no protocol {name!r} (it has {list(self.protocols)})") from None
+            raise SchemaError("session",
+                              f"has no protocol {name!r} (it has {list(self.protocols)})") from None
 
     @property
     def names(self) -> list[str]:

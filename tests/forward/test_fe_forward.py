@@ -48,9 +48,11 @@ def session(mode: str = "force", two: bool = False) -> Observations:
         F = 0.01 * s[:, None] * d
         X = 0.5e-3 * s[:, None] * d
         tf = np.arange(0, 10.0001, 1.0)
+        pos = X if mode == "displacement" else 0 * X
         chans = {"tip_force": Channel("tip_force", T, F, noise=1e-4),
-                 "tip_position": Channel("tip_position", T, X if mode == "displacement" else 0 * X, noise=1e-6),
-                 "points": Channel("points", tf, np.repeat(REF[:, None], tf.size, 1), noise=5e-6, reference=REF)}
+                 "tip_position": Channel("tip_position", T, pos, noise=1e-6),
+                 "points": Channel("points", tf, np.repeat(REF[:, None], tf.size, 1), noise=5e-6,
+                                   reference=REF)}
         out[name] = ProtocolObservations(Protocol(name), chans)
     return Observations(out, None, "test")
 
@@ -212,8 +214,10 @@ def test_point_outside_the_model_is_named(forward):
     obs = session()
     po = obs["normal"]
     far = np.array([[0.05, 0, 0]])
-    ch = Channel("points", po.channels["points"].time_s, np.repeat(far[:, None], 11, 1), noise=5e-6, reference=far)
-    bad = Observations({"normal": ProtocolObservations(po.protocol, {**po.channels, "points": ch})}, None, "x")
+    ch = Channel("points", po.channels["points"].time_s, np.repeat(far[:, None], 11, 1), noise=5e-6,
+                 reference=far)
+    bad = Observations({"normal": ProtocolObservations(po.protocol, {**po.channels, "points": ch})},
+                       None, "x")
     m = forward(SPEC)
     with pytest.raises(ForwardError, match="outside"):
         m.predict(m.parameters(), bad)
