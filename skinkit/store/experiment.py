@@ -37,8 +37,25 @@ def _one_line(exc: BaseException) -> str:
 _F = TypeVar("_F", bound=Callable[..., Any])
 
 
+#: modules whose exceptions, raised while reading, come from the file's content
+_FILE_MODULES = ("h5py", "json")
+
+
+def _from_file(exc: BaseException) -> bool:
+    """True when ``exc`` was raised inside the HDF5 or JSON readers (a damaged or foreign
+    file), False when skinkit's own code raised it (a bug, which must propagate)."""
+    tb = exc.__traceback__
+    last = None
+    while tb is not None:
+        last = tb.tb_frame
+        tb = tb.tb_next
+    name = "" if last is None else str(last.f_globals.get("__name__", ""))
+    return isinstance(exc, OSError) or name.split(".")[0] in _FILE_MODULES
+
+
 def _reading(method: _F) -> _F:
-    """Turn what HDF5 raises on a damaged file into a one-line StoreError naming the file."""
+    """Turn what HDF5 raises on a damaged file into a one-line StoreError naming the file;
+    an exception raised by skinkit's own code is a bug and propagates with its traceback."""
 
     @functools.wraps(method)
     def wrapper(self: Experiment, *args: Any, **kwargs: Any) -> Any:
@@ -47,6 +64,8 @@ def _reading(method: _F) -> _F:
         except (StoreError, SchemaError):
             raise
         except (OSError, KeyError, RuntimeError, ValueError, TypeError, IndexError) as exc:
+            if not _from_file(exc):
+                raise
             what = method.__name__ + (f"({args[0]!r})" if args else "")
             raise StoreError(str(self.path), "", f"damaged or unreadable file during {what}: "
                              f"{type(exc).__name__}: {_one_line(exc)}") from None

@@ -126,7 +126,8 @@ def warn(category: type[SysidWarning], message: str, issues: list[str] | None = 
 
 def _vector(a: Any, name: str) -> np.ndarray:
     try:
-        arr = np.asarray(a, dtype=float)
+        # a copy: later steps interpolate NaN runs in place, and the caller's array is theirs
+        arr = np.array(a, dtype=float, copy=True)
     except (TypeError, ValueError):
         raise SysidError(f"{name}: must be numbers, got {type(a).__name__}") from None
     if arr.ndim != 1:
