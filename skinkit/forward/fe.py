@@ -483,7 +483,8 @@ class FEForwardModel:
             for cname in ("tip_position", "tip_force"):
                 if cname == drive_name:
                     ch = po.channels[cname]
-                    true[cname] = (ch.values, {})
+                    rec = drive_mod.fill_invalid(ch.values, ch.valid)
+                    true[cname] = inst_mod.drive(entries, drive_name, ch.time_s, rec, inst_names)
                     continue
                 key, dkey = ("tip_u", "d_tip_u") if cname == "tip_position" else ("tip_f", "d_tip_f")
                 if cname not in po.channels:

@@ -60,15 +60,6 @@ def session(mode: str = "force", two: bool = False) -> Observations:
 @pytest.fixture(scope="module")
 def forward():
     from skinkit.forward import load
-    try:  # TEMPORARY until skinkit.forward.instrument lands
-        import skinkit.forward.instrument  # noqa: F401
-    except ImportError:
-        import types
-
-        import skinkit.forward.fe as fe
-        fe._instrument = lambda: types.SimpleNamespace(
-            parse=lambda e: [], drive=lambda e, n, t, v, names: (v, {}),
-            measure=lambda e, n, t, v, d, tr, names: (v, d))
     return lambda spec, **kw: load(spec, **{"workers": 1, **kw})
 
 
@@ -227,3 +218,40 @@ def test_unknown_parameter_is_named(forward):
     m = forward(SPEC)
     with pytest.raises(SchemaError, match="nope"):
         m.predict(m.parameters(), session(), sensitivities=["nope"])
+
+
+def test_instrument_parameters_match_central_differences(forward):
+    """Biases on the driving force (load derivatives), a tilt of the probe axis (drive and
+    measured tip channels turned), a series compliance and a similarity of the points: the
+    same tolerance as for the material parameters."""
+    spec = copy.deepcopy(SPEC)
+    spec.pop("fields")
+    spec["instrument"] = [
+        {"kind": "bias", "channel": "tip_force", "component": 2, "basis": "constant", "parameter": "off.z",
+         "value": 1e-3},
+        {"kind": "bias", "channel": "tip_force", "component": 0, "basis": "time", "parameter": "drift.x",
+         "value": 1e-5},
+        {"kind": "tilt", "parameter": "tilt.angle", "value": 0.05, "azimuth": 0.3,
+         "azimuth_parameter": "tilt.azimuth"},
+        {"kind": "series", "channel": "tip_position", "source": "tip_force", "parameter": "comp.c",
+         "value": 1e-3},
+        {"kind": "similarity", "channel": "points", "mode": "scale", "parameter": "trk.scale", "value": 0.01},
+        {"kind": "similarity", "channel": "points", "mode": "rotation", "parameter": "trk.rot", "value": 0.01},
+    ]
+    m = forward(spec)
+    obs = session()
+    names = ["off.z", "drift.x", "tilt.angle", "comp.c", "trk.scale", "trk.rot"]
+    pset = m.parameters()
+    assert set(names) <= set(pset.names)
+    pred = m.predict(pset, obs, sensitivities=names)
+    for nm in names:
+        p = pset.param(nm)
+        h = 1e-6 * max(abs(p.value), 1e-3)
+        up = m.predict(pset.with_values({nm: p.value + h}), obs)
+        dn = m.predict(pset.with_values({nm: p.value - h}), obs)
+        for (proto, c, cp), (_, _, u), (_, _, d) in zip(pred.items(), up.items(), dn.items(), strict=True):
+            fd = (u.values - d.values) / (2 * h)
+            scale = max(np.abs(fd).max(), np.abs(cp.d[nm]).max())
+            if scale == 0:
+                continue
+            assert np.abs(cp.d[nm] - fd).max() / scale < 2e-5, (nm, proto, c)

@@ -1,0 +1,219 @@
+"""``[[instrument]]`` entries: linear transforms between what the skin saw and what was recorded.
+
+Each entry is linear in one parameter (``parameter``, value ``value``; 0 is no effect, exactly)
+and applies to one channel (``docs/effects.md``):
+
+* ``bias``: recorded = true + value · b(t) on ``component`` of ``channel``, b = 1
+  (``basis = "constant"``) or t [s] (``"time"``). On the channel that drives a model the
+  model is driven by recorded − value · b(t).
+* ``series``: recorded ``channel`` = true + value · ``source`` channel (a compliance [m/N]
+  between the motor and the tip: ``channel = "tip_position"``, ``source = "tip_force"``).
+* ``similarity``: recorded points = (1 + value) p (``mode = "scale"``) or p turned by
+  ``value`` [rad] about the normal through the origin (``mode = "rotation"``), for
+  ``points`` and ``points_2d``.
+* ``tilt``: the robot's frame is turned by ``value`` [rad] about the in-plane axis at
+  ``azimuth`` [rad] from x relative to the skin's (the probe's axis misaligned): the drive
+  it records acts along turned directions on the skin, and the tip channels it records
+  are the skin-frame ones turned back (points, seen by the cameras, are not). ``azimuth``
+  is a second parameter when ``azimuth_parameter`` names it.
+
+API (model-agnostic; arrays in, arrays and derivative dicts out):
+
+* :func:`parse` validates the entries;
+* :func:`drive` maps a recorded drive ``(T, 3)`` to what the skin saw, with derivatives;
+* :func:`measure` maps a predicted channel to what the instrument records, with derivatives,
+  by the chain rule through the model's own derivatives.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from skinkit.errors import ForwardError
+
+KINDS = ("bias", "series", "similarity", "tilt")
+_CHANNELS = ("tip_force", "tip_position", "points", "points_2d")
+_POINTS = ("points", "points_2d")
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One validated ``[[instrument]]`` entry."""
+
+    kind: str
+    parameter: str
+    value: float
+    channel: str = ""
+    component: int = 0
+    basis: str = "constant"
+    source: str = ""
+    mode: str = ""
+    azimuth: float = 0.0
+    azimuth_parameter: str = ""
+
+
+def parse(entries: Any) -> list[Entry]:
+    """Validate ``[[instrument]]`` tables (errors name ``instrument[i].<key>``)."""
+    if entries is None:
+        return []
+    if not isinstance(entries, list):
+        raise ForwardError("instrument", "must be an array of tables ([[instrument]])")
+    out = []
+    for i, e in enumerate(entries):
+        w = f"instrument[{i}]"
+        if not isinstance(e, Mapping):
+            raise ForwardError(w, "must be a table")
+        kind = e.get("kind")
+        if kind not in KINDS:
+            raise ForwardError(f"{w}.kind", f"must be one of {list(KINDS)}, got {kind!r}")
+        allowed = {"kind", "parameter", "value", "channel", "component", "basis", "source", "mode", "azimuth",
+                   "azimuth_parameter"}
+        extra = sorted(set(e) - allowed)
+        if extra:
+            raise ForwardError(w, f"unknown key(s) {extra}")
+        par = str(e.get("parameter", ""))
+        if not par:
+            raise ForwardError(f"{w}.parameter", "needs a parameter name")
+        try:
+            value = float(e.get("value", 0.0))
+            az = float(e.get("azimuth", 0.0))
+        except (TypeError, ValueError):
+            raise ForwardError(f"{w}.value", f"must be a number, got {e.get('value')!r}") from None
+        if not np.isfinite(value):
+            raise ForwardError(f"{w}.value", f"must be finite, got {value}")
+        ch = str(e.get("channel", "tip_position" if kind == "series" else ""))
+        if kind in ("bias", "series", "similarity") and ch not in _CHANNELS:
+            raise ForwardError(f"{w}.channel", f"must be one of {list(_CHANNELS)}, got {ch!r}")
+        comp = e.get("component", 0)
+        if kind == "bias" and comp not in (0, 1, 2):
+            raise ForwardError(f"{w}.component", f"must be 0, 1 or 2, got {comp!r}")
+        basis = str(e.get("basis", "constant"))
+        if basis not in ("constant", "time"):
+            raise ForwardError(f"{w}.basis", f"must be 'constant' or 'time', got {basis!r}")
+        mode = str(e.get("mode", "scale" if kind == "similarity" else ""))
+        if kind == "similarity" and mode not in ("scale", "rotation"):
+            raise ForwardError(f"{w}.mode", f"must be 'scale' or 'rotation', got {mode!r}")
+        src = str(e.get("source", "tip_force" if kind == "series" else ""))
+        if kind == "series" and src not in ("tip_force", "tip_position"):
+            raise ForwardError(f"{w}.source", f"must be 'tip_force' or 'tip_position', got {src!r}")
+        out.append(Entry(kind, par, value, ch if kind != "tilt" else "", int(comp), basis, src, mode, az,
+                         str(e.get("azimuth_parameter", ""))))
+    return out
+
+
+def parameter_names(entries: Sequence[Entry]) -> list[str]:
+    """Every parameter the entries are linear (or, for a tilt's azimuth, smooth) in."""
+    out: list[str] = []
+    for e in entries:
+        for n in (e.parameter, e.azimuth_parameter):
+            if n and n not in out:
+                out.append(n)
+    return out
+
+
+def _basis(e: Entry, t: np.ndarray) -> np.ndarray:
+    return np.ones_like(t) if e.basis == "constant" else np.asarray(t, dtype=float)
+
+
+def _tilt(angle: float, azimuth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rotation R by ``angle`` about the in-plane axis at ``azimuth``; ∂R/∂angle, ∂R/∂azimuth."""
+    def R(a, b):
+        k = np.array([np.cos(b), np.sin(b), 0.0 * b])
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * (K @ K)
+    h = 1e-30
+    return (R(angle, azimuth), np.imag(R(angle + 1j * h, azimuth)) / h,
+            np.imag(R(angle, azimuth + 1j * h)) / h)
+
+
+def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: np.ndarray,
+          names: Sequence[str] = ()) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """What the skin saw when ``channel`` recorded ``recorded`` ``(T, 3)`` at ``time_s`` ``(T,)``:
+    biases of that channel removed, then a tilt applied. Returns the true drive ``(T, 3)`` and
+    its derivatives ``(T, 3)`` for the parameters in ``names`` it depends on."""
+    x = np.array(recorded, dtype=float)
+    d: dict[str, np.ndarray] = {}
+    for e in entries:
+        if e.kind == "bias" and e.channel == channel:
+            b = _basis(e, time_s)
+            x[:, e.component] -= e.value * b
+            if e.parameter in names:
+                dd = d.setdefault(e.parameter, np.zeros_like(x))
+                dd[:, e.component] -= b
+    for e in entries:
+        if e.kind != "tilt":
+            continue
+        R, dRa, dRb = _tilt(e.value, e.azimuth)
+        for k in list(d):
+            d[k] = d[k] @ R.T
+        if e.parameter in names:
+            d[e.parameter] = d.get(e.parameter, 0) + x @ dRa.T
+        if e.azimuth_parameter and e.azimuth_parameter in names:
+            d[e.azimuth_parameter] = d.get(e.azimuth_parameter, 0) + x @ dRb.T
+        x = x @ R.T
+    return x, d
+
+
+def measure(entries: Sequence[Entry], channel: str, time_s: np.ndarray, values: np.ndarray,
+            d: Mapping[str, np.ndarray], channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
+            names: Sequence[str] = ()) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """What the instrument records of predicted ``channel``: ``values`` (the channel's shape)
+    with derivatives ``d`` (name -> same shape). ``channels``: every channel the model knows
+    (predicted or driving) as ``(values, derivatives)`` for ``series`` entries. Returns the
+    recorded values and derivatives (the model's, carried through, plus the instrument's for
+    the parameters in ``names``)."""
+    v = np.array(values, dtype=float)
+    out = {k: np.array(a, dtype=float) for k, a in d.items()}
+    for e in entries:
+        if e.kind == "bias" and e.channel == channel:
+            b = _basis(e, time_s)
+            v[:, e.component] += e.value * b
+            if e.parameter in names:
+                out.setdefault(e.parameter, np.zeros_like(v))[:, e.component] += b
+        elif e.kind == "series" and e.channel == channel:
+            if e.source not in channels:
+                raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")
+            sv, sd = channels[e.source]
+            sv = np.nan_to_num(np.asarray(sv, dtype=float))
+            v = v + e.value * sv
+            for k, a in sd.items():
+                out[k] = out.get(k, np.zeros_like(v)) + e.value * a
+            if e.parameter in names:
+                out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + sv
+        elif e.kind == "similarity" and channel in _POINTS and e.channel in _POINTS:
+            if e.mode == "scale":
+                for key in out:
+                    out[key] = (1 + e.value) * out[key]
+                if e.parameter in names:
+                    out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + v
+                v = (1 + e.value) * v
+            else:
+                c, s = np.cos(e.value), np.sin(e.value)
+                R2 = np.array([[c, -s], [s, c]])
+                dR2 = np.array([[-s, -c], [c, -s]])
+                xy = v[..., :2]
+                for key in out:
+                    out[key][..., :2] = out[key][..., :2] @ R2.T
+                if e.parameter in names:
+                    dd = out.get(e.parameter, np.zeros_like(v))
+                    dd[..., :2] += xy @ dR2.T
+                    out[e.parameter] = dd
+                v[..., :2] = xy @ R2.T
+        elif e.kind == "tilt" and channel in ("tip_force", "tip_position"):
+            R, dRa, dRb = _tilt(e.value, e.azimuth)
+            # recorded (robot frame) = Rᵀ skin-frame, row by row: v @ R
+            for key in out:
+                out[key] = out[key] @ R
+            if e.parameter in names:
+                out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + v @ dRa
+            if e.azimuth_parameter and e.azimuth_parameter in names:
+                out[e.azimuth_parameter] = out.get(e.azimuth_parameter, np.zeros_like(v)) + v @ dRb
+            v = v @ R
+    return v, out
+
+
+__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parse"]
