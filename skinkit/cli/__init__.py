@@ -32,6 +32,7 @@ _COMMANDS: dict[str, str] = {
     "sysid": "skinkit.cli.sysid:sysid",
     "vision": "skinkit.cli.vision:vision",
     "predict": "skinkit.cli.predict:predict",
+    "effects": "skinkit.cli.effects:effects",
 }
 
 

@@ -1,0 +1,82 @@
+"""``skinkit effects``: the candidate-effect plugins, and which protocols can see them."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+
+@click.group("effects")
+def effects() -> None:
+    """Candidate unmodelled effects (plugins of the skinkit.effects group)."""
+
+
+@effects.command("list")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+def list_effects(as_json: bool) -> None:
+    """Every installed effect: the model kinds it fits, its parameters with null and typical values."""
+    from skinkit import registry
+
+    out = {}
+    for name in registry.names("skinkit.effects"):
+        try:
+            e = registry.create("skinkit.effects", name)
+        except Exception as exc:  # listed with its error, as `skinkit plugins` does
+            out[name] = {"error": f"{type(exc).__name__}: {exc}"}
+            continue
+        null = dict(e.null())
+        out[name] = {"kinds": list(e.kinds), "parameters": [
+            {"name": p.name, "unit": p.unit, "null": null.get(p.name), "typical": p.value,
+             "lower": p.lower, "upper": p.upper} for p in e.parameters()]}
+    if as_json:
+        click.echo(json.dumps(out, indent=2))
+        return
+    for name, d in out.items():
+        if "error" in d:
+            click.echo(f"{name}: error: {d['error']}")
+            continue
+        pars = ", ".join(f"{p['name']} {p['null']:g} -> {p['typical']:g} {p['unit']}" for p in d["parameters"])
+        click.echo(f"{name:20s} [{', '.join(d['kinds'])}]  {pars}")
+
+
+@effects.command("visibility")
+@click.argument("model_file", type=click.Path(dir_okay=False))
+@click.option("--session", type=click.Path(dir_okay=False), default=None,
+              help="predict this session's protocols with its noise (default: the model's [session] "
+                   "protocols driven by their programmes, with the robot's and the cameras' noise)")
+@click.option("--effects", "names", default=None, help="only these effects (comma-separated)")
+@click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
+              help="a channel sees an effect that changes it by more than this many noise levels")
+@click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+def visibility(model_file: str, session: str | None, names: str | None, threshold: float,
+               workers: int | None, as_json: bool) -> None:
+    """Each effect at its null (exact?) and typical magnitude: which protocols and channels see it."""
+    from skinkit.bench.forward import trajectory_observations
+    from skinkit.errors import SkinkitError
+    from skinkit.forward import load, read_description, read_observations
+    from skinkit.forward.visibility import DEFAULT_NOISE, effect_visibility
+
+    spec = read_description(model_file)
+    noise = None
+    if session:
+        obs = read_observations(session)
+    else:
+        protos = tuple(dict(spec.get("session", {}) or {}).get("protocols", ()))
+        if not protos:
+            raise SkinkitError(f"{model_file}: no [session] protocols; give --session")
+        obs = trajectory_observations(protos)
+        spec["indenter"] = {**dict(spec.get("indenter", {}) or {}), "mode": "displacement"}
+        noise = DEFAULT_NOISE
+    res = effect_visibility(spec, obs, [s.strip() for s in names.split(",")] if names else None, noise,
+                            threshold, load=lambda s: load(s, workers=workers),
+                            progress=None if as_json else (lambda n: click.echo(f"  {n} ...", err=True)))
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    for name, e in res["effects"].items():
+        seen = "; ".join(f"{p}: {', '.join(cs)}" for p, cs in e["seen_by"].items()) or "not seen"
+        click.echo(f"{name:20s} null change {e['null_relative_change']:.1e}   {seen}")
+    if res["invisible"]:
+        click.echo(f"not visible in these protocols: {', '.join(res['invisible'])}")
