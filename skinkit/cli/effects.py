@@ -36,7 +36,8 @@ def list_effects(as_json: bool) -> None:
         if "error" in d:
             click.echo(f"{name}: error: {d['error']}")
             continue
-        pars = ", ".join(f"{p['name']} {p['null']:g} -> {p['typical']:g} {p['unit']}" for p in d["parameters"])
+        pars = ", ".join(f"{p['name']} {p['null']:g} -> {p['typical']:g} {p['unit']}"
+                         for p in d["parameters"])
         click.echo(f"{name:20s} [{', '.join(d['kinds'])}]  {pars}")
 
 

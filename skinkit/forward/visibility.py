@@ -57,8 +57,9 @@ def _rel_change(a, b) -> float:
     return worst
 
 
-def effect_visibility(spec: Mapping[str, Any], observations: Observations, effects: Sequence[str] | None = None,
-                      noise: Mapping[str, float] | None = None, threshold: float = 5.0,
+def effect_visibility(spec: Mapping[str, Any], observations: Observations,
+                      effects: Sequence[str] | None = None, noise: Mapping[str, float] | None = None,
+                      threshold: float = 5.0,
                       load: Callable[..., Any] | None = None,
                       progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """For each effect: the null's largest relative change, and per protocol and channel the
