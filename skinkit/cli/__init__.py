@@ -33,6 +33,7 @@ _COMMANDS: dict[str, str] = {
     "vision": "skinkit.cli.vision:vision",
     "predict": "skinkit.cli.predict:predict",
     "effects": "skinkit.cli.effects:effects",
+    "fit": "skinkit.cli.fit:fit",
 }
 
 
