@@ -17,6 +17,7 @@ _BENCHES: dict[str, str] = {
     "fem": "skinkit.bench.fem:bench_fem",
     "vision": "skinkit.bench.vision:bench_vision",
     "forward": "skinkit.bench.forward:bench_forward",
+    "fit": "skinkit.bench.fit:bench_fit",
 }
 
 

@@ -54,9 +54,17 @@ def aic(chi2: float, n: int, k: int) -> tuple[float, float]:
 
 def fit(model: Any, observations: Observations, free: Sequence[str] | None = None, *,
         weighting: str = "noise", optimiser: str = "scipy-lsq", start: dict[str, float] | None = None,
-        ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50,
+        ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50, jacobian: str = "analytic",
         progress: Callable[[int, float, dict[str, float]], None] | None = None) -> FitResult:
-    """Fit ``free`` parameters of ``model`` to the non-held-out protocols of ``observations``."""
+    """Fit ``free`` parameters of ``model`` to the non-held-out protocols of ``observations``.
+
+    ``jacobian``: ``"analytic"`` (the model's sensitivities, default), ``"fd"`` (the optimiser
+    differences the residual itself, as FEBio and GIBBON do) or ``"none"`` (derivative-free
+    optimisers); the last two exist for comparison (``skinkit bench fit``).
+    """
+    if jacobian not in ("analytic", "fd", "none"):
+        raise FitError(f"jacobian must be 'analytic', 'fd' or 'none', got {jacobian!r}")
+    use_jac = jacobian == "analytic"
     t0 = time.perf_counter()
     params = free_set(model.parameters(), free)
     names = params.free_names
@@ -86,8 +94,9 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
         if cache.get("key") != key:
             pset = params.with_free_vector(sc.to_values(x))
             try:
-                res, _ = obj.evaluate(pset, jacobian=True)
-                cache.update(key=key, z=res.z, J=res.J * sc.dvalue_dscaled(x)[None, :], ok=True)
+                res, _ = obj.evaluate(pset, jacobian=use_jac)
+                J = res.J * sc.dvalue_dscaled(x)[None, :] if use_jac else None
+                cache.update(key=key, z=res.z, J=J, ok=True)
             except (SkinkitError, ArithmeticError) as exc:
                 # the model cannot be solved there: a large residual makes the optimiser step back
                 size = cache.get("z", np.ones(1)).size
@@ -99,8 +108,9 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
                 progress(len(history), phi, dict(zip(names, sc.to_values(x).tolist(), strict=True)))
         return cache
 
-    result = opt.minimise(lambda x: at(x)["z"], x0, lo, hi, jac=lambda x: at(x)["J"],
+    result = opt.minimise(lambda x: at(x)["z"], x0, lo, hi, jac=(lambda x: at(x)["J"]) if use_jac else None,
                           options=_options(optimiser, ftol, xtol, max_iterations))
+    n_fit_forward, n_fit_sens = obj.n_forward, obj.n_sensitivity
     best = params.with_free_vector(sc.to_values(result.x))
     res, pred = obj.evaluate(best, jacobian=True)
     J = res.J
@@ -117,7 +127,7 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
         "identifiability": {k: ident[k] for k in ("metrics", "weak_directions", "problems", "identifiable",
                                                  "inflation")},
         "residual_by_protocol": res.by("protocol"), "residual_by_channel": res.by("channel"),
-        "n_forward": obj.n_forward, "n_sensitivity": obj.n_sensitivity, "wall_s": time.perf_counter() - t0,
+        "n_forward": n_fit_forward, "n_sensitivity": n_fit_sens, "wall_s": time.perf_counter() - t0,
         "weighting": weighting, "optimiser": optimiser, "free": names, "history": history,
         "held_out": held_out_rms(model, best, observations, weighting),
         "scaling": dict(zip(names, sc.kinds, strict=True)),
