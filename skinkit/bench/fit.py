@@ -68,12 +68,12 @@ def bench_session(model: Any, seed: int = 0) -> Observations:
         ch = dict(po.channels)
         for c, cp in pred.protocols[po.name].items():
             o = ch[c]
-            ch[c] = Channel(c, o.time_s, cp.values + o.noise * rng.standard_normal(cp.values.shape), noise=o.noise,
-                            reference=o.reference)
+            noisy = cp.values + o.noise * rng.standard_normal(cp.values.shape)
+            ch[c] = Channel(c, o.time_s, noisy, noise=o.noise, reference=o.reference)
         # the drive as recorded: the force sensor's noise on the programmed force
         f = ch["tip_force"]
-        ch["tip_force"] = Channel("tip_force", f.time_s, f.values + f.noise * rng.standard_normal(f.values.shape),
-                                  noise=f.noise)
+        noisy = f.values + f.noise * rng.standard_normal(f.values.shape)
+        ch["tip_force"] = Channel("tip_force", f.time_s, noisy, noise=f.noise)
         out[po.name] = ProtocolObservations(po.protocol, ch)
     return Observations(out, None, "bench")
 
@@ -140,5 +140,5 @@ def bench_fit(as_json: bool, seed: int) -> None:
         click.echo(f"  {title:22s} {res[f'{label}_forward_equivalents']:7.1f} forward-solve equivalents "
                    f"({res[f'{label}_forward_solves']} solves), {res[f'{label}_wall_s']:7.1f} s, "
                    f"largest parameter error {100 * res[f'{label}_param_error']:.2f} %")
-    click.echo(f"  finite differences need {res['fd_over_skinkit']:.1f}x, BOBYQA {res['dfo_over_skinkit']:.1f}x "
-               "the forward-solve equivalents of skinkit")
+    click.echo(f"  finite differences need {res['fd_over_skinkit']:.1f}x, "
+               f"BOBYQA {res['dfo_over_skinkit']:.1f}x the forward-solve equivalents of skinkit")
