@@ -281,6 +281,9 @@ def test_fibres_extend_a_qlv_wrapped_neo_hookean_and_refuse_other_laws(plain_nh,
                                                   "volumetric": "quadratic"}
     assert skin["parameters"]["g1"] == 0.3  # the viscous term stays
     assert out["bindings"]["viscoelastic.g1"] == "skin.g1" and out["bindings"]["fibres.k1"] == "skin.k1"
+    # qlv's elastic law defaults to neo-hookean-ni: a qlv skin without the option fits too
+    del wrapped["layers"][0]["options"]["elastic"]
+    assert effect("fibres").apply(wrapped, {})["layers"][0]["options"]["elastic"] == "goh"
     with pytest.raises(EffectError) as exc:
         effect("fibres").apply(goh_qlv, effect("fibres").null())
     assert exc.value.entry == "effects.fibres" and "neo-hookean-ni" in exc.value.problem

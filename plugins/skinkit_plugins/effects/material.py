@@ -133,7 +133,7 @@ class Fibres(BaseEffect):
         if law == "neo-hookean-ni":
             skin["law"] = "goh"
             skin["options"] = self._goh_options(opts)
-        elif law == "qlv" and opts.get("elastic") == "neo-hookean-ni":
+        elif law == "qlv" and opts.get("elastic", "neo-hookean-ni") == "neo-hookean-ni":  # qlv's default
             opts["elastic"] = "goh"
             opts["elastic_options"] = self._goh_options(opts.get("elastic_options"))
             skin["options"] = opts
