@@ -561,6 +561,28 @@ class Experiment:
     def track_names(self) -> list[str]:
         return sorted(self._f[L.TRACKS]) if L.TRACKS in self._f else []
 
+    def set_track_attrs(self, name: str, **items: Any) -> None:
+        """Attach JSON-ready facts to track ``name`` (e.g. its producer's ``noise_m`` [m] per
+        axis, ``dimensions``), merged into its ``extra`` attribute."""
+        f = self._writable()
+        path = f"{L.TRACKS}/{name}"
+        if path not in f:
+            raise self._err(path, "missing")
+        g = f[path]
+        extra = json.loads(g.attrs["extra"]) if "extra" in g.attrs else {}
+        extra.update(items)
+        try:
+            g.attrs["extra"] = json.dumps(extra, allow_nan=True)
+        except TypeError as exc:
+            raise SchemaError(f"track {name!r} attrs", f"not JSON-ready ({exc})") from None
+        f.flush()
+
+    @_reading
+    def track_attrs(self, name: str) -> dict[str, Any]:
+        """The facts attached to track ``name`` by :meth:`set_track_attrs` (empty if none)."""
+        g = self._group(f"{L.TRACKS}/{name}")
+        return self._json_attr(g, "extra") if "extra" in g.attrs else {}
+
     @_reading
     def read_track(self, name: str) -> SurfaceTrack:
         g = self._group(f"{L.TRACKS}/{name}")
