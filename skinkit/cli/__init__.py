@@ -34,6 +34,7 @@ _COMMANDS: dict[str, str] = {
     "predict": "skinkit.cli.predict:predict",
     "effects": "skinkit.cli.effects:effects",
     "fit": "skinkit.cli.fit:fit",
+    "lab": "skinkit.cli.lab:lab",
 }
 
 

@@ -1,0 +1,52 @@
+"""``skinkit lab``: the virtual lab — sessions made by a truth model, the truth kept apart."""
+
+from __future__ import annotations
+
+import click
+
+
+@click.group("lab")
+def lab() -> None:
+    """The virtual lab: synthetic sessions whose truth is known."""
+
+
+@lab.command("session")
+@click.argument("truth", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False),
+              help="the session file to write (experiment file, laid out like a real one)")
+@click.option("--truth-out", "truth_out", required=True, type=click.Path(dir_okay=False),
+              help="the truth file to write (JSON: model after effects, parameters, seed, noise)")
+@click.option("--seed", required=True, type=click.IntRange(min=0), help="seed of every random draw")
+@click.option("--protocols", default=None,
+              help="library protocols, comma-separated (default: the model's [session] protocols, "
+                   "else normal_indentation,in_plane_000,in_plane_090,out_of_plane_330 for FE truths)")
+@click.option("--noise-scale", "noise_scale", default="1", show_default=True,
+              help="multiply every instrument imperfection (noise, resolution, offset) by this (> 0)")
+@click.option("--images", is_flag=True, help="render four-camera images and track them (not available yet)")
+def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | None, noise_scale: str,
+            images: bool) -> None:
+    """Run the TRUTH model file (effects included) through the protocols and record it as a session."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from skinkit.forward import read_description
+    from skinkit.lab.session import check_noise_scale, check_options, make_session
+
+    scale = check_noise_scale(noise_scale)
+    check_options(out, truth_out, protocols, scale, images)
+    read_description(truth)  # a missing or malformed model file: one line, before any progress bar
+    with Progress(TextColumn("{task.description:<16}"), BarColumn(), TimeElapsedColumn(),
+                  console=Console(stderr=True), transient=True) as bar:
+        tasks: dict[str, int] = {}
+
+        def progress(stage: str, fraction: float) -> None:
+            if stage not in tasks:
+                tasks[stage] = bar.add_task(stage, total=1.0)
+            bar.update(tasks[stage], completed=fraction)
+
+        doc = make_session(truth, out, truth_out, seed, protocols=protocols, noise_scale=scale,
+                           images=images, progress=progress)
+    names = ", ".join(f"{p['name']} ({p['samples']} samples, {p['frames']} frames)" for p in doc["protocols"])
+    click.echo(f"session {out}: {names}")
+    click.echo(f"truth {truth_out}: {doc['kind']} model, {len(doc['parameters'])} parameters, "
+               f"{len(doc['effects'])} effect(s), seed {doc['seed']}, noise scale {doc['noise_scale']:g}")
