@@ -77,6 +77,9 @@ def visibility(model_file: str, session: str | None, names: str | None, threshol
         click.echo(json.dumps(res, indent=2))
         return
     for name, e in res["effects"].items():
+        if not e["applicable"]:
+            click.echo(f"{name:20s} does not apply: {e['reason']}")
+            continue
         seen = "; ".join(f"{p}: {', '.join(cs)}" for p, cs in e["seen_by"].items()) or "not seen"
         click.echo(f"{name:20s} null change {e['null_relative_change']:.1e}   {seen}")
     if res["invisible"]:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from skinkit import registry
+from skinkit.errors import EffectError
 from skinkit.schemas import Observations
 
 #: per-sample noise [SI] used when no session gives it: the robot's tip position
@@ -82,7 +83,11 @@ def effect_visibility(spec: Mapping[str, Any], observations: Observations,
         plugin = registry.create("skinkit.effects", name)
         with_null = copy.deepcopy(base_spec)
         with_null["effects"] = [{"name": name}]
-        m0 = load(with_null)
+        try:
+            m0 = load(with_null)
+        except EffectError as exc:   # e.g. `fibres` on a skin that already has a fibre law
+            out["effects"][name] = {"applicable": False, "reason": str(exc), "visible": False}
+            continue
         null_change = _rel_change(m0.predict(m0.parameters(), observations), ref)
         typical = {p.name: p.value for p in plugin.parameters()}
         with_typ = copy.deepcopy(base_spec)
@@ -90,14 +95,15 @@ def effect_visibility(spec: Mapping[str, Any], observations: Observations,
         m1 = load(with_typ)
         change = _max_change(m1.predict(m1.parameters(), observations), ref, observations, noise)
         seen = {p: [c for c, v in chans.items() if v > threshold] for p, chans in change.items()}
-        out["effects"][name] = {"typical": typical, "null_relative_change": null_change,
+        out["effects"][name] = {"applicable": True, "typical": typical, "null_relative_change": null_change,
                                 "change_in_noise": change,
                                 "seen_by": {p: cs for p, cs in seen.items() if cs},
                                 "visible": any(seen.values())}
         for mdl in (m0, m1):
             if hasattr(mdl, "close"):
                 mdl.close()
-    out["invisible"] = [n for n, e in out["effects"].items() if not e["visible"]]
+    out["invisible"] = [n for n, e in out["effects"].items() if e["applicable"] and not e["visible"]]
+    out["not_applicable"] = {n: e["reason"] for n, e in out["effects"].items() if not e["applicable"]}
     if hasattr(base, "close"):
         base.close()
     return out
