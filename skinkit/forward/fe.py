@@ -202,7 +202,10 @@ class FEForwardModel:
                     if nm not in hidden:
                         out.append(Parameter(nm, m.prestress[i], unit, lo, hi))
         from skinkit.fem.fields import UNITS
+        effect_fields = {e.name for e in self.effects}
         for f in self._check.problem.fields:
+            if f.name in effect_fields:   # an effect's field: its declared parameters stand for it
+                continue
             for key, v in f.params.items():
                 nm = f"{f.name}.{key}"
                 if nm not in effect_names:
@@ -241,6 +244,8 @@ class FEForwardModel:
             elif region in layers:
                 layers[region].setdefault("parameters", {})[local] = float(v)
         for f in spec.get("fields", []) or []:
+            if f.get("name") in {e.name for e in self.effects}:
+                continue
             for key in list(f):
                 nm = f"{f['name']}.{key}"
                 if nm in values and nm not in {f"{e.name}.{k}" for e in self.effects for k in e.declared}:

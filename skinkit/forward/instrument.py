@@ -138,6 +138,12 @@ def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: 
     x = np.array(recorded, dtype=float)
     d: dict[str, np.ndarray] = {}
     for e in entries:
+        if e.kind == "series" and e.channel == channel:
+            raise ForwardError(f"instrument ({e.parameter})",
+                               f"a series compliance on the driving channel {channel!r} makes the drive "
+                               "depend on the predicted force; drive the model by the tip force "
+                               "([indenter] mode = \"force\") to include it")
+    for e in entries:
         if e.kind == "bias" and e.channel == channel:
             b = _basis(e, time_s)
             x[:, e.component] -= e.value * b

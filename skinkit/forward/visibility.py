@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from skinkit import registry
-from skinkit.errors import EffectError
+from skinkit.errors import EffectError, ForwardError
 from skinkit.schemas import Observations
 
 #: per-sample noise [SI] used when no session gives it: the robot's tip position
@@ -85,10 +85,10 @@ def effect_visibility(spec: Mapping[str, Any], observations: Observations,
         with_null["effects"] = [{"name": name}]
         try:
             m0 = load(with_null)
-        except EffectError as exc:   # e.g. `fibres` on a skin that already has a fibre law
+            null_change = _rel_change(m0.predict(m0.parameters(), observations), ref)
+        except (EffectError, ForwardError) as exc:   # e.g. `fibres` on a skin with a fibre law already
             out["effects"][name] = {"applicable": False, "reason": str(exc), "visible": False}
             continue
-        null_change = _rel_change(m0.predict(m0.parameters(), observations), ref)
         typical = {p.name: p.value for p in plugin.parameters()}
         with_typ = copy.deepcopy(base_spec)
         with_typ["effects"] = [{"name": name, **typical}]

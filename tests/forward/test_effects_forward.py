@@ -1,0 +1,144 @@
+"""Every effect plugin through the FE forward model: exact at its null value, differentiable
+at its null and at its typical magnitude, refused where it does not fit."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from skinkit import registry
+from skinkit.errors import EffectError
+from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
+
+pytestmark = pytest.mark.needs_plugins
+
+#: a small layered disc with an isotropic elastic skin (so that every FE effect applies)
+BASE = {
+    "model": {"name": "small-elastic"},
+    "geometry": {"kind": "disc", "diameter": "20 mm", "indenter_diameter": "4 mm", "n_inner": 2, "n_ring": 2},
+    "layers": [
+        {"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "neo-hookean-ni",
+         "parameters": {"mu": "15 kPa", "K": "500 kPa"}},
+        {"name": "subdermal", "thickness": "3.5 mm", "elements": 2, "law": "neo-hookean-enu",
+         "parameters": {"E": "10 kPa", "nu": 0.45}},
+    ],
+    "boundary": {"fixed": ["outer", "bottom"]},
+    "indenter": {"mode": "force"},
+    "drive": {"max_step": "1 s"},
+    "solver": {"rtol": 1e-12},
+}
+REF = np.array([[r * np.cos(a), r * np.sin(a), 0.0] for r in (3e-3, 5e-3) for a in np.linspace(0, 6, 4)])
+
+
+def fe_effects() -> list[str]:
+    return [n for n in registry.names("skinkit.effects")
+            if "fe" in registry.create("skinkit.effects", n).kinds]
+
+
+def session() -> Observations:
+    """An oblique 0.1 Hz push (normal and in-plane at once: every effect has a channel to move)."""
+    T = np.arange(0, 10.0001, 0.02)
+    s = 0.5 * (1 - np.cos(2 * np.pi * 0.1 * T))
+    F = 0.02 * s[:, None] * np.array([0.4, 0.2, -1.0])
+    tf = np.arange(0, 10.0001, 1.0)
+    chans = {"tip_force": Channel("tip_force", T, F, noise=1.7e-3),
+             "tip_position": Channel("tip_position", T, 0 * F, noise=1.7e-6),
+             "points": Channel("points", tf, np.repeat(REF[:, None], tf.size, 1), noise=4e-6, reference=REF)}
+    return Observations({"oblique": ProtocolObservations(Protocol("oblique"), chans)}, None, "test")
+
+
+@pytest.fixture(scope="module")
+def reference():
+    from skinkit.forward import load
+    m = load(copy.deepcopy(BASE), workers=1)
+    return m.predict(m.parameters(), session())
+
+
+def _with(effect: str, **values) -> dict:
+    spec = copy.deepcopy(BASE)
+    spec["effects"] = [{"name": effect, **values}]
+    return spec
+
+
+@pytest.mark.parametrize("effect", fe_effects())
+def test_null_value_is_the_model_without_the_effect(effect, reference):
+    """At its null value an effect changes no prediction by more than 1e-12 of its size."""
+    from skinkit.forward import load
+    m = load(_with(effect), workers=1)
+    pred = m.predict(m.parameters(), session())
+    for (_, c, x), (_, _, y) in zip(pred.items(), reference.items(), strict=True):
+        scale = np.max(np.abs(y.values))
+        assert np.max(np.abs(x.values - y.values)) <= 1e-12 * scale, (effect, c)
+
+
+def _check_derivatives(m, obs, names, tol=2e-5):
+    """Analytic (or the model's own differences) against differences of whole solves with
+    h = 1e-6 of the parameter's scale: central inside the bounds, the second-order one-sided
+    formula at a bound. Tolerance as in test_fe_forward (solver error rtol/h plus truncation);
+    against the model's own differences (step 1e-5) 1e-3. A derivative whose effect over the
+    parameter's whole scale is below 1e-7 of the channel (fibres' k2 when hardly any fibre
+    is stretched) is compared in absolute terms at that level."""
+    pset = m.parameters()
+    pred = m.predict(pset, obs, sensitivities=names)
+    for nm in names:
+        p = pset.param(nm)
+        scale = abs(p.value) if p.value != 0 else 0.01 * (p.upper - p.lower)
+        h = 1e-6 * scale
+        tol_nm = max(tol, 1e-3) if pred.methods[nm] == "central-difference" else tol
+        if p.value - h >= p.lower and p.value + h <= p.upper:
+            up = m.predict(pset.with_values({nm: p.value + h}), obs)
+            dn = m.predict(pset.with_values({nm: p.value - h}), obs)
+            fds = [(u.values - d.values) / (2 * h) for (_, _, u), (_, _, d) in zip(up.items(), dn.items(),
+                                                                                 strict=True)]
+        else:
+            sg = 1.0 if p.value - h < p.lower else -1.0
+            f1 = m.predict(pset.with_values({nm: p.value + sg * h}), obs)
+            f2 = m.predict(pset.with_values({nm: p.value + 2 * sg * h}), obs)
+            trip = zip(pred.items(), f1.items(), f2.items(), strict=True)
+            fds = [sg * (-3 * x.values + 4 * a.values - b.values) / (2 * h)
+                   for (_, _, x), (_, _, a), (_, _, b) in trip]
+        for (_, c, cp), fd in zip(pred.items(), fds, strict=True):
+            size = max(np.abs(fd).max(), np.abs(cp.d[nm]).max())
+            floor = 1e-7 * np.abs(cp.values).max() / scale
+            err = np.abs(cp.d[nm] - fd).max()
+            assert err <= tol_nm * size or err <= floor, (nm, c, err / max(size, 1e-300))
+    return pred.methods
+
+
+@pytest.mark.parametrize("effect", fe_effects())
+@pytest.mark.parametrize("where", ["null", "typical"])
+def test_effect_sensitivities_match_central_differences(effect, where):
+    from skinkit.forward import load
+    plugin = registry.create("skinkit.effects", effect)
+    values = {} if where == "null" else {p.name: p.value for p in plugin.parameters()}
+    m = load(_with(effect, **values), workers=1)
+    names = [f"{effect}.{p.name}" for p in plugin.parameters()]
+    methods = _check_derivatives(m, session(), names)
+    analytic = {"thickness", "support-compliance"}
+    for nm in names:
+        assert methods[nm] == ("central-difference" if effect in analytic else "analytic"), nm
+
+
+def test_effect_that_does_not_fit_is_refused():
+    from skinkit.forward import load
+    spec = _with("fibres")
+    spec["layers"][0]["law"] = "mooney-rivlin"
+    spec["layers"][0]["parameters"] = {"c1": "5 kPa", "c2": "1 kPa", "K": "500 kPa"}
+    with pytest.raises(EffectError, match="fibres"):
+        load(spec, workers=1)
+
+
+def test_unknown_effect_and_out_of_range_value_are_named():
+    from skinkit.forward import load
+    with pytest.raises(EffectError, match=r"effects\[0\].name.*unknown effect 'scarring'"):
+        load(_with("scarring"), workers=1)
+    with pytest.raises(EffectError, match=r"effects\[0\].l1.*outside the admissible range"):
+        load(_with("prestress", l1=3.0), workers=1)
+
+
+def test_fe_only_effect_on_a_lumped_model_is_refused():
+    from skinkit.forward.effects import resolve
+    with pytest.raises(EffectError, match="prestress.*not to a 'lumped' model"):
+        resolve([{"name": "prestress"}], "lumped")
