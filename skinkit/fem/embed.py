@@ -134,7 +134,9 @@ def embed_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: floa
     pts[:, 2] -= depth
     Xe = mesh.nodes[mesh.elements]                  # (E, 27, 3)
     lo, hi = Xe.min(axis=1), Xe.max(axis=1)
-    pad = 1e-6 * (hi - lo).max(axis=1, keepdims=True)  # curved faces stay within the nodes' hull
+    # a curved face can bulge micrometres beyond its nodes' box; the Newton inversion and the inside
+    # test below decide which element holds a point
+    pad = 1e-3 * (hi - lo).max(axis=1, keepdims=True)
     inbox = np.all((pts[:, None, :] >= lo[None] - pad[None]) & (pts[:, None, :] <= hi[None] + pad[None]),
                    axis=2)                           # (M, E)
     dist = np.linalg.norm(pts[:, None, :] - Xe.mean(axis=1)[None], axis=2)
@@ -231,7 +233,12 @@ def surface_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: fl
                     s = np.clip(s + ds, -0.5, 1.5)
                     if np.max(np.abs(ds)) < tol:
                         break
-                if np.all((s > -1e-8) & (s < 1 + 1e-8)):
+                xi = np.zeros((3, 1))
+                xi[free, 0] = s
+                xi[axis, 0] = end
+                miss = float(np.linalg.norm(xy[m] - (_shape(xi)[0][:, 0] @ Xe)[:2]))
+                # inside the face, and really there: a clipped Newton can stop at a wrong point
+                if np.all((s > -1e-8) & (s < 1 + 1e-8)) and miss < 1e-9 * max(1.0, float(np.ptp(Xe))):
                     found[m] = e
                     loc[m] = np.clip(s, 0, 1)
                     break

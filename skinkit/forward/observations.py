@@ -154,7 +154,7 @@ def channel_from_track(track: SurfaceTrack, attrs: dict[str, Any], where: str) -
     ref = np.where(np.isfinite(ref), ref, 0.0)
     t = track.time_s
     return Channel("points_2d" if two_d else "points", t, np.where(valid, pts, np.nan), valid, noise, src,
-                   reference=ref)
+                   reference=ref, reference_frame=0)
 
 
 def _read_experiment(path: Path, held_out: Sequence[str]) -> Observations:

@@ -1,6 +1,8 @@
 """How far a prediction is from the observations, per protocol and channel.
 
 The residual of a sample is ``prediction − observation``; normalised by the channel's noise
+(and, for tracked points whose reference is a measured frame, decorrelated along frames,
+:meth:`skinkit.schemas.Channel.whiten`)
 (standard deviation of one sample) it is a standard normal variable when the model is
 right and the noise estimate honest, so Σ r² over n samples follows a χ² distribution with
 n degrees of freedom: χ²/n is 1 ± √(2/n).
@@ -34,7 +36,7 @@ def summarise(prediction: Prediction, observations: Observations) -> dict[str, A
         ch = observations[proto].channels[cname]
         m = cp.mask(ch)
         r = np.where(m, cp.values - np.where(m, ch.values, 0.0), 0.0)
-        z = r / ch.noise
+        z = ch.normalised(cp.values, m)
         n = int(m.sum())
         c2 = float(np.sum(z[m] ** 2))
         lead = tuple(range(r.ndim - 1))

@@ -121,11 +121,13 @@ class Objective:
             m = cp.mask(ch) & keep
             if not m.any():
                 continue
-            r = (cp.values[m] - ch.values[m]) * w[m]
+            # a measured reference frame correlates a point's residuals: whiten along frames
+            full = ch.whiten(np.where(m, (cp.values - np.where(m, ch.values, 0.0)) * w, 0.0), m)
+            r = full[m]
             zs.append(r)
             if jacobian:
-                Js.append(np.stack([cp.d[n][m] * w[m] for n in self.names], axis=1) if self.names
-                          else np.zeros((r.size, 0)))
+                cols = [ch.whiten(np.where(m, cp.d[n] * w, 0.0), m)[m] for n in self.names]
+                Js.append(np.stack(cols, axis=1) if cols else np.zeros((r.size, 0)))
             blocks.append((proto, cname, slice(start, start + r.size)))
             start += r.size
         if not zs:

@@ -52,6 +52,10 @@ class Channel:
         noise: ``(k,)`` standard deviation of one sample per component [unit], positive.
         noise_source: how ``noise`` was estimated (``"rest segment"``, ``"tracker"``, ...).
         reference: ``(P, 3)`` [m] reference (undeformed) positions of point channels, or None.
+        reference_frame: the frame whose measured positions are ``reference`` (0 for a track
+            read from a session), or None when the reference is known exactly. A measured
+            reference carries that frame's noise into every later frame's residual; see
+            :meth:`whiten`.
     """
 
     name: str
@@ -61,6 +65,7 @@ class Channel:
     noise: Any = None
     noise_source: str = "unknown"
     reference: Any = None
+    reference_frame: int | None = None
 
     def __post_init__(self) -> None:
         if self.name not in CHANNELS:
@@ -109,10 +114,38 @@ class Channel:
     def n_valid(self) -> int:
         return int(self.valid.sum())
 
-    def normalised(self, predicted: np.ndarray) -> np.ndarray:
-        """``(predicted - values) / noise`` on valid entries, 0 elsewhere; shape of ``values``."""
-        r = np.where(self.valid, (np.asarray(predicted) - np.where(self.valid, self.values, 0.0)), 0.0)
-        return r / self.noise
+    def fit_mask(self, predicted: np.ndarray | None = None) -> np.ndarray:
+        """Entries that carry information: valid, predicted (if a mask is given), and not the
+        reference frame itself (whose residual is zero by construction)."""
+        m = self.valid.copy() if predicted is None else self.valid & predicted
+        if self.is_points and self.reference_frame is not None:
+            m[:, self.reference_frame] = False
+        return m
+
+    def whiten(self, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """Decorrelate noise-normalised residuals (or their derivatives) ``a`` along frames.
+
+        When the reference positions are the measured frame ``reference_frame``, a point's
+        residuals over its other m frames share that frame's noise: their covariance is
+        σ² (I + 11ᵀ). Multiplying by (I + 11ᵀ)^(-1/2) = I − (1 − 1/√(1+m))/m 11ᵀ makes them
+        independent standard normals again, so Σ r² is χ² with m degrees of freedom per point
+        and component. Linear in ``a`` (Jacobians go through the same map). Other channels
+        are returned unchanged."""
+        if not self.is_points or self.reference_frame is None:
+            return a
+        a = np.where(mask, a, 0.0)
+        m = mask.sum(axis=1)                                  # (P, k) frames per point/component
+        s = a.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.where(m > 0, (1 - 1 / np.sqrt(1 + m)) * s / np.maximum(m, 1), 0.0)
+        return np.where(mask, a - c[:, None, :], 0.0)
+
+    def normalised(self, predicted: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """``(predicted - values) / noise`` on ``mask`` (default :meth:`fit_mask`), whitened
+        along frames (:meth:`whiten`), 0 elsewhere; shape of ``values``."""
+        mask = self.fit_mask() if mask is None else mask
+        r = np.where(mask, (np.asarray(predicted) - np.where(mask, self.values, 0.0)), 0.0)
+        return self.whiten(r / self.noise, mask)
 
 
 @dataclass
@@ -239,8 +272,8 @@ class ChannelPrediction:
     predicted: np.ndarray | None = None
 
     def mask(self, channel: Channel) -> np.ndarray:
-        """Entries that are both observed (valid) and predicted."""
-        return channel.valid if self.predicted is None else channel.valid & self.predicted
+        """Entries that are observed (valid), predicted, and not a measured reference frame."""
+        return channel.fit_mask(self.predicted)
 
 
 @dataclass
@@ -271,8 +304,8 @@ class Prediction:
         s, n = 0.0, 0
         for p, c, cp in self.items():
             ch = observations[p].channels[c]
-            r = ch.normalised(cp.values)
             m = cp.mask(ch)
+            r = ch.normalised(cp.values, m)
             s += float(np.sum(r[m] ** 2))
             n += int(m.sum())
         return s, n
