@@ -22,6 +22,7 @@ _COMMANDS: dict[str, str] = {
     "plugins": "skinkit.cli.plugins:plugins",
     "inspect": "skinkit.cli.inspect:inspect",
     "import-csv": "skinkit.cli.import_csv:import_csv",
+    "import-extensometer": "skinkit.cli.import_extensometer:import_extensometer_cmd",
     "recover": "skinkit.cli.recover:recover",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",

@@ -1,0 +1,37 @@
+"""``skinkit import-extensometer``: a two-pad extensometer record with 2D tracking into an experiment file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_extensometer
+
+
+@click.command("import-extensometer")
+@click.argument("folder", type=click.Path(path_type=Path))
+@click.argument("experiment", type=click.Path(path_type=Path))
+@click.option("--protocol", default="extension", show_default=True, help="Protocol (record and track) name.")
+@click.option("--overwrite", is_flag=True, help="Replace EXPERIMENT if it exists.")
+@click.option("--rate", "rate_hz", type=float, default=NOMINAL_RATE_HZ, show_default=True,
+              help="Nominal sampling rate of the device [Hz] (the files have no time stamps).")
+@click.option("--mark-spacing", "mark_spacing_mm", type=float, default=MARK_SPACING_M * 1e3,
+              show_default=True,
+              help="Distance between the two marks on one pad [mm]; sets the pixel scale.")
+@click.option("--moving-pad", type=click.Choice(["1", "2"]), default="1", show_default=True,
+              help="Which pad's marks (x0_ref_N) are on the moving pad.")
+def import_extensometer_cmd(folder: Path, experiment: Path, protocol: str, overwrite: bool, rate_hz: float,
+                            mark_spacing_mm: float, moving_pad: str) -> None:
+    """Import FOLDER (u_moving_pad.dat, f_moving_pad.dat and the tracked points x0/y0/xt/yt
+    in pixels; see docs/real-data.md) as a new session EXPERIMENT: one record (pad
+    displacement and force along x) and its 2D track in metres in the skin frame."""
+    imp = import_extensometer(folder, experiment, protocol, overwrite, rate_hz, mark_spacing_mm * 1e-3,
+                              int(moving_pad))
+    a = imp.track_attrs
+    click.echo(f"imported {imp.record.n_samples} force samples (nominal {rate_hz:g} Hz) and "
+               f"{imp.track.n_points} points x {imp.track.n_frames} frames as {protocol!r} "
+               f"into {experiment}; "
+               f"pixel scale {1e-3 / a['pixel_scale_m_per_px']:.4g} px/mm, tracking noise "
+               f"{a['noise_m'][0] * 1e6:.3g}/{a['noise_m'][1] * 1e6:.3g} um (x/y), "
+               f"{a['invalid_point_frames']} point-frames invalid")
