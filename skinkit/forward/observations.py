@@ -9,11 +9,15 @@ change sign here, and nowhere else.
 
 Noise, per channel and component (:func:`sample_noise`), in this order of preference:
 
-1. **rest segment** — the samples before the signal first leaves its starting level (by
-   more than five times the second-difference estimate below), detrended by a quadratic;
-   used when at least 50 samples are at rest;
-2. **second differences** — 1.4826 MAD(Δ²x)/√6: for white noise Var(Δ²x) = 6σ², and a signal
-   that is smooth at the sampling rate contributes almost nothing; robust to spikes;
+1. **second differences** over the whole record — RMS(Δ²x)/√6, spikes beyond five robust
+   standard deviations trimmed: for white noise Var(Δ²x) = 6σ², and a signal smooth at the
+   sampling rate adds almost nothing; with every sample used it is precise (0.6 % at 30,000
+   samples), also on quantised signals, where a median-based estimate is biased;
+2. checked against the **rest segment** — the samples before the signal first leaves its
+   starting level, detrended by a quadratic (unbiased, but short: its standard deviation is
+   uncertain by 1/√(2n)). When both exist and disagree by more than three of those
+   uncertainties, the signal has leaked into the differences (a broadband input) and the
+   rest segment's value is used;
 3. a floor at the **sensor resolution** (the smallest step between distinct values, /√12).
 
 Tracks: the track's ``noise_m`` attribute when its producer knows its uncertainty
@@ -63,7 +67,11 @@ def sample_noise(x: np.ndarray) -> tuple[float, str]:
     if ok.sum() < 8:
         return float("nan"), "too few samples"
     xs = x[ok]
-    sd2 = _mad(np.diff(xs, 2)) / np.sqrt(6.0)
+    d2 = np.diff(xs, 2)
+    robust = _mad(d2) / np.sqrt(6.0)
+    keep = np.abs(d2 - np.median(d2)) <= 5 * np.sqrt(6.0) * max(robust, 1e-300) if robust > 0 else \
+        np.ones(d2.size, bool)
+    sd2 = float(np.sqrt(np.mean(d2[keep] ** 2) / 6.0)) if keep.any() else float("nan")
     res = _resolution(xs)
     floor = res / np.sqrt(12.0)
     est, src = sd2, "second differences"
@@ -76,8 +84,10 @@ def sample_noise(x: np.ndarray) -> tuple[float, str]:
             seg = xs[:n_rest]
             fit = np.polyval(np.polyfit(t, seg, 2), t)
             rest = float(np.std(seg - fit, ddof=3))
-            if rest > 0:
-                est, src = rest, f"rest segment ({n_rest} samples)"
+            if rest > 0 and abs(sd2 - rest) > 3 * rest / np.sqrt(2 * n_rest):
+                est, src = rest, f"rest segment ({n_rest} samples; second differences disagree)"
+            elif rest > 0:
+                src = f"second differences (rest segment of {n_rest} samples agrees)"
     if not (np.isfinite(est) and est > floor):
         if floor > 0:
             est, src = floor, "sensor resolution"
