@@ -46,8 +46,10 @@ def _graded(a: float, b: float, n: int, grading: float, fine: str) -> np.ndarray
 
 
 def _axis(breaks: Sequence[float], counts: Sequence[int], fines: Sequence[str], grading: float) -> np.ndarray:
-    parts = [_graded(breaks[i], breaks[i + 1], counts[i], grading, fines[i]) for i in range(len(counts))]
-    return np.unique(np.concatenate(parts))
+    # each segment without its end point, then the last break: every break appears exactly once
+    # (a + (b - a) * 1 may differ from b by rounding, which would make a sliver element)
+    parts = [_graded(breaks[i], breaks[i + 1], counts[i], grading, fines[i])[:-1] for i in range(len(counts))]
+    return np.concatenate(parts + [[breaks[-1]]])
 
 
 def twopad_mesh(size: Sequence[float] = (0.100, 0.050), pad_size: float = 0.008, gap: float = 0.032,
