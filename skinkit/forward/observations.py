@@ -15,9 +15,9 @@ Noise, per channel and component (:func:`sample_noise`), in this order of prefer
    samples), also on quantised signals, where a median-based estimate is biased;
 2. checked against the **rest segment** — the samples before the signal first leaves its
    starting level, detrended by a quadratic (unbiased, but short: its standard deviation is
-   uncertain by 1/√(2n)). When both exist and disagree by more than three of those
-   uncertainties, the signal has leaked into the differences (a broadband input) and the
-   rest segment's value is used;
+   uncertain by 1/√(2n)). When the differences exceed it by more than three of those
+   uncertainties, a broadband input has leaked into them and the rest segment's value is
+   used (a "rest" segment larger than the differences holds a slow signal, and is not);
 3. a floor at the **sensor resolution** (the smallest step between distinct values, /√12).
 
 Tracks: the track's ``noise_m`` attribute when its producer knows its uncertainty
@@ -84,8 +84,9 @@ def sample_noise(x: np.ndarray) -> tuple[float, str]:
             seg = xs[:n_rest]
             fit = np.polyval(np.polyfit(t, seg, 2), t)
             rest = float(np.std(seg - fit, ddof=3))
-            if rest > 0 and abs(sd2 - rest) > 3 * rest / np.sqrt(2 * n_rest):
-                est, src = rest, f"rest segment ({n_rest} samples; second differences disagree)"
+            # a broadband signal inflates the differences; a slow one the "rest" segment
+            if rest > 0 and sd2 - rest > 3 * rest / np.sqrt(2 * n_rest):
+                est, src = rest, f"rest segment ({n_rest} samples; second differences larger)"
             elif rest > 0:
                 src = f"second differences (rest segment of {n_rest} samples agrees)"
     if not (np.isfinite(est) and est > floor):

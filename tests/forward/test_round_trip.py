@@ -94,3 +94,31 @@ def test_no_truth_in_the_session_file(trip, tmp_path):
     obs, _, truth = trip
     assert "prestress" in json.dumps(truth)
     assert "prestress" not in json.dumps(obs.summary())
+
+
+LUMPED = {
+    "model": {"kind": "lumped", "name": "round-trip-lumped"},
+    "session": {"protocols": ["in_plane_000"]},
+    "lumped": {"axis": "x", "elastic": "exponential", "parameters": {"a": "20 mN", "b": 300.0},
+               "relaxation": [{"g": 0.3, "tau": "3 s"}]},
+}
+
+
+def test_lumped_round_trip(tmp_path):
+    """A lumped truth through the lab (Table 12 in-plane stretch along x, 1 kHz) predicted by
+    the same model: the force along x within the same range as the FE round trip."""
+    from skinkit.forward import load, read_observations
+    from skinkit.lab.session import make_session
+    truth = make_session(copy.deepcopy(LUMPED), tmp_path / "s.h5", tmp_path / "t.json", seed=5)
+    m = load(copy.deepcopy(LUMPED))
+    obs = read_observations(tmp_path / "s.h5", axis="x")
+    pred = m.predict(m.parameters(), obs)
+    (proto, cname, cp), = list(pred.items())
+    ch = obs[proto].channels[cname]
+    msk = cp.mask(ch)
+    n = int(msk.sum())
+    c2n = float(np.sum(ch.normalised(cp.values, msk)[msk] ** 2)) / n
+    o = np.asarray(truth["offsets"][proto]["tip_force"]["skin_frame"])[0] / ch.noise[0]
+    lo, hi = chi2_range(n)
+    s_est = np.sqrt(2 * 1.944 / ch.values.shape[0])
+    assert lo - 3.3 * s_est + o ** 2 <= c2n <= hi + 3.3 * s_est + o ** 2, c2n
