@@ -235,8 +235,10 @@ def test_instrument_parameters_match_central_differences(forward):
          "azimuth_parameter": "tilt.azimuth"},
         {"kind": "series", "channel": "tip_position", "source": "tip_force", "parameter": "comp.c",
          "value": 1e-3},
-        {"kind": "similarity", "channel": "points", "mode": "scale", "parameter": "trk.scale", "value": 0.01},
-        {"kind": "similarity", "channel": "points", "mode": "rotation", "parameter": "trk.rot", "value": 0.01},
+        {"kind": "similarity", "channel": "points", "mode": "scale", "parameter": "trk.scale",
+         "value": 0.01},
+        {"kind": "similarity", "channel": "points", "mode": "rotation", "parameter": "trk.rot",
+         "value": 0.01},
     ]
     m = forward(spec)
     obs = session()

@@ -11,7 +11,8 @@ import pytest
 from skinkit.errors import ForwardError
 from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
 
-REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "healthy_skin_extension_relaxation.csv"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / \
+    "healthy_skin_extension_relaxation.csv"
 
 SPEC = {
     "model": {"kind": "lumped", "name": "ramp-hold"},
@@ -39,8 +40,9 @@ def test_linear_element_relaxes_as_the_closed_form():
     """A ramp to x0 over T then a hold, linear element k with one Prony term:
     F(t > T) = k x0 [g∞ + g τ/T (1 - e^(-T/τ)) e^(-(t-T)/τ)] (QLV, exact for a linear ramp)."""
     from skinkit.forward import load
-    spec = {"model": {"kind": "lumped"}, "lumped": {"axis": "x", "elastic": "linear", "parameters": {"k": 50.0},
-                                                     "relaxation": [{"g": 0.4, "tau": 3.0}]}}
+    spec = {"model": {"kind": "lumped"},
+            "lumped": {"axis": "x", "elastic": "linear", "parameters": {"k": 50.0},
+                       "relaxation": [{"g": 0.4, "tau": 3.0}]}}
     m = load(spec)
     obs = session(1)
     F = m.predict(m.parameters(), obs).protocols["cycle0"]["tip_force"].values[:, 0]
@@ -66,7 +68,7 @@ def test_sensitivities_match_central_differences():
         h = 1e-6 * max(abs(p.value), 1e-3)
         up = m.predict(pset.with_values({p.name: p.value + h}), obs)
         dn = m.predict(pset.with_values({p.name: p.value - h}), obs)
-        for (_, c, cp), (_, _, u), (_, _, d) in zip(pred.items(), up.items(), dn.items(), strict=True):
+        for (_, _, cp), (_, _, u), (_, _, d) in zip(pred.items(), up.items(), dn.items(), strict=True):
             fd = (u.values - d.values) / (2 * h)
             size = np.abs(fd).max()
             if size:
