@@ -41,6 +41,29 @@ def list_effects(as_json: bool) -> None:
         click.echo(f"{name:20s} [{', '.join(d['kinds'])}]  {pars}")
 
 
+def _forces_from_trajectories(spec, obs, workers):
+    import copy
+
+    from skinkit.forward import load
+    from skinkit.schemas import Channel, Observations, ProtocolObservations
+
+    disp = copy.deepcopy(spec)
+    disp.pop("effects", None)
+    disp["indenter"] = {**dict(disp.get("indenter", {}) or {}), "mode": "displacement"}
+    m = load(disp, workers=workers)
+    pred = m.predict(m.parameters(), obs)
+    if hasattr(m, "close"):
+        m.close()
+    out = {}
+    for po in obs:
+        ch = dict(po.channels)
+        f = ch["tip_force"]
+        forces = pred.protocols[po.name]["tip_force"].values
+        ch["tip_force"] = Channel("tip_force", f.time_s, forces, noise=f.noise)
+        out[po.name] = ProtocolObservations(po.protocol, ch)
+    return Observations(out, None, obs.source)
+
+
 @effects.command("visibility")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.option("--session", type=click.Path(dir_okay=False), default=None,
@@ -68,8 +91,12 @@ def visibility(model_file: str, session: str | None, names: str | None, threshol
         if not protos:
             raise SkinkitError(f"{model_file}: no [session] protocols; give --session")
         obs = trajectory_observations(protos)
-        spec["indenter"] = {**dict(spec.get("indenter", {}) or {}), "mode": "displacement"}
         noise = DEFAULT_NOISE
+        mode = str(dict(spec.get("indenter", {}) or {}).get("mode", "force"))
+        if mode == "force":
+            # the protocols' programmes give tip trajectories: the model driven by them gives the
+            # tip forces that then drive it as the model file says (by the recorded force)
+            obs = _forces_from_trajectories(spec, obs, workers)
     res = effect_visibility(spec, obs, [s.strip() for s in names.split(",")] if names else None, noise,
                             threshold, load=lambda s: load(s, workers=workers),
                             progress=None if as_json else (lambda n: click.echo(f"  {n} ...", err=True)))
