@@ -198,6 +198,8 @@ def surface_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: fl
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ModelError("points", f"expected (M, 3) points, got shape {pts.shape}")
+    if not len(pts):
+        return np.zeros((0, 3)), np.zeros((0, 3))
     top = np.zeros(mesh.n_nodes, bool)
     top[mesh.node_sets["top"]] = True
     top_el = np.flatnonzero(top[mesh.elements].sum(axis=1) >= 9)

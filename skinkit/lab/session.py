@@ -182,6 +182,8 @@ class TopSurface:
     indenter_radius: float
     curved: bool
     has_mesh: bool
+    #: rigid regions away from the origin (two-pad geometry's pads): (xmin, xmax, ymin, ymax) [m]
+    exclude: tuple[tuple[float, float, float, float], ...] = ()
 
     def track_reference(self) -> np.ndarray:
         """``(P, 3)`` [m] tracked material points on the undeformed surface (skin frame)."""
@@ -192,7 +194,11 @@ class TopSurface:
         X, Y = np.meshgrid(g, g, indexing="ij")
         xy = np.column_stack([X.ravel(), Y.ravel()])
         r = np.hypot(xy[:, 0], xy[:, 1])
-        xy = xy[(r >= r_in - 1e-12) & (r <= r_out + 1e-12)]
+        keep = (r >= r_in - 1e-12) & (r <= r_out + 1e-12)
+        for x0, x1, y0, y1 in self.exclude:   # points clear of the pads
+            c = TRACK_CLEARANCE_M
+            keep &= ~((xy[:, 0] > x0 - c) & (xy[:, 0] < x1 + c) & (xy[:, 1] > y0 - c) & (xy[:, 1] < y1 + c))
+        xy = xy[keep]
         return np.column_stack([xy, surface_height(xy, self.curved)])
 
     def profile_points(self) -> np.ndarray:
@@ -217,9 +223,19 @@ def top_surface(spec: Mapping[str, Any] | None, kind: str) -> TopSurface:
     top = mesh.nodes[mesh.node_sets["top"]]
     ind = mesh.node_sets.get("indenter")
     r_ind = float(np.hypot(*mesh.nodes[ind, :2].T).max()) if ind is not None and len(ind) else 0.0
+    exclude = []
+    if ind is not None and len(ind):
+        lo, hi = mesh.nodes[ind, :2].min(axis=0), mesh.nodes[ind, :2].max(axis=0)
+        if not (lo[0] <= 0 <= hi[0] and lo[1] <= 0 <= hi[1]):   # a pad beside the origin, not a probe on it
+            r_ind = 0.0
+            for s in ("indenter", "pad_fixed"):
+                if s in mesh.node_sets:
+                    xy_s = mesh.nodes[mesh.node_sets[s], :2]
+                    a, b = xy_s.min(axis=0), xy_s.max(axis=0)
+                    exclude.append((float(a[0]), float(b[0]), float(a[1]), float(b[1])))
     fit = dict(spec.get("surface", {}) or {}).get("fit", "auto")
     return TopSurface(float(np.abs(top[:, 0]).max()), float(np.abs(top[:, 1]).max()), r_ind,
-                      fit in (True, "auto"), True)
+                      fit in (True, "auto"), True, tuple(exclude))
 
 
 # -- the skeleton a truth predicts -------------------------------------------------------------

@@ -122,3 +122,45 @@ def test_lumped_round_trip(tmp_path):
     lo, hi = chi2_range(n)
     s_est = np.sqrt(2 * 1.944 / ch.values.shape[0])
     assert lo - 3.3 * s_est + o ** 2 <= c2n <= hi + 3.3 * s_est + o ** 2, c2n
+
+
+TWOPAD = {
+    "model": {"name": "round-trip-twopad"},
+    "session": {"protocols": ["in_plane_000"], "parameters": {"in_plane_000": {"periods": 1}}},
+    "geometry": {"kind": "twopad", "size": ["60 mm", "30 mm"], "pad_size": "8 mm", "gap": "28.5 mm",
+                 "n_pad": 1, "n_gap": 4, "n_outer": 1, "n_side": 1},
+    "layers": [
+        {"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "neo-hookean-ni",
+         "parameters": {"mu": "20 kPa", "K": "500 kPa"}},
+        {"name": "subdermal", "thickness": "3.5 mm", "elements": 1, "law": "neo-hookean-enu",
+         "parameters": {"E": "2 kPa", "nu": 0.45}},
+    ],
+    "boundary": {"fixed": ["pad_fixed", "bottom", "sides"]},
+    "indenter": {"mode": "displacement"},
+    "surface": {"fit": "auto", "outside": "nearest"},
+    "drive": {"max_step": "1 s"},
+}
+
+
+def test_twopad_round_trip(tmp_path):
+    """The two-pad extension geometry through the lab (the moving pad pulled 1.5 mm along x):
+    force and tracked points within the noise's range, as for the indentation model."""
+    from skinkit.forward import load, read_observations
+    from skinkit.lab.session import make_session
+    truth = make_session(copy.deepcopy(TWOPAD), tmp_path / "s.h5", tmp_path / "t.json", seed=7, workers=1)
+    m = load(copy.deepcopy(TWOPAD), workers=1)
+    obs = read_observations(tmp_path / "s.h5")
+    pred = m.predict(m.parameters(), obs)
+    for proto, cname, cp in pred.items():
+        ch = obs[proto].channels[cname]
+        msk = cp.mask(ch)
+        n = int(msk.sum())
+        c2n = float(np.sum(ch.normalised(cp.values, msk)[msk] ** 2)) / n
+        lo, hi = chi2_range(n)
+        shift = 0.0
+        if not ch.is_points:
+            s_est = np.sqrt(2 * 1.944 / ch.values.shape[0] / 3)
+            lo, hi = lo - 3.3 * s_est, hi + 3.3 * s_est
+            o = np.asarray(truth["offsets"][proto]["tip_force"]["skin_frame"])
+            shift = float(np.mean((o / ch.noise) ** 2))
+        assert lo + shift <= c2n <= hi + shift, (cname, c2n, lo + shift, hi + shift)
