@@ -120,14 +120,35 @@ def _basis(e: Entry, t: np.ndarray) -> np.ndarray:
 
 
 def _tilt(angle: float, azimuth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rotation R by ``angle`` about the in-plane axis at ``azimuth``; ∂R/∂angle, ∂R/∂azimuth."""
-    def R(a, b):
-        k = np.array([np.cos(b), np.sin(b), 0.0 * b])
-        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-        return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * (K @ K)
-    h = 1e-30
-    return (R(angle, azimuth), np.imag(R(angle + 1j * h, azimuth)) / h,
-            np.imag(R(angle, azimuth + 1j * h)) / h)
+    """Rotation R by ``angle`` about the in-plane axis k = (cos azimuth, sin azimuth, 0) and its
+    analytic derivatives ∂R/∂angle, ∂R/∂azimuth (Rodrigues: R = I + sin a K + (1 − cos a) K²,
+    K the cross-product matrix of k)."""
+    def cross(k: np.ndarray) -> np.ndarray:
+        return np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    sa, ca = np.sin(angle), np.cos(angle)
+    K = cross(np.array([np.cos(azimuth), np.sin(azimuth), 0.0]))
+    dK = cross(np.array([-np.sin(azimuth), np.cos(azimuth), 0.0]))
+    K2 = K @ K
+    R = np.eye(3) + sa * K + (1 - ca) * K2
+    dRa = ca * K + sa * K2
+    dRb = sa * dK + (1 - ca) * (dK @ K + K @ dK)
+    return R, dRa, dRb
+
+
+#: SI unit of an entry's parameter, by kind (bias: by channel and basis)
+_BIAS_UNITS = {("tip_force", "constant"): "N", ("tip_force", "time"): "N/s",
+               ("tip_position", "constant"): "m", ("tip_position", "time"): "m/s"}
+
+
+def parameter_unit(entry: Entry) -> str:
+    """The SI unit of ``entry.parameter`` (``"1"`` where skinkit's unit table has no name for it)."""
+    if entry.kind == "bias":
+        return _BIAS_UNITS.get((entry.channel, entry.basis), "m" if entry.basis == "constant" else "m/s")
+    if entry.kind == "series":
+        return "m/N" if (entry.channel, entry.source) == ("tip_position", "tip_force") else "1"
+    if entry.kind == "tilt" or entry.mode == "rotation":
+        return "rad"
+    return "1"
 
 
 def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: np.ndarray,
@@ -222,4 +243,4 @@ def measure(entries: Sequence[Entry], channel: str, time_s: np.ndarray, values: 
     return v, out
 
 
-__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parse"]
+__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parameter_unit", "parse"]

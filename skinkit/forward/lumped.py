@@ -1,40 +1,43 @@
-"""Lumped forward models: a uniaxial elastic element, with relaxation and preconditioning.
+"""Lumped forward models: a session's recorded drive through a uniaxial element, predicting the other channel.
 
-For extension, relaxation and indentation records along one ``axis``: the recorded tip
-position drives the model (``drive = "tip_position"``, the default) and the force along the
-axis is predicted::
+Families (``[lumped] family``; vocabulary in :mod:`skinkit.forward.lumped_spec`):
 
-    F(t) = φ(t) [g∞ Fe(x(t)) + Σ gᵢ hᵢ(t)],  hᵢ' = −hᵢ/τᵢ + dFe/dt   (QLV, thesis Eq 7.6-7.7)
+* ``quasi-static`` — extension, relaxation and indentation records. Displacement in, force
+  out (``drive = "tip_position"``)::
 
-with the elastic element Fe (``elastic``): ``linear`` F = k x; ``exponential`` (Fung)
-F = a (exp(b x) − 1); ``polynomial`` F = c1 x + c2 x² + c3 x³; x the displacement along the
-axis [m] (sign as recorded). The Prony recurrence is exact for Fe piecewise linear in time
-(as in :mod:`skinkit.fem.viscoelastic`). φ(t) = 1 − softening · m(t)/m_ref is the
-preconditioning factor: m the largest |x| seen so far over the session, m_ref the largest
-of the session. The other force components are not predicted. ``[[instrument]]`` entries
-(force offset and drift, series compliance) apply as for every model.
+      f(t) = g∞ φ Fe(u) + Σᵢ gᵢ hᵢ,   φ(t) = 1 − softening · m(t)/m_ref
 
-Sensitivities of every parameter by the complex step (the simulation is complex-safe): exact
-to rounding. Model file::
+  with the elastic element Fe (``linear``, ``exponential``, ``polynomial``), the exact Prony
+  recurrence of ``[[lumped.relaxation]]`` terms and the preconditioning factor φ
+  (:mod:`skinkit.forward.lumped_elements`); or force in, displacement out (``drive =
+  "tip_force"``): the QLV filter and the element inverted sample by sample.
+* ``kbi`` and ``wiener`` — the dynamic models of :mod:`skinkit.sysid` (force in, position out)
+  on a uniformly sampled record (:mod:`skinkit.forward.lumped_dynamic`).
 
-    [model]
-    kind = "lumped"
-    [lumped]
-    axis = "x"
-    elastic = "exponential"
-    [lumped.parameters]
-    a = "0.05 N"
-    b = 300.0          # [1/m]: numbers are SI
-    [[lumped.relaxation]]
-    g = 0.3
-    tau = "10 s"
+u and f are the tip position and force along ``axis`` (``-z``: into the skin). The drive
+channel's invalid samples are interpolated; the prediction has the observed channel's shape
+and times, with the components other than the axis 0 and marked not predicted.
+
+``[[instrument]]`` entries (:mod:`skinkit.forward.instrument`) turn the recorded drive into
+what the skin saw and the prediction into what was recorded. A series compliance on a
+displacement drive (the motor's position recorded, the tip lagging by c f) is solved with the
+element: u + c f(u) = recorded, Newton per sample. m(t) is the largest |drive| along the axis
+after the bias and tilt entries (what the motor imposed).
+
+Sensitivities: parameters of the element, relaxation, preconditioning and a drive-side series
+compliance by the complex step (the simulation is complex-safe; exact to rounding); instrument
+parameters acting on the measurement analytically; those acting on the drive by a complex step
+along their analytic drive derivative. Effect parameters bound to a model parameter
+(``bindings``) report that parameter's sensitivity under the effect's name.
 """
 
 from __future__ import annotations
 
 import copy
 import math
+import time
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -42,245 +45,246 @@ import numpy as np
 from skinkit.errors import ForwardError, SchemaError
 from skinkit.forward import drive as drive_mod
 from skinkit.forward import instrument as inst_mod
+from skinkit.forward import lumped_dynamic as dyn
+from skinkit.forward import lumped_elements as el
 from skinkit.forward.effects import AppliedEffect, apply_all
+from skinkit.forward.lumped_spec import ELASTIC, LumpedSpec, check_values, parse_lumped
 from skinkit.schemas import ChannelPrediction, Observations, Parameter, ParameterSet, Prediction
 
-#: elastic element -> (parameter, SI unit, lower, upper)
-ELASTIC: dict[str, list[tuple[str, str, float, float]]] = {
-    "linear": [("k", "N/m", 0.0, math.inf)],
-    "exponential": [("a", "N", 0.0, math.inf), ("b", "1", 0.0, math.inf)],
-    "polynomial": [("c1", "N/m", -math.inf, math.inf), ("c2", "1", -math.inf, math.inf),
-                   ("c3", "1", -math.inf, math.inf)],
-}
-_AXES = {"x": 0, "y": 1, "z": 2}
-_KEYS = {"axis", "drive", "elastic", "parameters", "relaxation", "preconditioning", "test"}
+#: complex step [SI of the parameter]: far below rounding of any value, so exact to rounding
 _H = 1e-30
 
 
-def _elastic(kind: str, p: Mapping[str, Any], x: np.ndarray) -> np.ndarray:
-    if kind == "linear":
-        return p["k"] * x
-    if kind == "exponential":
-        return p["a"] * np.expm1(p["b"] * x) if np.isrealobj(p["a"]) and np.isrealobj(p["b"]) \
-            else p["a"] * (np.exp(p["b"] * x) - 1)
-    return p["c1"] * x + p["c2"] * x ** 2 + p["c3"] * x ** 3
+def simulate(ls: LumpedSpec, v: Mapping[str, Any], drives: Sequence[tuple[np.ndarray, np.ndarray]]
+             ) -> list[np.ndarray]:
+    """The element's response to each protocol's drive (session order, complex-safe).
+
+    ``v``: ``"lumped.<name>"`` -> value (and a drive-side series compliance under its entry's
+    parameter name); ``drives``: per protocol ``(t (T,) [s], u (T,))``, u the drive along the
+    axis [m or N]. Returns per protocol the predicted quantity along the axis ``(T,)``
+    (force [N] for a displacement drive, position [m] for a force drive).
+    """
+    out = []
+    if ls.family != "quasi-static":
+        for t, u in drives:
+            dt = np.diff(t)
+            if dt.size == 0 or float(np.ptp(dt)) > 1e-6 * float(np.mean(dt)):
+                raise ForwardError(f"lumped.family = {ls.family!r}", "needs a uniformly sampled record")
+            step = float(np.mean(dt))
+            if ls.family == "kbi":
+                out.append(dyn.second_order(u, v["lumped.K"], v["lumped.B"], v["lumped.I"], step, ls.hold))
+            else:
+                out.append(dyn.wiener(u, v["lumped.Is"], v["lumped.Bs"], v["lumped.C1"], v["lumped.C2"], step,
+                                      ls.hold))
+        return out
+    p = {n: v[f"lumped.{n}"] for n in ls.names}
+    g = [v[f"lumped.g{i}"] for i in range(1, ls.n_terms + 1)]
+    tau = [v[f"lumped.tau{i}"] for i in range(1, ls.n_terms + 1)]
+    soft = v.get("lumped.softening", 0.0)
+    levels = el.softening_levels([u for _, u in drives]) if ls.has_preconditioning else [0.0] * len(drives)
+    series = [e for e in ls.entries if e.kind == "series" and e.channel == ls.drive]
+    for (t, u), lev in zip(drives, levels, strict=True):
+        phi = 1 - soft * lev
+        if ls.drive == "tip_force":
+            fe = el.qlv_inverse(t, u, g, tau) / phi
+            out.append(el.elastic_inverse(ls.elastic, p, fe, "lumped.parameters"))
+        elif series:
+            c = sum(v.get(e.parameter, e.value) for e in series)
+            where = f"instrument ({series[0].parameter})"
+            out.append(el.series_solve(t, u, phi, ls.elastic, p, g, tau, c, where)[1])
+        else:
+            out.append(el.qlv(t, phi * el.elastic_force(ls.elastic, p, u), g, tau))
+    return out
 
 
-def simulate(kind: str, p: Mapping[str, Any], t: np.ndarray, x: np.ndarray, g: Sequence[Any],
-             tau: Sequence[Any], phi: np.ndarray | Any) -> np.ndarray:
-    """Force ``(T,)`` of the element at times ``t`` [s] under displacement ``x`` [m] (complex-safe)."""
-    fe = _elastic(kind, p, x)
-    out = (1 - sum(g)) * fe if len(g) else fe * 1.0
-    if len(g):
-        dt = np.diff(t)
-        dfe = np.diff(fe)
-        for gi, ti in zip(g, tau, strict=True):
-            e = np.exp(-dt / ti)
-            beta = ti / dt * (1 - e)
-            h = np.zeros(len(t), dtype=np.result_type(fe, gi, ti))
-            for n in range(1, len(t)):   # the exact recurrence for piecewise-linear Fe
-                h[n] = e[n - 1] * h[n - 1] + beta[n - 1] * dfe[n - 1]
-            out = out + gi * h
-    return phi * out
+def _interp(t_to: np.ndarray, t_from: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Linear interpolation along axis 0 (complex-safe); the same array when the times agree."""
+    if t_to.shape == t_from.shape and np.array_equal(t_to, t_from):
+        return y
+    flat = y.reshape(len(t_from), -1)
+    cols = [np.interp(t_to, t_from, flat[:, j].real) + (1j * np.interp(t_to, t_from, flat[:, j].imag)
+                                                         if np.iscomplexobj(flat) else 0.0)
+            for j in range(flat.shape[1])]
+    return np.stack(cols, axis=1).reshape((len(t_to),) + y.shape[1:])
 
 
 class LumpedForwardModel:
-    """A uniaxial lumped model as a :class:`skinkit.protocols.ForwardModel`."""
+    """A lumped model description as a :class:`skinkit.protocols.ForwardModel` (module docstring)."""
 
     kind = "lumped"
 
-    def __init__(self, spec: Mapping[str, Any], effects: list[AppliedEffect] = ()) -> None:
+    def __init__(self, spec: Mapping[str, Any], effects: Sequence[AppliedEffect] = ()) -> None:
         self.base = copy.deepcopy(dict(spec))
         self.base.pop("effects", None)
+        self.base.pop("load", None)
         self.effects = list(effects)
         self.name = str(dict(self.base.get("model", {}) or {}).get("name", "lumped"))
         eff = apply_all(self.base, self.effects)
-        self._read(eff)
-        self.axis = self._axis_name
+        self.spec = parse_lumped(eff)
+        #: the tip axis letter (``skinkit predict`` reads a one-axis CSV along it)
+        self.axis = self.spec.axis_name
+        self.last_info: dict[str, Any] = {}
         self._pset = self._parameters(eff)
 
-    def _read(self, spec: Mapping[str, Any]) -> None:
-        from skinkit.fem.errors import ModelError
-        from skinkit.fem.model import quantity
-        lt = spec.get("lumped")
-        if not isinstance(lt, Mapping):
-            raise ForwardError("lumped", "a lumped model needs a [lumped] table")
-        extra = sorted(set(lt) - _KEYS)
-        if extra:
-            raise ForwardError("lumped", f"unknown key(s) {extra}; allowed are {sorted(_KEYS)}")
-        self._axis_name = str(lt.get("axis", "x"))
-        if self._axis_name not in _AXES:
-            raise ForwardError("lumped.axis", f"must be x, y or z, got {self._axis_name!r}")
-        self.drive_channel = str(lt.get("drive", "tip_position"))
-        if self.drive_channel != "tip_position":
-            raise ForwardError("lumped.drive",
-                               "only 'tip_position' (displacement in, force out) is available")
-        self.elastic = str(lt.get("elastic", "linear"))
-        if self.elastic not in ELASTIC:
-            raise ForwardError("lumped.elastic", f"must be one of {sorted(ELASTIC)}, got {self.elastic!r}")
-        given = dict(lt.get("parameters", {}) or {})
-        names = [n for n, *_ in ELASTIC[self.elastic]]
-        missing = sorted(set(names) - set(given))
-        unknown = sorted(set(given) - set(names))
-        if missing or unknown:
-            what = (f"; missing {missing}" if missing else "") + (f"; unknown {unknown}" if unknown else "")
-            raise ForwardError("lumped.parameters", f"the {self.elastic!r} element takes {names}{what}")
-        try:
-            self.params = {n: quantity(given[n], u, f"lumped.parameters.{n}")
-                           for n, u, *_ in ELASTIC[self.elastic]}
-            rel = lt.get("relaxation", []) or []
-            self.g = [quantity(r.get("g"), "1", f"lumped.relaxation[{i}].g") for i, r in enumerate(rel)]
-            self.tau = [quantity(r.get("tau"), "s", f"lumped.relaxation[{i}].tau") for i, r in enumerate(rel)]
-            pre = dict(lt.get("preconditioning", {}) or {})
-            self.softening = quantity(pre.get("softening", 0.0), "1", "lumped.preconditioning.softening")
-        except ModelError as exc:
-            raise ForwardError(exc.args[0].split(":")[0], str(exc)) from None
-        for n, _, lo, hi in ELASTIC[self.elastic]:
-            if not lo <= self.params[n] <= hi:
-                raise ForwardError(f"lumped.parameters.{n}",
-                                   f"{self.params[n]:g} is outside [{lo:g}, {hi:g}]")
-        if any(t <= 0 for t in self.tau) or any(not 0 <= g < 1 for g in self.g) or sum(self.g) >= 1:
-            raise ForwardError("lumped.relaxation", "needs 0 <= g, sum(g) < 1 and tau > 0")
-        if not 0 <= self.softening < 1:
-            raise ForwardError("lumped.preconditioning.softening",
-                               f"must be in [0, 1), got {self.softening}")
-        self.entries = inst_mod.parse(spec.get("instrument"))
+    @property
+    def default_protocols(self) -> tuple[str, ...]:
+        """Table 12 protocols a virtual-lab session of this model holds by default."""
+        if self.spec.family != "quasi-static":
+            return ("stochastic_full_scale",)
+        return {"x": ("in_plane_000",), "y": ("in_plane_090",)}.get(self.axis, ("normal_indentation",))
 
     def _parameters(self, spec: Mapping[str, Any]) -> ParameterSet:
         bound = set(dict(spec.get("bindings", {}) or {}).values())
-        out = []
-        for n, u, lo, hi in ELASTIC[self.elastic]:
-            out.append(Parameter(f"lumped.{n}", self.params[n], u, lo, hi))
-        for i, (g, t) in enumerate(zip(self.g, self.tau, strict=True), start=1):
-            out.append(Parameter(f"lumped.g{i}", g, "1", 0.0, 0.99))
-            out.append(Parameter(f"lumped.tau{i}", t, "s", 1e-3, 1e4))
-        if "preconditioning" in dict(spec["lumped"]):
-            out.append(Parameter("lumped.softening", self.softening, "1", 0.0, 0.99))
-        out = [p for p in out if p.name not in bound]
         effect_names = {f"{e.name}.{k}" for e in self.effects for k in e.declared}
-        for e in self.entries:
-            for nm in (e.parameter, e.azimuth_parameter):
-                if nm and nm not in effect_names and nm not in {p.name for p in out}:
-                    out.append(Parameter(nm, e.value, "1"))
+        out: list[Parameter] = []
+        for nm, v in self.spec.values.items():
+            if nm not in bound:
+                unit, lo, hi = self.spec.parameter_bounds(nm)
+                out.append(Parameter(nm, v, unit, lo, hi))
+        seen = {p.name for p in out} | effect_names
+        for e in self.spec.entries:
+            for nm, val, unit in ((e.parameter, e.value, inst_mod.parameter_unit(e)),
+                                  (e.azimuth_parameter, e.azimuth, "rad")):
+                if nm and nm not in seen:
+                    lo = 0.0 if e.kind == "series" and val >= 0 else -math.inf
+                    out.append(Parameter(nm, val, unit, lo, math.inf))
+                    seen.add(nm)
         for e in self.effects:
             out.extend(e.parameter_set())
         return ParameterSet(out)
 
     def parameters(self) -> ParameterSet:
+        """Every parameter of the model, values from the description (effects at their values)."""
         return self._pset
 
-    def _values(self, params: ParameterSet) -> tuple[dict[str, Any], Mapping[str, Any]]:
-        """Internal values (``lumped.*`` and instrument names) at ``params``."""
-        vals = params.values()
+    def values(self, params: ParameterSet | Mapping[str, float]) -> tuple[LumpedSpec, dict[str, float],
+                                                                           dict[str, str]]:
+        """``(spec, internal values, bindings)`` at ``params``: the description with the effects
+        applied at their values; internal names are ``lumped.*`` and instrument parameters."""
+        vals = params.values() if isinstance(params, ParameterSet) else dict(params)
         unknown = sorted(set(vals) - set(self._pset.names))
         if unknown:
             raise SchemaError("parameters", f"unknown parameter(s) {unknown} for model {self.name!r}")
         spec = apply_all(self.base, self.effects, vals)
-        bind = dict(spec.get("bindings", {}) or {})
-        internal: dict[str, Any] = {f"lumped.{n}": v for n, v in self.params.items()}
-        lt = spec["lumped"]
-        for i, r in enumerate(lt.get("relaxation", []) or [], start=1):
-            internal[f"lumped.g{i}"] = float(r["g"])
-            internal[f"lumped.tau{i}"] = _si(r["tau"], "s")
-        pre = dict(lt.get("preconditioning", {}) or {})
-        internal["lumped.softening"] = _si(pre.get("softening", 0.0), "1")
-        for e in inst_mod.parse(spec.get("instrument")):
+        bind = {str(k): str(t) for k, t in dict(spec.get("bindings", {}) or {}).items()}
+        ls = parse_lumped(spec)
+        internal = dict(ls.values)
+        for e in ls.entries:
             internal[e.parameter] = e.value
             if e.azimuth_parameter:
                 internal[e.azimuth_parameter] = e.azimuth
         for nm, v in vals.items():
-            internal[bind.get(nm, nm)] = v
-        return internal, bind
+            internal[bind.get(nm, nm)] = float(v)
+        check_values(ls, internal)
+        ls.entries = [replace(e, value=internal.get(e.parameter, e.value),
+                              azimuth=internal.get(e.azimuth_parameter, e.azimuth) if e.azimuth_parameter
+                              else e.azimuth) for e in ls.entries]
+        return ls, internal, bind
 
+    # -- prediction ----------------------------------------------------------------------------
     def predict(self, params: ParameterSet, observations: Observations,
                 sensitivities: bool | Sequence[str] = False) -> Prediction:
-        """Predicted force (and, with a series compliance, position) of every protocol."""
+        """Predictions of the channel the model does not take as its drive, every protocol."""
+        if not isinstance(observations, Observations):
+            raise SchemaError("observations", f"expected Observations, got {type(observations).__name__}")
         names = self._pset.names if sensitivities is True else \
             ([] if not sensitivities else list(sensitivities))
         unknown = sorted(set(names) - set(self._pset.names))
         if unknown:
             raise SchemaError("sensitivities", f"unknown parameter(s) {unknown} for model {self.name!r}")
-        internal, bind = self._values(params)
-        base = self._run(internal, observations)
-        pred = Prediction({p: {c: ChannelPrediction(v, {}, m) for c, (v, m) in chans.items()}
-                           for p, chans in base.items()}, {},
-                          {p.name: self.drive_channel for p in observations})
-        for nm in names:
-            key = bind.get(nm, nm)
-            pert = dict(internal)
-            pert[key] = internal[key] + 1j * _H
-            out = self._run(pert, observations)
-            for p, chans in out.items():
-                for c, (v, _) in chans.items():
-                    pred.protocols[p][c].d[nm] = np.imag(v) / _H
-            pred.methods[nm] = "complex-step"
+        t0 = time.perf_counter()
+        ls, v, bind = self.values(params)
+        targets = {nm: bind.get(nm, nm) for nm in names}
+        inst_names = inst_mod.parameter_names(ls.entries)
+        series_drive = {e.parameter for e in ls.entries if e.kind == "series" and e.channel == ls.drive}
+        drive_entries = [e for e in ls.entries if not (e.kind == "series" and e.channel == ls.drive)]
+        want_inst = sorted({t for t in targets.values() if t in inst_names})
+        # the drive each protocol's skin saw, along the axis, with its instrument derivatives
+        recs = []
+        for po in observations:
+            if ls.drive not in po.channels:
+                raise ForwardError(f"session protocol {po.name!r}",
+                                   f"has no {ls.drive!r} channel to drive the lumped model ([lumped] drive); "
+                                   f"it has {sorted(po.channels)}")
+            if ls.predicted not in po.channels:
+                raise ForwardError(f"session protocol {po.name!r}",
+                                   f"has no {ls.predicted!r} channel for the lumped model to predict; "
+                                   f"it has {sorted(po.channels)}")
+            ch = po.channels[ls.drive]
+            rec = drive_mod.fill_invalid(ch.values, ch.valid)
+            true, dtrue = inst_mod.drive(drive_entries, ls.drive, ch.time_s, rec, want_inst)
+            recs.append((ch.time_s, true, dtrue))
+        base = [(t, ls.sense * true[:, ls.axis]) for t, true, _ in recs]
+        y0 = simulate(ls, v, base)
+        dy: dict[str, list[np.ndarray]] = {}
+        methods: dict[str, str] = {}
+        for key in sorted(set(targets.values())):
+            if key in v and (key.startswith("lumped.") or key in series_drive):
+                pert = dict(v)
+                pert[key] = v[key] + 1j * _H
+                dy[key] = [np.imag(y) / _H for y in simulate(ls, pert, base)]
+                methods[key] = "complex-step"
+            elif key in inst_names:
+                if any(key in d for _, _, d in recs):
+                    # a complex step along the drive's analytic derivative: the model's response to it
+                    pdrv = [(t, u + 1j * _H * ls.sense * d[key][:, ls.axis] if key in d else u + 0j)
+                            for (t, u), (_, _, d) in zip(base, recs, strict=True)]
+                    dy[key] = [np.imag(y) / _H for y in simulate(ls, v, pdrv)]
+                    methods[key] = "complex-step"
+                else:
+                    methods[key] = "analytic"
+            else:
+                methods[key] = "central-difference"
+        out: dict[str, dict[str, ChannelPrediction]] = {}
+        for k, po in enumerate(observations):
+            t_d, true, dtrue = recs[k]
+            ch = po.channels[ls.predicted]
+            Y = np.zeros((len(t_d), 3))
+            Y[:, ls.axis] = ls.sense * y0[k]
+            d = {}
+            for key, ys in dy.items():
+                a = np.zeros_like(Y)
+                a[:, ls.axis] = ls.sense * ys[k]
+                d[key] = _interp(ch.time_s, t_d, a)
+            Yp = _interp(ch.time_s, t_d, Y)
+            channels = {ls.predicted: (Yp, d),
+                        ls.drive: (_interp(ch.time_s, t_d, true),
+                                   {n: _interp(ch.time_s, t_d, a) for n, a in dtrue.items()})}
+            measured = [e for e in ls.entries if e.parameter not in series_drive]
+            mv, md = inst_mod.measure(measured, ls.predicted, ch.time_s, Yp, d, channels, want_inst)
+            mask = np.zeros(ch.values.shape, bool)
+            mask[:, ls.axis] = True
+            cd = {nm: md.get(targets[nm], np.zeros_like(mv)) for nm in names}
+            out[po.name] = {ls.predicted: ChannelPrediction(mv, cd, mask)}
+        pred = Prediction(out, {nm: methods[targets[nm]] for nm in names},
+                          {po.name: ls.drive for po in observations}, {})
+        fd = [nm for nm in names if methods[targets[nm]] == "central-difference"]
+        if fd:
+            self._central_differences(params, observations, pred, fd)
+        pred.info = {"wall_s": time.perf_counter() - t0, "family": ls.family}
+        self.last_info = pred.info
         return pred
 
-    def _run(self, v: Mapping[str, Any], observations: Observations) -> dict[str, dict[str, tuple[Any, Any]]]:
-        ax = _AXES[self._axis_name]
-        p = {n: v[f"lumped.{n}"] for n, *_ in ELASTIC[self.elastic]}
-        g = [v[f"lumped.g{i}"] for i in range(1, len(self.g) + 1)]
-        tau = [v[f"lumped.tau{i}"] for i in range(1, len(self.tau) + 1)]
-        entries = [_with(e, v) for e in self.entries]
-        drives = {}
-        for po in observations:
-            if self.drive_channel not in po.channels:
-                raise ForwardError(f"session protocol {po.name!r}", f"has no {self.drive_channel!r} channel "
-                                   f"to drive the lumped model; it has {sorted(po.channels)}")
-            if "tip_force" not in po.channels:
-                raise ForwardError(f"session protocol {po.name!r}", "has no 'tip_force' channel to predict")
-            ch = po.channels[self.drive_channel]
-            x = drive_mod.fill_invalid(ch.values, ch.valid)
-            drives[po.name] = (ch.time_s, x[:, ax])
-        m_ref = max((float(np.max(np.abs(x))) for _, x in drives.values()), default=0.0)
-        running = 0.0
-        out: dict[str, dict[str, tuple[Any, Any]]] = {}
-        for po in observations:
-            t, x = drives[po.name]
-            level = np.maximum.accumulate(np.maximum(np.abs(x), running)) / m_ref if m_ref > 0 else 0 * x
-            running = max(running, float(np.max(np.abs(x))))
-            phi = 1 - v["lumped.softening"] * level
-            f = simulate(self.elastic, p, t, x, g, tau, phi)
-            fch = po.channels["tip_force"]
-            F = np.zeros(fch.values.shape, dtype=np.result_type(f, float))
-            F[:, ax] = np.interp(fch.time_s, t, f.real)
-            if np.iscomplexobj(f):
-                F[:, ax] = F[:, ax] + 1j * np.interp(fch.time_s, t, f.imag)
-            mask = np.zeros(fch.values.shape, bool)
-            mask[:, ax] = True
-            Fm = _measure(entries, "tip_force", fch.time_s, F)
-            out[po.name] = {"tip_force": (Fm, mask)}
-        return out
+    def _central_differences(self, params: ParameterSet, observations: Observations, pred: Prediction,
+                             names: list[str]) -> None:
+        """Parameters no route above covers (an effect that edits the description some other
+        way): central differences of whole predictions, step 1e-6 of the parameter's scale."""
+        for nm in names:
+            p = params.param(nm)
+            h = 1e-6 * max(abs(p.value), 1e-6)
+            lo, hi = max(p.lower, p.value - h), min(p.upper, p.value + h)
+            up = self.predict(params.with_values({nm: hi}), observations)
+            dn = self.predict(params.with_values({nm: lo}), observations)
+            for proto, chans in pred.protocols.items():
+                for cname, cp in chans.items():
+                    diff = up.protocols[proto][cname].values - dn.protocols[proto][cname].values
+                    cp.d[nm] = diff / (hi - lo)
 
 
-def _si(value: Any, unit: str) -> float:
-    from skinkit.fem.model import quantity
-    return quantity(value, unit, "lumped")
-
-
-def _with(e: inst_mod.Entry, v: Mapping[str, Any]):
-    from dataclasses import replace
-    return replace(e, value=v.get(e.parameter, e.value),
-                   azimuth=v.get(e.azimuth_parameter, e.azimuth) if e.azimuth_parameter else e.azimuth)
-
-
-def _measure(entries, channel: str, t: np.ndarray, F):
-    """Bias entries on the predicted force (complex-safe)."""
-    out = F.astype(np.result_type(F, *[e.value for e in entries]))
-    for e in entries:
-        if e.kind == "bias" and e.channel == channel:
-            out[:, e.component] = out[:, e.component] + e.value * (1.0 if e.basis == "constant" else t)
-        elif e.kind in ("series", "tilt", "similarity") and e.channel in (channel, "", "tip_position"):
-            if e.kind != "similarity":
-                raise ForwardError(f"instrument ({e.parameter})",
-                                   f"{e.kind!r} entries are not available in a lumped model "
-                                   "driven by position")
-    return out
-
-
-def build_lumped(spec: Mapping[str, Any], effects: list[AppliedEffect] = ()) -> LumpedForwardModel:
-    """The lumped forward model of a description (``[model] kind = "lumped"``)."""
-    return LumpedForwardModel(spec, list(effects))
+def build_lumped(spec: Mapping[str, Any], effects: Sequence[AppliedEffect] = ()) -> LumpedForwardModel:
+    """The lumped forward model of a description (``[model] kind = "lumped"``) with its
+    resolved ``[[effects]]`` (:func:`skinkit.forward.effects.resolve`); errors name the entry."""
+    return LumpedForwardModel(spec, effects)
 
 
 __all__ = ["ELASTIC", "LumpedForwardModel", "build_lumped", "simulate"]
