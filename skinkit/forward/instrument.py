@@ -17,18 +17,29 @@ and applies to one channel (``docs/effects.md``):
   are the skin-frame ones turned back (points, seen by the cameras, are not). ``azimuth``
   is a second parameter when ``azimuth_parameter`` names it.
 
-API (model-agnostic; arrays in, arrays and derivative dicts out):
+API (model-agnostic; arrays in, arrays and derivative dicts out; shapes: tip channels
+``(T, 3)``, points ``(P, T, 3)``, 2D points ``(P, T, 2)``, times ``(T,)`` [s]):
 
-* :func:`parse` validates the entries;
-* :func:`drive` maps a recorded drive ``(T, 3)`` to what the skin saw, with derivatives;
-* :func:`measure` maps a predicted channel to what the instrument records, with derivatives,
-  by the chain rule through the model's own derivatives.
+* ``parse(entries) -> list[Entry]`` validates the tables (errors name ``instrument[i].<key>``;
+  ``value`` and ``azimuth`` are numbers in SI or ``"<number> <unit>"`` strings);
+* ``parameter_names(entries) -> list[str]`` and ``parameter_unit(entry) -> str``;
+* ``drive(entries, channel, time_s, recorded, names) -> (true, {name: d true/d name})``: the
+  recorded drive ``(T, 3)`` to what the skin saw (biases of that channel removed, then the
+  tilt). A series entry on the driving channel is refused here: it couples the drive to the
+  prediction, so the model itself must solve it (the lumped model does);
+* ``measure(entries, channel, time_s, values, d, channels, names) -> (recorded, derivatives)``:
+  a predicted channel (skin frame) with the model's derivatives ``d`` to what the instrument
+  records, the model's derivatives carried through and the instrument's own added for
+  ``names``; ``channels`` maps every channel the model knows (predicted or driving) to
+  ``(values, derivatives)`` for the ``source`` of series entries (chain rule included).
+
+Every transform is exactly the identity at value 0 (a tilt: at angle 0, any azimuth).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -78,13 +89,6 @@ def parse(entries: Any) -> list[Entry]:
         par = str(e.get("parameter", ""))
         if not par:
             raise ForwardError(f"{w}.parameter", "needs a parameter name")
-        try:
-            value = float(e.get("value", 0.0))
-            az = float(e.get("azimuth", 0.0))
-        except (TypeError, ValueError):
-            raise ForwardError(f"{w}.value", f"must be a number, got {e.get('value')!r}") from None
-        if not np.isfinite(value):
-            raise ForwardError(f"{w}.value", f"must be finite, got {value}")
         ch = str(e.get("channel", "tip_position" if kind == "series" else ""))
         if kind in ("bias", "series", "similarity") and ch not in _CHANNELS:
             raise ForwardError(f"{w}.channel", f"must be one of {list(_CHANNELS)}, got {ch!r}")
@@ -100,9 +104,31 @@ def parse(entries: Any) -> list[Entry]:
         src = str(e.get("source", "tip_force" if kind == "series" else ""))
         if kind == "series" and src not in ("tip_force", "tip_position"):
             raise ForwardError(f"{w}.source", f"must be 'tip_force' or 'tip_position', got {src!r}")
-        out.append(Entry(kind, par, value, ch if kind != "tilt" else "", int(comp), basis, src, mode, az,
-                         str(e.get("azimuth_parameter", ""))))
+        entry = Entry(kind, par, 0.0, ch if kind != "tilt" else "", int(comp), basis, src, mode, 0.0,
+                      str(e.get("azimuth_parameter", "")))
+        value = _number(e.get("value", 0.0), parameter_unit(entry), f"{w}.value")
+        az = _number(e.get("azimuth", 0.0), "rad", f"{w}.azimuth")
+        out.append(replace(entry, value=value, azimuth=az))
     return out
+
+
+def _number(value: Any, unit: str, where: str) -> float:
+    """A finite SI value from a number or a ``"<number> <unit>"`` string (``"-77 mN"``, ``"3 deg"``)."""
+    if isinstance(value, str):
+        from skinkit.fem.errors import ModelError
+        from skinkit.fem.model import quantity
+
+        try:
+            x = quantity(value, unit, where)
+        except ModelError as exc:
+            raise ForwardError(where, exc.problem) from None
+    elif isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ForwardError(where, f"must be a number or a '<number> <unit>' string, got {value!r}")
+    else:
+        x = float(value)
+    if not np.isfinite(x):
+        raise ForwardError(where, f"must be finite, got {x}")
+    return x
 
 
 def parameter_names(entries: Sequence[Entry]) -> list[str]:

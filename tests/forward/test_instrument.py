@@ -76,6 +76,11 @@ def test_parse_names_the_entry():
         with pytest.raises(ForwardError) as err:
             inst.parse([entry])
         assert err.value.entry == where, err.value
+    got = inst.parse([{**f, "value": "-77 mN"}, {"kind": "tilt", "parameter": "t", "value": "3 deg",
+                                                 "azimuth": "90 deg"}])
+    assert got[0].value == pytest.approx(-0.077, rel=1e-15) and got[1].azimuth == pytest.approx(np.pi / 2)
+    with pytest.raises(ForwardError, match=r"instrument\[0\]\.value.*inconsistent units"):
+        inst.parse([{**f, "value": "3 mm"}])
     with pytest.raises(ForwardError, match="array of tables"):
         inst.parse({"kind": "bias"})
     assert inst.parameter_names(inst.parse(ENTRIES)) == NAMES
