@@ -6,8 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from skinkit.cli.docgen import render
-
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -15,9 +13,21 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.mark.needs_hardware
 def test_cli_reference_is_current():
     """In a full environment (every command installed) the generated reference matches."""
+    import difflib
+    import os
+    import subprocess
+    import sys
+
     doc = ROOT / "docs" / "cli.md"
-    if render() != doc.read_text():
-        pytest.fail("docs/cli.md is out of date: run `python -m skinkit.cli.docgen > docs/cli.md`")
+    # in a fresh process, exactly as the docs say to generate it: other tests in this worker
+    # may have changed the environment (terminal width, working directory) that help reads
+    out = subprocess.run([sys.executable, "-m", "skinkit.cli.docgen"], capture_output=True, text=True,
+                         cwd=ROOT, env={k: v for k, v in os.environ.items() if k != "COLUMNS"},
+                         check=True).stdout
+    if out != doc.read_text():
+        lines = difflib.unified_diff(doc.read_text().splitlines(True), out.splitlines(True))
+        diff = "".join(list(lines)[:30])
+        pytest.fail("docs/cli.md is out of date: run `python -m skinkit.cli.docgen > docs/cli.md`\n" + diff)
 
 
 def test_readme_commands_exist_in_makefile():
