@@ -18,6 +18,8 @@ def _names(text: str | None) -> list[str]:
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.argument("session", type=click.Path(dir_okay=False))
 @click.option("--protocols", default=None, help="only these protocols (comma-separated)")
+@click.option("--until", "until_s", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="only the first part of every record, up to this time [s]")
 @click.option("--holdout", default=None, help="mark these protocols held out (comma-separated)")
 @click.option("--set", "sets", multiple=True, metavar="NAME=VALUE",
               help="override a parameter (SI value or '<number> <unit>'), repeatable")
@@ -30,7 +32,8 @@ def _names(text: str | None) -> list[str]:
 @click.option("--out", "out_file", type=click.Path(dir_okay=False), default=None,
               help="write the predictions (HDF5) here")
 @click.option("--json", "as_json", is_flag=True, help="print the residual summary as JSON")
-def predict(model_file: str, session: str, protocols: str | None, holdout: str | None, sets: tuple[str, ...],
+def predict(model_file: str, session: str, protocols: str | None, until_s: float | None, holdout: str | None,
+            sets: tuple[str, ...],
             sensitivities: bool, workers: int | None, scheduler: str | None, axis: str | None,
             out_file: str | None, as_json: bool) -> None:
     """Predict SESSION (experiment file or CSV record) with MODEL_FILE; report the residuals."""
@@ -44,6 +47,8 @@ def predict(model_file: str, session: str, protocols: str | None, holdout: str |
     obs = read_observations(session, held_out=_names(holdout), axis=axis)
     if protocols:
         obs = obs.select(_names(protocols))
+    if until_s is not None:
+        obs = obs.until(until_s)
     params = model.parameters()
     values = {}
     for item in sets:

@@ -238,6 +238,21 @@ class Observations:
         return Observations({k: ProtocolObservations(v.protocol, v.channels, k in set(names))
                              for k, v in self.protocols.items()}, self.profile, self.source)
 
+    def until(self, t_s: float) -> Observations:
+        """Every channel cut to its samples at times ≤ ``t_s`` [s] (a record's first part)."""
+        out = {}
+        for p in self:
+            chans = {}
+            for c in p.channels.values():
+                k = int(np.searchsorted(c.time_s, t_s, side="right"))
+                if k < 2:
+                    continue
+                sl = (slice(None), slice(0, k)) if c.is_points else (slice(0, k),)
+                chans[c.name] = Channel(c.name, c.time_s[:k], c.values[sl], c.valid[sl], c.noise,
+                                        c.noise_source, c.reference, c.reference_frame)
+            out[p.name] = ProtocolObservations(p.protocol, chans, p.held_out)
+        return Observations(out, self.profile, self.source)
+
     def fitted(self) -> Observations:
         return Observations({k: v for k, v in self.protocols.items() if not v.held_out},
                             self.profile, self.source)
