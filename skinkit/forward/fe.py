@@ -135,7 +135,7 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
                 "increments": solver.steps_taken, "newton_iterations": tm.iterations,
                 "newton_per_step": tm.iterations / max(solver.steps_taken, 1),
                 "assembly_s": tm.assembly, "linear_solve_s": tm.solve, "n_dof": mesh.n_dof,
-                "linear_solver": solver.linear.name}
+                "linear_solver": solver.linear.name, "process": os.getpid()}
         return {"name": job.name, "times": np.concatenate([[0.0], job.times]), "tip_u": tip_u,
                 "tip_f": tip_f, "points": pts, "d_tip_u": d_tip_u, "d_tip_f": d_tip_f, "d_points": d_pts,
                 "untied": untied, "col_names": list(job.sens), "info": info}
