@@ -54,8 +54,8 @@ def smooth_at(t_rec: np.ndarray, x_rec: np.ndarray, t_out: np.ndarray, window_s:
             continue
         tt = (t_rec[a:b] - tc) / max(half, 1e-300)
         V = np.stack([np.ones_like(tt), tt, tt * tt], axis=1)
-        # row 0 of the pseudo-inverse gives the fitted value at the centre
-        w = np.linalg.lstsq(V, np.eye(b - a), rcond=None)[0][0]
+        # the fitted value at the centre: e0ᵀ (VᵀV)⁻¹ Vᵀ x, three unknowns
+        w = np.linalg.solve(V.T @ V, np.array([1.0, 0.0, 0.0])) @ V.T
         out[i] = w @ x[a:b]
     return out[:, 0] if squeeze else out
 

@@ -362,12 +362,21 @@ class FEForwardModel:
         ref = np.asarray(ch.reference, dtype=float)
         if ref.shape[1] == 2:
             ref = np.column_stack([ref, np.zeros(len(ref))])
+        # protocols of a session share their points, and a fit asks again and again: locate once
+        import hashlib
+        key = hashlib.sha1(mesh.nodes.tobytes() + ref.tobytes() + np.float64(depth).tobytes()).hexdigest()
+        cache = self.__dict__.setdefault("_embed_cache", {})
+        if key in cache:
+            return cache[key]
         try:
             on, _ = surface_points(mesh, ref, depth)
             emb = embed_points(mesh, on)
         except ModelError as exc:
             raise ForwardError(where, f"tracked point outside the model: {exc}") from None
-        return emb.element, emb.local
+        if len(cache) > 64:
+            cache.clear()
+        cache[key] = (emb.element, emb.local)
+        return cache[key]
 
     def _drive_channel(self, spec: Mapping[str, Any]) -> tuple[str, str]:
         mode = str(dict(spec.get("indenter", {}) or {}).get("mode", "force"))
