@@ -32,6 +32,9 @@ def _checkpoint(path: Path, payload: dict) -> None:
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
               help="multi-start: this many starts from a space-filling design; every start is kept")
 @click.option("--holdout", default=None, help="protocols kept out of the fit and predicted (comma-separated)")
+@click.option("--segments", type=click.Choice(["cycles"]), default=None,
+              help="split every record into protocols first (cycles: one per loading cycle, "
+                   "named <protocol>-cycle-<k>), so --holdout can name a cycle")
 @click.option("--resume", is_flag=True,
               help="continue a killed fit from its last completed iteration (same --out)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
@@ -39,7 +42,8 @@ def _checkpoint(path: Path, payload: dict) -> None:
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str, starts: int,
-        holdout: str | None, resume: bool, out_dir: str | None, workers: int | None, as_json: bool) -> None:
+        holdout: str | None, segments: str | None, resume: bool, out_dir: str | None, workers: int | None,
+        as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record)."""
     import numpy as np
 
@@ -53,7 +57,8 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         raise SkinkitError(f"--objective {weighting!r}: must be one of {', '.join(WEIGHTINGS)}")
     model = load(model_file, workers=workers)
     axis = str(getattr(model, "axis", "z"))
-    obs = read_observations(session, held_out=_names(holdout) or [], axis=axis if axis in "xyz" else "z")
+    obs = read_observations(session, held_out=_names(holdout) or [], axis=axis if axis in "xyz" else "z",
+                            segments=segments)
     out = Path(out_dir) if out_dir else Path.cwd() / f"fit-{model.name}"
     ckpt = out / "checkpoint.json"
     if resume and not ckpt.is_file():

@@ -21,6 +21,8 @@ def _names(text: str | None) -> list[str]:
 @click.option("--until", "until_s", type=click.FloatRange(min=0, min_open=True), default=None,
               help="only the first part of every record, up to this time [s]")
 @click.option("--holdout", default=None, help="mark these protocols held out (comma-separated)")
+@click.option("--segments", type=click.Choice(["cycles"]), default=None,
+              help="split every record into protocols first (cycles: one per loading cycle)")
 @click.option("--set", "sets", multiple=True, metavar="NAME=VALUE",
               help="override a parameter (SI value or '<number> <unit>'), repeatable")
 @click.option("--sensitivities", is_flag=True, help="also compute every parameter's sensitivities")
@@ -33,7 +35,7 @@ def _names(text: str | None) -> list[str]:
               help="write the predictions (HDF5) here")
 @click.option("--json", "as_json", is_flag=True, help="print the residual summary as JSON")
 def predict(model_file: str, session: str, protocols: str | None, until_s: float | None, holdout: str | None,
-            sets: tuple[str, ...],
+            segments: str | None, sets: tuple[str, ...],
             sensitivities: bool, workers: int | None, scheduler: str | None, axis: str | None,
             out_file: str | None, as_json: bool) -> None:
     """Predict SESSION (experiment file or CSV record) with MODEL_FILE; report the residuals."""
@@ -44,7 +46,7 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
     model = load(model_file, workers=workers, scheduler=scheduler)
     if axis is None:
         axis = str(getattr(model, "axis", "z")) if str(getattr(model, "axis", "z")) in "xyz" else "z"
-    obs = read_observations(session, held_out=_names(holdout), axis=axis)
+    obs = read_observations(session, held_out=_names(holdout), axis=axis, segments=segments)
     if protocols:
         obs = obs.select(_names(protocols))
     if until_s is not None:

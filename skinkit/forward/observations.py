@@ -199,12 +199,15 @@ def _read_experiment(path: Path, held_out: Sequence[str]) -> Observations:
     return Observations(protocols, profile, str(path))
 
 
-def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = (), axis: str = "z"
-                      ) -> Observations:
+def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = (), axis: str = "z",
+                      segments: str | None = None) -> Observations:
     """The observations of a session file: an experiment file or a CSV record.
 
     ``held_out``: protocol names to mark held out (in addition to those the file marks).
     ``axis``: the tip axis of one-axis CSV columns (``displacement_mm``, ``force_N``).
+    ``segments``: split every record into protocols first (:func:`skinkit.forward.segments.split`;
+    ``"cycles"``: one protocol per loading cycle, named ``<protocol>-cycle-<k>``), so that
+    ``held_out`` can name a segment (fit cycles 1-2, predict 3-4).
     Raises :class:`StoreError` / :class:`SchemaError` naming the file and what is wrong.
     """
     p = Path(path)
@@ -215,13 +218,19 @@ def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = ()
 
         rec = read_robot_csv(p, axis=axis)
         obs = Observations({rec.protocol.name: ProtocolObservations(
-            rec.protocol, channels_from_record(rec, str(p)), rec.protocol.name in held_out)}, None, str(p))
+            rec.protocol, channels_from_record(rec, str(p)), False)}, None, str(p))
     else:
-        obs = _read_experiment(p, held_out)
+        obs = _read_experiment(p, ())
+    if segments is not None:
+        from skinkit.forward.segments import split
+
+        obs = split(obs, segments)
     unknown = sorted(set(held_out) - set(obs.names))
     if unknown:
         raise SchemaError("--holdout", f"no protocol(s) {unknown} in {p} (it has {obs.names})")
-    return obs
+    if not held_out:
+        return obs
+    return obs.with_held_out(sorted(set(held_out) | set(obs.held_out().names)))
 
 
 __all__ = ["channel_from_track", "channels_from_record", "read_observations", "sample_noise", "track_noise"]
