@@ -250,7 +250,8 @@ def rank_protocols(model: Any, observations: Observations,
 
     Returns a JSON-ready dict: ``free``, ``current`` (per parameter ``value``, ``se`` [SI],
     ``determined``; ``logdet``, ``singular``), ``ranking`` (best first; per candidate
-    ``protocol``, ``parameters``, ``gain``, ``samples``, ``se_after``, ``se_reduction`` (fraction),
+    ``protocol``, ``label`` (with the parameters given), ``parameters`` (as run), ``drive``,
+    ``gain``, ``samples``, ``se_after``, ``se_reduction`` (fraction),
     ``pins_down``, ``message``), ``not_applicable`` (``protocol``, ``reason``), ``ridge``.
     """
     base = model.parameters()
@@ -300,8 +301,10 @@ def rank_protocols(model: Any, observations: Observations,
         se1 = np.sqrt(np.diag(C1)) * D
         red = 1.0 - se1 / se0
         gain = _logdet(F + G + R) - ld0
-        rows.append({"protocol": cname, "parameters": _protocol_parameters(model, cname, cpars),
-                     "drive": drive, "gain": float(gain), "samples": mc,
+        label = cname + (f"({', '.join(f'{k}={v:g}' for k, v in cpars.items())})" if cpars else "")
+        rows.append({"protocol": cname, "label": label,
+                     "parameters": _protocol_parameters(model, cname, cpars), "drive": drive,
+                     "gain": float(gain), "samples": mc,
                      "se_after": {nm: float(se1[i]) for i, nm in enumerate(names)},
                      "se_reduction": {nm: float(red[i]) for i, nm in enumerate(names)}})
     if not rows:
@@ -325,7 +328,7 @@ def _words(row: dict[str, Any], current: dict[str, Any]) -> tuple[str | None, st
     red = row["se_reduction"]
     best = max(red, key=lambda nm: red[nm])
     if row["gain"] < 1e-6 or red[best] < 1e-3:
-        return None, (f"{row['protocol']}: adds (almost) nothing (log det gain {row['gain']:.3g}); it does "
+        return None, (f"{row['label']}: adds (almost) nothing (log det gain {row['gain']:.3g}); it does "
                       "not move the free parameters")
     c = current[best]
     unit = "" if c["unit"] in ("1", "") else f" {c['unit']}"
@@ -338,7 +341,7 @@ def _words(row: dict[str, Any], current: dict[str, Any]) -> tuple[str | None, st
     others = [f"{nm} {100 * r:.0f} %" for nm, r in sorted(red.items(), key=lambda kv: -kv[1])
               if nm != best and r >= 0.01]
     tail = f"; also {', '.join(others)}" if others else ""
-    return best, f"{row['protocol']}: log det gain {row['gain']:.3g}; {what}{tail}"
+    return best, f"{row['label']}: log det gain {row['gain']:.3g}; {what}{tail}"
 
 
 def format_ranking(result: dict[str, Any], top: int | None = None) -> list[str]:
@@ -349,12 +352,13 @@ def format_ranking(result: dict[str, Any], top: int | None = None) -> list[str]:
         state = "" if c["determined"] else "  (not determined)"
         lines.append(f"  {nm:28s} {c['value']:.6g} ± {c['se']:.2g} {c['unit']}{state}")
     names = result["free"]
-    head = f"{'rank':>4}  {'protocol':24s} {'gain':>9}  " + "  ".join(f"{('-SE ' + n)[:14]:>14s}"
+    w = max([24] + [len(r["label"]) for r in result["ranking"]])
+    head = f"{'rank':>4}  {'protocol':{w}s} {'gain':>9}  " + "  ".join(f"{('-SE ' + n)[:14]:>14s}"
                                                                        for n in names)
     lines += ["", head]
     rows = result["ranking"][:top] if top else result["ranking"]
     for r in rows:
-        lines.append(f"{r['rank']:>4}  {r['protocol']:24s} {r['gain']:>9.4g}  "
+        lines.append(f"{r['rank']:>4}  {r['label']:{w}s} {r['gain']:>9.4g}  "
                      + "  ".join(f"{100 * r['se_reduction'][n]:>13.1f}%" for n in names))
     lines.append("")
     lines += [r["message"] for r in result["ranking"][:3]]
