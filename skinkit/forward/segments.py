@@ -118,13 +118,12 @@ def cycle_cuts(t: np.ndarray, u: np.ndarray, noise: float, where: str = "drive")
         down = np.flatnonzero(a[i_up:] < _DOWN)
         if not down.size:
             raise SchemaError(where, f"cycle {len(spans) + 1}, loaded from t = {t[i_up]:.4g} s, does not "
-                              f"return towards rest (below {_DOWN:.0%} of the range) before the record ends")
+                              f"return towards rest ({rest:.4g}, the extreme nearer the first sample) "
+                              f"within {_DOWN:.0%} of the range before the record ends")
         i_down = i_up + int(down[0])
         spans.append((i_up, i_down))
         i = i_down
-    if not spans:
-        raise SchemaError(where, f"no loading cycle found (the drive never goes beyond {_UP:.0%} "
-                          "of its range)")
+    # spans is not empty: a reaches 1 at the far extreme, so the first up-crossing exists
     tol = max(_REST_TOL, 3 * noise / R)
     cuts = []
     for (_, d0), (u1, _) in zip(spans[:-1], spans[1:], strict=True):
