@@ -190,7 +190,8 @@ def format_table(result: dict[str, Any]) -> list[str]:
     """The rows of :func:`select` as text lines (the CLI's table)."""
     has_fold = result["folds"] is not None
     has_held = bool(result["held_out_protocols"])
-    head = f"{'rank':>4}  {'free parameters':32s} {'k':>2} {'chi2/dof':>9} {'AIC':>12} {'dAIC':>8} " \
+    w = max([15] + [len(",".join(row["free"])) for row in result["rows"]])
+    head = f"{'rank':>4}  {'free parameters':{w}s} {'k':>2} {'chi2/dof':>9} {'AIC':>12} {'dAIC':>8} " \
            f"{'AICc':>12} {'dAICc':>8} {'weight':>6}"
     if has_fold:
         head += f" {'k-fold':>7}"
@@ -199,7 +200,7 @@ def format_table(result: dict[str, Any]) -> list[str]:
     lines = [head]
     for row in result["rows"]:
         free = ",".join(row["free"])
-        line = (f"{row['rank']:>4}  {free[:32]:32s} {row['k']:>2} {row['chi2_per_dof']:>9.4g} "
+        line = (f"{row['rank']:>4}  {free:{w}s} {row['k']:>2} {row['chi2_per_dof']:>9.4g} "
                 f"{row['aic']:>12.6g} {row['delta_aic']:>8.2f} {row['aicc']:>12.6g} "
                 f"{row['delta_aicc']:>8.2f} {row['weight_aicc']:>6.3f}")
         if has_fold:
