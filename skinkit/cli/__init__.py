@@ -35,6 +35,8 @@ _COMMANDS: dict[str, str] = {
     "predict": "skinkit.cli.predict:predict",
     "effects": "skinkit.cli.effects:effects",
     "fit": "skinkit.cli.fit:fit",
+    "grid": "skinkit.cli.grid:grid",
+    "profile": "skinkit.cli.grid:profile",
     "select": "skinkit.cli.select:select",
     "design": "skinkit.cli.design:design",
     "lab": "skinkit.cli.lab:lab",
