@@ -397,15 +397,19 @@ def grid_plot(grid: dict[str, Any], path: Path) -> Path:
             if grid.get(key) is not None:
                 e = _ellipse(c, np.asarray(grid[key], float), level)
                 ax.plot(e[:, 0], e[:, 1], style, color="orange", lw=1.5, label=lab)
+    from matplotlib.ticker import MaxNLocator
+
     if pa["scaling"] == "log":
         ax.set_xscale("log")
+    else:
+        ax.xaxis.set_major_locator(MaxNLocator(5))   # long SI tick labels must not overlap
     if pb["scaling"] == "log":
         ax.set_yscale("log")
     ax.set_xlim(X.min(), X.max())
     ax.set_ylim(Y.min(), Y.max())
     ax.set_xlabel(f"{a} [{pa['unit']}]")
     ax.set_ylabel(f"{b} [{pb['unit']}]")
-    ax.set_title(f"{grid.get('model', '')}: objective over {a}, {b} ({grid.get('weighting', '')} weighting, "
+    ax.set_title(f"{grid.get('model', '')}\nobjective over {a}, {b} ({grid.get('weighting', '')} weighting, "
                  f"others fixed)", fontsize=9)
     ax.legend(fontsize=7, loc="best")
     return _save(fig, Path(path))
