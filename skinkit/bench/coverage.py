@@ -1,0 +1,195 @@
+"""``skinkit bench coverage``: is the truth inside the reported 95 % interval 95 % of the time?
+
+Four virtual-lab truths with the fitted model's own structure (:mod:`skinkit.inverse.coverage`:
+the lab's truth run solved once, Gaussian noise at the lab's declared instrument levels per
+seed, the drive exact), each fitted for every seed from a start perturbed by about 20 % per
+parameter (10 % for the in vivo case; :func:`skinkit.inverse.coverage.perturbed_start`):
+
+* ``gel``: the neo-Hookean gel of ``docs/models/phantom_cube_box.toml`` (thesis Ch 6) cast in a
+  30 mm dish 15 mm deep, fixed at its rim and floor, indented by a 5 mm probe following the
+  Table 12 normal sinusoid (one period); free: the gel's shear modulus ``mu`` and bulk modulus ``K``;
+* ``invivo``: the coarse layered in vivo model (``docs/models/invivo_quick.toml``: GOH + QLV
+  skin over neo-Hookean tissue) through four Table 12 protocols (normal, in-plane 0° and 90°,
+  out of plane 330°), one period each, on a coarser mesh; free: ``c``, ``k1``, ``kappa``, ``g1``;
+* ``twopad``: the two-pad extensometer geometry (``docs/models/extension_dic_twopad.toml``) on
+  a coarser mesh, the moving pad driven along x by the in-plane 0° sinusoid (one period); free:
+  the skin's and the subdermal tissue's Young's moduli;
+* ``lumped``: a quasi-static exponential element with one relaxation term (the family of
+  ``docs/models/extension_relaxation_lumped.toml``), indented through a ramp-and-hold
+  (``preconditioning``) and the normal sinusoid; free: ``a``, ``b``, ``g1``, ``tau1``.
+
+FE meshes and protocol lengths were chosen so that 20 seeds of a case take about 15 minutes
+or less on the 2-core machine (``docs/identification-coverage.md`` has the measured costs).
+Every truth is flat-topped (``[surface] fit = false``) and displacement-driven (Table 12
+protocols are trajectories: the programme is the drive, exact in the virtual session).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+
+from skinkit.errors import SkinkitError
+
+_DOCS = Path(__file__).resolve().parents[2] / "docs" / "models"
+CASES = ("gel", "invivo", "twopad", "lumped")
+#: relative spread of each fit's start around the truth (the in vivo fit, at ~8 s per evaluation,
+#: is started closer: 7 evaluations from 20 % off, against about 5 from 10 %)
+SPREAD = {"gel": 0.2, "invivo": 0.1, "twopad": 0.2, "lumped": 0.2}
+#: one period of the Table 12 sinusoid (10 s at 0.1 Hz, cameras at 1 Hz: 11 frames)
+ONE_PERIOD = {"periods": 1}
+
+
+def _read(name: str) -> dict[str, Any]:
+    from skinkit.fem.model import read_model
+
+    return read_model(_DOCS / name)
+
+
+def _session(spec: dict[str, Any], protocols: list[str], parameters: dict[str, Any]) -> dict[str, Any]:
+    spec["session"] = {"protocols": protocols, "parameters": {p: dict(parameters) for p in protocols}}
+    spec.setdefault("surface", {})["fit"] = False
+    spec.setdefault("indenter", {})["mode"] = "displacement"
+    return spec
+
+
+def gel_spec() -> tuple[dict[str, Any], list[str]]:
+    """The gel phantom truth and its free parameters: the gel of ``phantom_cube_box.toml`` cast
+    in a round dish (the lab's skin frame has the probe at the origin, a block's is a corner)."""
+    gel = _read("phantom_cube_box.toml")["layers"][0]
+    spec = {"model": {"name": "coverage-gel-phantom"},
+            "geometry": {"kind": "disc", "diameter": "30 mm", "indenter_diameter": "5 mm", "n_inner": 2,
+                         "n_ring": 2, "grading": 1.6},
+            "layers": [dict(gel, thickness="15 mm", elements=3)],
+            "boundary": {"fixed": ["outer", "bottom"]},
+            "drive": {"max_step": "0.5 s"}, "output": {"point_depth": "0 mm"},
+            "solver": {"rtol": 1e-8, "intorder": 4}}
+    return _session(spec, ["normal_indentation"], ONE_PERIOD), ["gel.mu", "gel.K"]
+
+
+def invivo_spec() -> tuple[dict[str, Any], list[str]]:
+    """The layered in vivo truth (GOH + QLV) and its four free parameters."""
+    from skinkit.lab.session import DEFAULT_FE_PROTOCOLS
+
+    spec = _read("invivo_quick.toml")
+    spec.pop("load", None)
+    spec["geometry"].update({"n_inner": 1, "n_ring": 2})
+    return (_session(spec, list(DEFAULT_FE_PROTOCOLS), ONE_PERIOD),
+            ["skin.c", "skin.k1", "skin.kappa", "skin.g1"])
+
+
+def twopad_spec() -> tuple[dict[str, Any], list[str]]:
+    """The two-pad extension truth and its free parameters."""
+    spec = _read("extension_dic_twopad.toml")
+    spec.pop("load", None)
+    spec["geometry"].update({"n_pad": 1, "n_gap": 4, "n_outer": 2, "n_side": 2})
+    for layer in spec["layers"]:
+        layer["elements"] = 1
+    spec["drive"] = {"max_step": "0.5 s"}
+    return _session(spec, ["in_plane_000"], ONE_PERIOD), ["skin.E", "subdermal.E"]
+
+
+def lumped_spec() -> tuple[dict[str, Any], list[str]]:
+    """The lumped relaxation truth and its free parameters."""
+    spec = {"model": {"kind": "lumped", "name": "coverage-lumped-relaxation"},
+            "lumped": {"test": "indentation", "family": "quasi-static", "axis": "-z", "drive": "tip_position",
+                       "elastic": "exponential", "parameters": {"a": "15 mN", "b": 800.0},
+                       "relaxation": [{"g": 0.3, "tau": "3 s"}]},
+            "session": {"protocols": ["preconditioning", "normal_indentation"]}}
+    return spec, ["lumped.a", "lumped.b", "lumped.g1", "lumped.tau1"]
+
+
+SPECS: dict[str, Callable[[], tuple[dict[str, Any], list[str]]]] = {
+    "gel": gel_spec, "invivo": invivo_spec, "twopad": twopad_spec, "lumped": lumped_spec}
+
+
+def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int | None = None,
+             progress: Callable[[int, int, dict[str, Any]], None] | None = None) -> dict[str, Any]:
+    """One case's coverage study (JSON-ready; :func:`skinkit.inverse.coverage.coverage`'s fields
+    plus the case's description, DOF, protocols and the truth run's wall time)."""
+    from skinkit.forward import load
+    from skinkit.inverse.coverage import LabSessions, coverage, perturbed_start
+
+    if case not in SPECS:
+        raise SkinkitError(f"--case: unknown case {case!r}; choose from {', '.join(CASES)} or all")
+    spec, free = SPECS[case]()
+    lab = LabSessions(spec, workers=workers)
+    model = load(lab.model_spec, workers=workers)
+    try:
+        st = perturbed_start(model, free, SPREAD[case]) if start == "perturbed" else "truth"
+        res = coverage(model, lab, free, seeds, start=st, progress=progress)
+    finally:
+        if hasattr(model, "close"):
+            model.close()
+    res.update({"case": case, "model": spec.get("model", {}).get("name"), "protocols": lab.protocols,
+                "start_kind": start, "start_spread": SPREAD[case] if start == "perturbed" else 0.0,
+                "truth_wall_s": lab.truth_wall_s, "dof": _dof_of(lab.model_spec),
+                "observations": _n_obs(lab(0))})
+    return res
+
+
+def _dof_of(spec: dict[str, Any]) -> int | None:
+    from skinkit.forward import model_kind
+
+    if model_kind(spec) != "fe":
+        return None
+    from skinkit.fem.model import build_mesh
+
+    return 3 * int(build_mesh(copy.deepcopy(spec)).nodes.shape[0])
+
+
+def _n_obs(obs: Any) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for po in obs:
+        for c, ch in po.channels.items():
+            out[c] = out.get(c, 0) + int(ch.values.size)
+    return out
+
+
+def _line(res: dict[str, Any]) -> str:
+    lo, hi = res["expected_fraction"]
+    per = ", ".join(f"{n.split('.')[-1]} {v['inside']}/{v['pairs']} (rms z {v['rms_z']:.2f})"
+                    for n, v in res["per_parameter"].items() if v["rms_z"] is not None)
+    dof = f"{res['dof']:6d}" if res["dof"] else "     -"
+    return (f"{res['case']:7s} {dof} {len(res['seeds']):5d} {res['pairs']:5d} {res['inside']:6d} "
+            f"{100 * res['coverage']:7.1f} %  {100 * lo:5.1f}-{100 * hi:5.1f} %  "
+            f"{res['chi2_per_dof_mean']:.3f}  {res['evaluations_mean']:4.1f}  "
+            f"{res['fit_wall_s_mean']:7.1f} s  "
+            f"{res['wall_s'] / 60:6.1f} min\n        {per}")
+
+
+@click.command("coverage")
+@click.option("--case", "case", type=click.Choice([*CASES, "all"]), default="all", show_default=True,
+              help="which truth")
+@click.option("--seeds", type=click.IntRange(1), default=20, show_default=True,
+              help="virtual sessions per case")
+@click.option("--start", type=click.Choice(["perturbed", "truth"]), default="perturbed", show_default=True,
+              help="each fit's start: the truth perturbed by ~20 % per parameter, or the truth")
+@click.option("--workers", type=click.IntRange(1), default=None, help="worker processes per FE prediction")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+def bench_coverage(case: str, seeds: int, start: str, workers: int | None, as_json: bool) -> None:
+    """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
+    cases = list(CASES) if case == "all" else [case]
+    out: dict[str, Any] = {}
+    t0 = time.perf_counter()
+    for c in cases:
+        def progress(i: int, n: int, rec: dict[str, Any], c: str = c) -> None:
+            if not as_json:
+                k = sum(rec["inside"].values())
+                status = "failed" if "error" in rec else f"{k}/{len(rec['inside'])} inside"
+                click.echo(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s", err=True)
+        out[c] = run_case(c, seeds, start, workers, progress)
+    if as_json:
+        click.echo(json.dumps({"cases": out, "wall_s": time.perf_counter() - t0}, indent=1))
+        return
+    click.echo("case       DOF seeds pairs inside coverage  expected (95 %)  chi2/dof evals  per fit   total")
+    for c in cases:
+        click.echo(_line(out[c]))
+    click.echo(f"expected: the central 95 % of the inside count if the intervals were exact (binomial); "
+               f"{out[cases[0]]['note']}")
