@@ -110,6 +110,7 @@ SPECS: dict[str, Callable[[], tuple[dict[str, Any], list[str]]]] = {
 
 
 def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int | None = None,
+             first_seed: int = 0,
              progress: Callable[[int, int, dict[str, Any]], None] | None = None) -> dict[str, Any]:
     """One case's coverage study (JSON-ready; :func:`skinkit.inverse.coverage.coverage`'s fields
     plus the case's description, DOF, protocols and the truth run's wall time)."""
@@ -123,7 +124,7 @@ def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int 
     model = load(lab.model_spec, workers=workers)
     try:
         st = perturbed_start(model, free, SPREAD[case]) if start == "perturbed" else "truth"
-        res = coverage(model, lab, free, seeds, start=st, progress=progress)
+        res = coverage(model, lab, free, range(first_seed, first_seed + seeds), start=st, progress=progress)
     finally:
         if hasattr(model, "close"):
             model.close()
@@ -171,20 +172,22 @@ def _line(res: dict[str, Any]) -> str:
               help="virtual sessions per case")
 @click.option("--start", type=click.Choice(["perturbed", "truth"]), default="perturbed", show_default=True,
               help="each fit's start: the truth perturbed by ~20 % per parameter, or the truth")
+@click.option("--first-seed", type=click.IntRange(0), default=0, show_default=True,
+              help="seeds are first-seed, first-seed + 1, ...")
 @click.option("--workers", type=click.IntRange(1), default=None, help="worker processes per FE prediction")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
-def bench_coverage(case: str, seeds: int, start: str, workers: int | None, as_json: bool) -> None:
+def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None,
+                   as_json: bool) -> None:
     """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
     cases = list(CASES) if case == "all" else [case]
     out: dict[str, Any] = {}
     t0 = time.perf_counter()
     for c in cases:
-        def progress(i: int, n: int, rec: dict[str, Any], c: str = c) -> None:
-            if not as_json:
-                k = sum(rec["inside"].values())
-                status = "failed" if "error" in rec else f"{k}/{len(rec['inside'])} inside"
-                click.echo(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s", err=True)
-        out[c] = run_case(c, seeds, start, workers, progress)
+        def progress(i: int, n: int, rec: dict[str, Any], c: str = c) -> None:   # on stderr, also with --json
+            k = sum(rec["inside"].values())
+            status = "failed" if "error" in rec else f"{k}/{len(rec['inside'])} inside"
+            click.echo(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s", err=True)
+        out[c] = run_case(c, seeds, start, workers, first_seed, progress)
     if as_json:
         click.echo(json.dumps({"cases": out, "wall_s": time.perf_counter() - t0}, indent=1))
         return

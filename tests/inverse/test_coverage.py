@@ -3,7 +3,7 @@
 The lumped relaxation case runs in full here (100 seeds, 4 free parameters: 400 parameter-seed
 pairs). Under exact coverage the inside count is binomial(400, 0.95) if pairs were independent:
 mean 380, sd 4.4; the acceptance band 90-99 % is 360-396 pairs, and the probability of falling
-outside it is :func:`outside_band_probability` (about 2e-4, computed in the test). Pairs within a
+outside it is :func:`outside_band_probability` (1.6e-5, checked in the test). Pairs within a
 seed are correlated (a and b strongly), which widens the count's spread; the per-parameter RMS
 of z = (estimate − truth)/se over 100 independent seeds is a sharper check: RMS² ~ χ²₁₀₀/100, so
 RMS outside [0.7, 1.3] has probability below 1e-5 for honest intervals.
@@ -55,7 +55,7 @@ def test_binomial_helpers():
 
 def test_lumped_coverage_100_seeds(lumped):
     lab, model, free = lumped
-    assert outside_band_probability(400) < 1e-3          # ~2e-4: a failure here is not bad luck
+    assert outside_band_probability(400) < 1e-4          # 1.6e-5: a failure here is not bad luck
     res = coverage(model, lab, free, 100, start=perturbed_start(model, free))
     assert res["failed"] == 0 and res["pairs"] == 400
     assert 0.90 <= res["coverage"] <= 0.99, res["coverage"]
