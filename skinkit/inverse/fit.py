@@ -13,8 +13,11 @@ optimiser rejects, so that it shrinks its step — never a traceback.
 
 from __future__ import annotations
 
+import json
+import os
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,7 +25,7 @@ import numpy as np
 from skinkit import registry
 from skinkit.errors import PluginError, SkinkitError
 from skinkit.inverse.identifiability import analyse
-from skinkit.inverse.objective import Objective, held_out_rms
+from skinkit.inverse.objective import Objective, Residual, held_out_rms
 from skinkit.inverse.scaling import Scaling
 from skinkit.schemas import FitResult, Observations, ParameterSet
 
@@ -52,15 +55,66 @@ def aic(chi2: float, n: int, k: int) -> tuple[float, float]:
     return float(a), float(c)
 
 
+class _Evaluations:
+    """Every evaluation of a fit, kept by its scaled point; optionally on disk.
+
+    With a ``directory``, each completed evaluation is written there atomically (one ``.npz``
+    each), so a fit killed at any moment and run again with the same directory replays the
+    evaluations already made — the deterministic optimiser retraces its path at no solve cost
+    and continues where it was stopped, to the same optimum.
+    """
+
+    def __init__(self, directory: Path | None) -> None:
+        self.directory = directory
+        self.table: dict[bytes, dict[str, Any]] = {}
+        if directory is None:
+            return
+        directory.mkdir(parents=True, exist_ok=True)
+        for f in sorted(directory.glob("eval-*.npz")):
+            try:
+                with np.load(f) as d:
+                    rec = {k: d[k] for k in d.files}
+            except (OSError, ValueError, EOFError):
+                continue   # a file cut by the kill: that evaluation is simply redone
+            self.table[rec["x"].tobytes()] = {"z": rec["z"], "J": rec["J"] if rec["J"].size else None,
+                                              "ok": bool(rec["ok"]), "error": str(rec["error"]),
+                                              "blocks": json.loads(str(rec["blocks"])), "from_disk": True}
+
+    def get(self, x: np.ndarray) -> dict[str, Any] | None:
+        return self.table.get(np.asarray(x, float).tobytes())
+
+    def put(self, x: np.ndarray, rec: dict[str, Any]) -> None:
+        x = np.asarray(x, float)
+        self.table[x.tobytes()] = rec
+        if self.directory is None:
+            return
+        k = len(list(self.directory.glob("eval-*.npz")))
+        path = self.directory / f"eval-{k:05d}.npz"
+        tmp = self.directory / f".eval-{k:05d}.part.npz"
+        J = rec["J"] if rec["J"] is not None else np.zeros(0)
+        np.savez(tmp, x=x, z=rec["z"], J=J, ok=rec["ok"], error=rec.get("error", ""),
+                 blocks=json.dumps(rec.get("blocks", [])))
+        os.replace(tmp, path)
+
+
 def fit(model: Any, observations: Observations, free: Sequence[str] | None = None, *,
         weighting: str = "noise", optimiser: str = "scipy-lsq", start: dict[str, float] | None = None,
         ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50, jacobian: str = "analytic",
+        checkpoint: str | os.PathLike[str] | None = None,
         progress: Callable[[int, float, dict[str, float]], None] | None = None) -> FitResult:
     """Fit ``free`` parameters of ``model`` to the non-held-out protocols of ``observations``.
 
+    ``weighting``: one of :data:`skinkit.inverse.WEIGHTINGS`. ``optimiser``: a
+    ``skinkit.optimisers`` plugin. Stopping rules (thesis 7.6): relative change of the objective
+    below ``ftol``, scaled step below ``xtol``, at most ``max_iterations`` evaluations.
     ``jacobian``: ``"analytic"`` (the model's sensitivities, default), ``"fd"`` (the optimiser
     differences the residual itself, as FEBio and GIBBON do) or ``"none"`` (derivative-free
     optimisers); the last two exist for comparison (``skinkit bench fit``).
+    ``checkpoint``: a directory keeping every evaluation, so that a killed fit resumes
+    (:class:`_Evaluations`). ``progress(evaluation, objective, values)`` after each evaluation.
+    A forward solve that fails during the fit gives a non-finite residual there, which the
+    optimiser answers by shrinking its step; a start the model cannot solve is a
+    :class:`FitError`.
     """
     if jacobian not in ("analytic", "fd", "none"):
         raise FitError(f"jacobian must be 'analytic', 'fd' or 'none', got {jacobian!r}")
@@ -70,8 +124,14 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
     names = params.free_names
     if not names:
         raise FitError(f"model {model.name!r} has no free parameter")
+    for n in names:
+        p = params.param(n)
+        if not p.lower < p.upper:
+            raise FitError(f"bounds of {n} are inverted or empty: [{p.lower:g}, {p.upper:g}] {p.unit}")
     if start:
         for k, v in start.items():
+            if k not in params:
+                raise FitError(f"start: the model has no parameter {k!r}")
             p = params.param(k)
             if not p.lower <= v <= p.upper:
                 raise FitError(f"start of {k} = {v:g} {p.unit} is outside its bounds "
@@ -86,53 +146,100 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
         opt = registry.create("skinkit.optimisers", optimiser)
     except PluginError as exc:
         raise FitError(f"--optimiser {optimiser!r}: {exc}") from None
-    cache: dict[str, Any] = {}
+    if getattr(opt, "needs_gradient", False) and not use_jac:
+        raise FitError(f"--optimiser {optimiser!r} is gradient-based: it needs the analytic Jacobian")
+    evals = _Evaluations(Path(checkpoint) if checkpoint is not None else None)
     history: list[dict[str, Any]] = []
+    n_replayed = 0
+    size = {"m": None}
 
-    def at(x: np.ndarray):
-        key = np.asarray(x, float).tobytes()
-        if cache.get("key") != key:
-            pset = params.with_free_vector(sc.to_values(x))
-            try:
-                res, _ = obj.evaluate(pset, jacobian=use_jac)
-                J = res.J * sc.dvalue_dscaled(x)[None, :] if use_jac else None
-                cache.update(key=key, z=res.z, J=J, ok=True)
-            except (SkinkitError, ArithmeticError) as exc:
-                # the model cannot be solved there: a large residual makes the optimiser step back
-                size = cache.get("z", np.ones(1)).size
-                cache.update(key=key, z=np.full(size, 1e6), J=np.zeros((size, len(names))), ok=False,
-                             error=str(exc))
-            phi = 0.5 * float(cache["z"] @ cache["z"])
-            history.append({"x": sc.to_values(x).tolist(), "objective": phi, "solved": cache["ok"]})
-            if progress is not None:
-                progress(len(history), phi, dict(zip(names, sc.to_values(x).tolist(), strict=True)))
-        return cache
+    def at(x: np.ndarray, need_jac: bool = use_jac) -> dict[str, Any]:
+        nonlocal n_replayed
+        rec = evals.get(x)
+        if rec is not None and (rec["J"] is not None or not need_jac or not rec["ok"]):
+            if rec.pop("from_disk", False):   # an evaluation made before the fit was stopped
+                n_replayed += 1
+                _record(x, rec, replayed=True)
+            return rec
+        pset = params.with_free_vector(sc.to_values(x))
+        try:
+            res, _ = obj.evaluate(pset, jacobian=need_jac)
+            J = res.J * sc.dvalue_dscaled(x)[None, :] if need_jac else None
+            rec = {"z": res.z, "J": J, "ok": True, "error": "",
+                   "blocks": [(p, c, sl.start, sl.stop) for p, c, sl in res.blocks]}
+            size["m"] = res.z.size
+        except (SkinkitError, ArithmeticError) as exc:
+            if size["m"] is None:
+                raise FitError(f"the model cannot be solved at the start of the fit "
+                               f"({_describe(pset, names)}): {exc}") from None
+            # not a penalty: a non-finite residual makes the optimiser reject the step and shrink it
+            rec = {"z": np.full(size["m"], np.nan), "J": np.zeros((size["m"], len(names))), "ok": False,
+                   "error": str(exc), "blocks": []}
+        evals.put(x, rec)
+        _record(x, rec, replayed=False)
+        return rec
 
-    result = opt.minimise(lambda x: at(x)["z"], x0, lo, hi, jac=(lambda x: at(x)["J"]) if use_jac else None,
-                          options=_options(optimiser, ftol, xtol, max_iterations))
+    def _record(x: np.ndarray, rec: dict[str, Any], replayed: bool) -> None:
+        phi = 0.5 * float(rec["z"] @ rec["z"]) if rec["ok"] else float("nan")
+        values = sc.to_values(x)
+        history.append({"x": values.tolist(), "x_scaled": np.asarray(x, float).tolist(), "objective": phi,
+                        "solved": rec["ok"], "replayed": replayed,
+                        **({"error": rec["error"]} if not rec["ok"] else {})})
+        if size["m"] is None:
+            size["m"] = rec["z"].size
+        if progress is not None:
+            progress(len(history), phi, dict(zip(names, values.tolist(), strict=True)))
+
+    at(x0)   # the start must be solvable
+    try:
+        result = opt.minimise(lambda x: at(x)["z"], x0, lo, hi,
+                              jac=(lambda x: at(x)["J"]) if use_jac else None,
+                              options=_options(optimiser, ftol, xtol, max_iterations))
+    except ValueError as exc:   # an optimiser refusing the problem (bounds it cannot search, ...)
+        raise FitError(f"--optimiser {optimiser!r}: {exc}") from None
     n_fit_forward, n_fit_sens = obj.n_forward, obj.n_sensitivity
-    best = params.with_free_vector(sc.to_values(result.x))
-    res, pred = obj.evaluate(best, jacobian=True)
-    J = res.J
-    ident = analyse(J, res.z, names, best.free_vector(), sc.dvalue_dscaled(result.x),
+    x_best = np.asarray(result.x, float)
+    final = at(x_best, need_jac=True)
+    if not final["ok"]:
+        raise FitError(f"the optimiser ended where the model cannot be solved: {final['error']}")
+    best = params.with_free_vector(sc.to_values(x_best))
+    z = final["z"]
+    J = final["J"] / sc.dvalue_dscaled(x_best)[None, :]     # back to ∂z/∂p in SI
+    res = Residual(z, None, [(p, c, slice(a, b)) for p, c, a, b in final["blocks"]])
+    ident = analyse(J, z, names, best.free_vector(), sc.dvalue_dscaled(x_best),
                     noise_weighted=weighting == "noise")
-    n_obs = res.z.size
-    chi2 = float(res.z @ res.z)
+    n_obs = z.size
+    chi2 = float(z @ z)
     a, ac = aic(chi2, n_obs, len(names))
-    out = FitResult(model.name, best, 0.5 * chi2, obj.n_forward, bool(result.success), str(result.message),
-                    covariance=np.array(ident["covariance"]), aic=a)
+    se = dict(zip(names, ident["se"], strict=True))
+    identifiability = {k: ident[k] for k in ("metrics", "weak_directions", "problems", "identifiable",
+                                             "inflation")}
+    held = held_out_rms(model, best, observations, weighting)
+    wall = time.perf_counter() - t0
+    n_fwd, n_sens = obj.n_forward, obj.n_sensitivity
+    out = FitResult(model.name, best, 0.5 * chi2, n_fwd, bool(result.success), str(result.message),
+                    covariance=np.array(ident["covariance"]), aic=a, aicc=ac, se=se,
+                    correlation=np.array(ident["correlation"]), identifiability=identifiability,
+                    chi2_per_dof=ident["chi2_per_dof"], residual_by_protocol=res.by("protocol"),
+                    residual_by_channel=res.by("channel"), held_out=held, n_forward=n_fwd,
+                    n_sensitivity=n_sens, wall_s=wall)
     out.extra.update({
-        "aicc": ac, "chi2": chi2, "n_observations": n_obs, "chi2_per_dof": ident["chi2_per_dof"],
-        "se": dict(zip(names, ident["se"], strict=True)), "correlation": ident["correlation"],
-        "identifiability": {k: ident[k] for k in ("metrics", "weak_directions", "problems", "identifiable",
-                                                 "inflation")},
-        "residual_by_protocol": res.by("protocol"), "residual_by_channel": res.by("channel"),
-        "n_forward": n_fit_forward, "n_sensitivity": n_fit_sens, "wall_s": time.perf_counter() - t0,
-        "weighting": weighting, "optimiser": optimiser, "free": names, "history": history,
-        "held_out": held_out_rms(model, best, observations, weighting),
-        "scaling": dict(zip(names, sc.kinds, strict=True)),
+        "chi2": chi2, "n_observations": n_obs, "weighting": weighting, "optimiser": optimiser, "free": names,
+        "history": history, "scaling": dict(zip(names, sc.kinds, strict=True)), "n_replayed": n_replayed,
+        "n_failed_solves": sum(1 for h in history if not h["solved"]),
+        "n_forward_optimiser": n_fit_forward, "n_sensitivity_optimiser": n_fit_sens,
+        "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations,
+        # mirrors of the fields above, for readers of the earlier layout
+        "se": se, "n_forward": n_fwd, "n_sensitivity": n_sens, "wall_s": wall, "held_out": held,
+        "chi2_per_dof": ident["chi2_per_dof"], "correlation": ident["correlation"],
+        "identifiability": identifiability, "aicc": ac,
+        "residual_by_protocol": out.residual_by_protocol, "residual_by_channel": out.residual_by_channel,
     })
     return out
+
+
+def _describe(pset: ParameterSet, names: Sequence[str]) -> str:
+    return ", ".join(f"{n} = {pset[n]:.4g} {pset.param(n).unit}" for n in names)
 
 
 def _options(optimiser: str, ftol: float, xtol: float, max_iterations: int) -> dict[str, Any]:
@@ -143,21 +250,23 @@ def _options(optimiser: str, ftol: float, xtol: float, max_iterations: int) -> d
 
 def fit_json(result: FitResult) -> dict[str, Any]:
     """The ``skinkit fit --json`` shape (issue 10)."""
-    ex = result.extra
-    se = ex.get("se", {})
-    ident = ex.get("identifiability", {}).get("identifiable", {})
+    se = result.se
+    ident = result.identifiability.get("identifiable", {})
     pars = {}
     for p in result.parameters:
         s = se.get(p.name)
         pars[p.name] = {"value": p.value, "unit": p.unit, "se": s, "lower": p.lower, "upper": p.upper,
                         "free": p.free, "identifiable": ident.get(p.name, True) if p.free else None}
-    return {"parameters": pars, "objective": result.objective, "chi2_per_dof": ex.get("chi2_per_dof"),
-            "correlation": ex.get("correlation"), "identifiability": ex.get("identifiability"),
-            "aic": result.aic, "aicc": ex.get("aicc"), "n_forward": ex.get("n_forward"),
-            "n_sensitivity": ex.get("n_sensitivity"), "wall_s": ex.get("wall_s"),
-            "converged": result.converged, "message": result.message, "held_out": ex.get("held_out", {}),
-            "residual_by_protocol": ex.get("residual_by_protocol"),
-            "residual_by_channel": ex.get("residual_by_channel")}
+    corr = None if result.correlation is None else np.asarray(result.correlation).tolist()
+    return {"parameters": pars, "objective": result.objective, "chi2_per_dof": result.chi2_per_dof,
+            "correlation": corr, "identifiability": result.identifiability,
+            "aic": result.aic, "aicc": result.aicc, "n_forward": result.n_forward,
+            "n_sensitivity": result.n_sensitivity, "wall_s": result.wall_s,
+            "converged": result.converged, "message": result.message, "held_out": result.held_out,
+            "residual_by_protocol": result.residual_by_protocol,
+            "residual_by_channel": result.residual_by_channel, "starts": result.starts,
+            "n_replayed": result.extra.get("n_replayed", 0),
+            "n_failed_solves": result.extra.get("n_failed_solves", 0)}
 
 
 __all__ = ["FitError", "aic", "fit", "fit_json", "free_set"]

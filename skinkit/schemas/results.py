@@ -26,8 +26,20 @@ class FitResult:
         message: the optimiser's closing message.
         residual_rms_m: RMS of the position residuals [m], if position data were fitted.
         covariance: ``(n_free, n_free)`` covariance of the free parameters [SI²], or None.
-        aic: Akaike information criterion, or None.
-        extra: further JSON-ready numbers (VAF, ...).
+        aic: Akaike information criterion (Eq 7.14), or None.
+        aicc: its small-sample correction, or None.
+        se: standard error per free parameter [SI], inflated by χ²/ν when the fit is worse than
+            the noise explains.
+        correlation: ``(n_free, n_free)`` correlation matrix, or None.
+        identifiability: the metrics of Eqs 7.15-7.18, weak directions and problems in words.
+        chi2_per_dof: Σz²/(m - n) of the weighted residual.
+        residual_by_protocol, residual_by_channel: Σz² per protocol and per channel.
+        held_out: RMS weighted residual per held-out protocol.
+        n_forward, n_sensitivity: forward predictions solved during the fit, and how many of them
+            carried sensitivities (replayed evaluations of a resumed fit are not counted).
+        wall_s: wall time of the fit [s].
+        starts: every start of a multi-start fit: its start values, result and objective.
+        extra: further JSON-ready numbers (VAF, history, ...).
     """
 
     model: str
@@ -39,6 +51,18 @@ class FitResult:
     residual_rms_m: float | None = None
     covariance: Any = None
     aic: float | None = None
+    aicc: float | None = None
+    se: dict[str, float] = field(default_factory=dict)
+    correlation: Any = None
+    identifiability: dict[str, Any] = field(default_factory=dict)
+    chi2_per_dof: float | None = None
+    residual_by_protocol: dict[str, float] = field(default_factory=dict)
+    residual_by_channel: dict[str, float] = field(default_factory=dict)
+    held_out: dict[str, float] = field(default_factory=dict)
+    n_forward: int = 0
+    n_sensitivity: int = 0
+    wall_s: float = 0.0
+    starts: list[dict[str, Any]] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -53,6 +77,9 @@ class FitResult:
         if self.covariance is not None:
             n = len(self.parameters.free_names)
             self.covariance = as_array(self.covariance, "FitResult.covariance", (n, n), "1", {})
+        if self.correlation is not None:
+            n = len(self.parameters.free_names)
+            self.correlation = as_array(self.correlation, "FitResult.correlation", (n, n), "1", {})
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -65,6 +92,18 @@ class FitResult:
             "residual_rms_m": self.residual_rms_m,
             "covariance": None if self.covariance is None else np.asarray(self.covariance).tolist(),
             "aic": self.aic,
+            "aicc": self.aicc,
+            "se": self.se,
+            "correlation": None if self.correlation is None else np.asarray(self.correlation).tolist(),
+            "identifiability": self.identifiability,
+            "chi2_per_dof": self.chi2_per_dof,
+            "residual_by_protocol": self.residual_by_protocol,
+            "residual_by_channel": self.residual_by_channel,
+            "held_out": self.held_out,
+            "n_forward": self.n_forward,
+            "n_sensitivity": self.n_sensitivity,
+            "wall_s": self.wall_s,
+            "starts": self.starts,
             "extra": self.extra,
         }
 

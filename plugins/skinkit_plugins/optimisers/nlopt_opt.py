@@ -1,4 +1,16 @@
-"""Derivative-free bound-constrained minimisation by NLopt's BOBYQA."""
+"""Bound-constrained minimisation by NLopt: derivative-free and gradient-based algorithms.
+
+Least-squares residuals ``r(x)`` are minimised as φ = ½‖r‖²; gradient-based algorithms get
+∇φ = Jᵀr from the analytic Jacobian ``jac(x)`` (one forward pass with sensitivities gives both,
+so a gradient costs no extra solve). An evaluation that cannot be computed (a non-finite
+residual: the forward model failed there) is reported to NLopt as φ = +inf, which its
+algorithms treat as a rejected point, not as a value to fit.
+
+Plugins (``skinkit.optimisers``): ``nlopt-bobyqa`` (LN_BOBYQA, local derivative-free),
+``nlopt-crs2`` (GN_CRS2_LM, global derivative-free, as Lavigne et al.; needs finite bounds),
+``nlopt-mma`` (LD_MMA), ``nlopt-slsqp`` (LD_SLSQP) and ``nlopt-lbfgs`` (LD_LBFGS), the last
+three gradient-based.
+"""
 
 from __future__ import annotations
 
@@ -10,43 +22,115 @@ import numpy as np
 
 from skinkit_plugins.optimisers.result import OptimiseResult
 
+_MESSAGES = {nlopt.SUCCESS: "success", nlopt.FTOL_REACHED: "ftol reached", nlopt.XTOL_REACHED: "xtol reached",
+             nlopt.MAXEVAL_REACHED: "maxeval reached", nlopt.STOPVAL_REACHED: "stopval reached",
+             nlopt.MAXTIME_REACHED: "maxtime reached"}
 
-class NloptBobyqa:
-    """NLopt ``LN_BOBYQA``. ``fun`` may return a residual vector (minimises ½‖r‖²) or a scalar.
 
-    ``options``: ``xtol_rel`` (default 1e-8), ``ftol_rel`` (1e-12), ``maxeval`` (2000).
+class NloptOptimiser:
+    """An NLopt algorithm behind skinkit's optimiser protocol (``skinkit.protocols.Optimiser``).
+
+    ``fun`` may return a residual vector (φ = ½‖r‖²) or a scalar. ``options``: ``xtol_rel``
+    (default 1e-8), ``ftol_rel`` (1e-12), ``maxeval`` (2000), ``population`` (CRS2 only).
     """
 
-    name = "nlopt-bobyqa"
+    name = "nlopt"
+    algorithm: int = nlopt.LN_BOBYQA
+    needs_gradient = False
+    needs_finite_bounds = False
 
     def minimise(self, fun: Callable[[np.ndarray], Any], x0: np.ndarray, lower: np.ndarray,
                  upper: np.ndarray, jac: Callable[[np.ndarray], np.ndarray] | None = None,
                  options: Mapping[str, Any] | None = None) -> OptimiseResult:
-        """Minimise the objective subject to ``lower <= x <= upper``; ``jac`` is not used."""
+        """Minimise the objective subject to ``lower <= x <= upper``."""
         opts = {"xtol_rel": 1e-8, "ftol_rel": 1e-12, "maxeval": 2000, **(options or {})}
         x0 = np.asarray(x0, float)
+        lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+        if self.needs_gradient and jac is None:
+            raise ValueError(f"{self.name} is gradient-based and needs the Jacobian")
+        if self.needs_finite_bounds and not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
+            raise ValueError(f"{self.name} searches a box: every free parameter needs finite bounds")
         nfev = 0
+        best = {"x": np.clip(x0, lower, upper), "f": np.inf}
+        # quasi-Newton methods start from an identity Hessian: with the objective divided by
+        # its value at the start their first steps have a sensible size in scaled coordinates
+        scale = {"f0": None}
 
         def objective(x: np.ndarray, grad: np.ndarray) -> float:
             nonlocal nfev
             nfev += 1
             r = np.asarray(fun(x), float)
-            return float(0.5 * r @ r) if r.ndim else float(r)
+            if not np.all(np.isfinite(r)):
+                if grad.size:
+                    grad[:] = 0.0
+                return float("inf")
+            f = float(0.5 * r @ r) if r.ndim else float(r)
+            if scale["f0"] is None:
+                scale["f0"] = abs(f) if f != 0 else 1.0
+            if grad.size:
+                J = np.asarray(jac(x), float)
+                grad[:] = (J.T @ r if r.ndim else J.ravel()) / scale["f0"]
+            if f < best["f"]:
+                best.update(x=np.array(x, float), f=f)
+            return f / scale["f0"]
 
-        opt = nlopt.opt(nlopt.LN_BOBYQA, x0.size)
+        opt = nlopt.opt(self.algorithm, x0.size)
         opt.set_min_objective(objective)
-        opt.set_lower_bounds(np.asarray(lower, float))
-        opt.set_upper_bounds(np.asarray(upper, float))
-        opt.set_xtol_rel(opts["xtol_rel"])
-        opt.set_ftol_rel(opts["ftol_rel"])
+        opt.set_lower_bounds(lower)
+        opt.set_upper_bounds(upper)
+        opt.set_xtol_rel(float(opts["xtol_rel"]))
+        opt.set_ftol_rel(float(opts["ftol_rel"]))
         opt.set_maxeval(int(opts["maxeval"]))
+        if "population" in opts:
+            opt.set_population(int(opts["population"]))
         try:
             x = opt.optimize(np.clip(x0, lower, upper))
             code = opt.last_optimize_result()
-            success = code > 0 and code != nlopt.MAXEVAL_REACHED
-            message = {nlopt.SUCCESS: "success", nlopt.FTOL_REACHED: "ftol reached",
-                       nlopt.XTOL_REACHED: "xtol reached", nlopt.MAXEVAL_REACHED: "maxeval reached",
-                       nlopt.STOPVAL_REACHED: "stopval reached"}.get(code, f"nlopt code {code}")
+            success = code > 0 and code not in (nlopt.MAXEVAL_REACHED, nlopt.MAXTIME_REACHED)
+            message = _MESSAGES.get(code, f"nlopt code {code}")
+            fval = float(opt.last_optimum_value()) * (scale["f0"] or 1.0)
         except nlopt.RoundoffLimited:
-            x, success, message = x0, False, "roundoff limited"
-        return OptimiseResult(np.asarray(x), float(opt.last_optimum_value()), nfev, success, message)
+            # the best point seen is still a result; the fit reports it as not converged
+            x, fval, success, message = best["x"], best["f"], False, "roundoff limited"
+        except RuntimeError as exc:   # NLopt's generic failure (e.g. SLSQP after rejected points)
+            x, fval, success, message = best["x"], best["f"], False, f"nlopt failure: {exc or 'generic'}"
+        return OptimiseResult(np.asarray(x), fval, nfev, success, message)
+
+
+class NloptBobyqa(NloptOptimiser):
+    """NLopt ``LN_BOBYQA``: local derivative-free, quadratic models in a trust region."""
+
+    name = "nlopt-bobyqa"
+    algorithm = nlopt.LN_BOBYQA
+
+
+class NloptCrs2(NloptOptimiser):
+    """NLopt ``GN_CRS2_LM``: global derivative-free controlled random search (Lavigne et al.)."""
+
+    name = "nlopt-crs2"
+    algorithm = nlopt.GN_CRS2_LM
+    needs_finite_bounds = True
+
+
+class NloptMma(NloptOptimiser):
+    """NLopt ``LD_MMA``: gradient-based method of moving asymptotes."""
+
+    name = "nlopt-mma"
+    algorithm = nlopt.LD_MMA
+    needs_gradient = True
+
+
+class NloptSlsqp(NloptOptimiser):
+    """NLopt ``LD_SLSQP``: gradient-based sequential quadratic programming."""
+
+    name = "nlopt-slsqp"
+    algorithm = nlopt.LD_SLSQP
+    needs_gradient = True
+
+
+class NloptLbfgs(NloptOptimiser):
+    """NLopt ``LD_LBFGS``: gradient-based limited-memory BFGS with bounds."""
+
+    name = "nlopt-lbfgs"
+    algorithm = nlopt.LD_LBFGS
+    needs_gradient = True
