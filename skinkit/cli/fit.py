@@ -28,45 +28,79 @@ def _checkpoint(path: Path, payload: dict) -> None:
 @click.option("--free", default=None, help="free parameters (comma-separated; default: the model's)")
 @click.option("--objective", "weighting", default="noise", show_default=True,
               help="weighting: noise, unweighted, displacement, threshold, robot-only, strain")
-@click.option("--optimiser", default="scipy-lsq", show_default=True, help="a skinkit.optimisers plugin")
+@click.option("--optimiser", default="scipy-lsq", show_default=True,
+              help="a skinkit.optimisers plugin (skinkit plugins lists them)")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
               help="multi-start: this many starts from a space-filling design; every start is kept")
 @click.option("--holdout", default=None, help="protocols kept out of the fit and predicted (comma-separated)")
 @click.option("--segments", type=click.Choice(["cycles"]), default=None,
               help="split every record into protocols first (cycles: one per loading cycle, "
                    "named <protocol>-cycle-<k>), so --holdout can name a cycle")
+@click.option("--ftol", type=click.FloatRange(min=0, min_open=True), default=1e-6, show_default=True,
+              help="stop when the objective changes by less than this, relatively")
+@click.option("--xtol", type=click.FloatRange(min=0, min_open=True), default=1e-3, show_default=True,
+              help="stop when the step in scaled parameters is below this")
+@click.option("--max-iterations", type=click.IntRange(min=1), default=50, show_default=True,
+              help="at most this many forward evaluations per start")
 @click.option("--resume", is_flag=True,
-              help="continue a killed fit from its last completed iteration (same --out)")
+              help="continue a killed fit from its last completed evaluation (same --out)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="directory for fit.json and the checkpoint (default: fit-<model name>)")
+              help="directory for fit.json, plots and the checkpoint (default: fit-<model name>)")
+@click.option("--plots", is_flag=True, help="write plots of the fit to --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str, starts: int,
-        holdout: str | None, segments: str | None, resume: bool, out_dir: str | None, workers: int | None,
-        as_json: bool) -> None:
-    """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record)."""
+        holdout: str | None, segments: str | None, ftol: float, xtol: float, max_iterations: int,
+        resume: bool, out_dir: str | None, plots: bool, workers: int | None, as_json: bool) -> None:
+    """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
+
+    Every evaluation is kept under --out until the fit ends, so a killed fit run again with
+    --resume replays what was done (no forward solve repeated) and goes on to the same optimum.
+    """
+    import shutil
+    import warnings
+
     import numpy as np
 
+    from skinkit import registry
     from skinkit.forward import load, read_observations
     from skinkit.inverse import WEIGHTINGS, fit_json
     from skinkit.inverse import fit as run_fit
-    from skinkit.inverse.fit import free_set
+    from skinkit.inverse.fit import FitError, free_set
     from skinkit.inverse.scaling import Scaling
 
     if weighting not in WEIGHTINGS:
         raise SkinkitError(f"--objective {weighting!r}: must be one of {', '.join(WEIGHTINGS)}")
+    if optimiser not in registry.names("skinkit.optimisers"):
+        raise SkinkitError(f"--optimiser {optimiser!r} is not installed; installed: "
+                           f"{', '.join(registry.names('skinkit.optimisers'))}")
     model = load(model_file, workers=workers)
     axis = str(getattr(model, "axis", "z"))
     obs = read_observations(session, held_out=_names(holdout) or [], axis=axis if axis in "xyz" else "z",
                             segments=segments)
     out = Path(out_dir) if out_dir else Path.cwd() / f"fit-{model.name}"
-    ckpt = out / "checkpoint.json"
-    if resume and not ckpt.is_file():
-        raise SkinkitError(f"--resume: no checkpoint in {out} "
-                           "(run without --resume first, with the same --out)")
-    out.mkdir(parents=True, exist_ok=True)
+    evals_dir = out / "evaluations"
+    state_file = out / "checkpoint.json"
     params = free_set(model.parameters(), _names(free))
     names = params.free_names
+    # what makes two runs the same fit: a resumed run must match it exactly
+    identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
+                "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
+                "holdout": _names(holdout) or [], "segments": segments, "ftol": ftol, "xtol": xtol,
+                "max_iterations": max_iterations}
+    if resume:
+        if not state_file.is_file():
+            raise SkinkitError(f"--resume: no checkpoint in {out} "
+                               "(run without --resume first, with the same --out)")
+        saved = json.loads(state_file.read_text())
+        diff = sorted(k for k in identity if saved.get(k) != identity[k])
+        if diff:
+            raise SkinkitError(f"--resume: the checkpoint in {out} is of another fit (it differs in "
+                               f"{', '.join(diff)})")
+    else:
+        shutil.rmtree(evals_dir, ignore_errors=True)
+    out.mkdir(parents=True, exist_ok=True)
+    _checkpoint(state_file, identity)
     sc = Scaling.for_parameters(params, names)
     lo, hi = sc.bounds()
     # the starts: the model's values, then a scrambled Sobol design in the scaled box
@@ -75,58 +109,60 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         from scipy.stats import qmc
         box_lo = np.where(np.isfinite(lo), lo, x_starts[0] - 1)
         box_hi = np.where(np.isfinite(hi), hi, x_starts[0] + 1)
-        u = qmc.Sobol(len(names), scramble=True, seed=0).random(starts - 1)
+        with warnings.catch_warnings():   # any count is fine here, not only powers of two
+            warnings.simplefilter("ignore")
+            u = qmc.Sobol(len(names), scramble=True, seed=0).random(starts - 1)
         x_starts += list(qmc.scale(u, box_lo, box_hi))
-    done: list[dict] = []
-    state = {"best_x": None, "start": 0}
-    if resume:
-        saved = json.loads(ckpt.read_text())
-        if saved.get("free") != names or saved.get("session") != str(session):
-            raise SkinkitError(f"--resume: the checkpoint in {out} is of another fit "
-                               f"(free {saved.get('free')}, session {saved.get('session')})")
-        done = saved["starts_done"]
-        state = {"best_x": saved.get("best_x"), "start": saved.get("start", len(done))}
 
-    def progress(i: int, phi: float, x: dict) -> None:
-        best = state.get("best_phi")
-        if best is None or phi < best:
-            state["best_phi"] = phi
-            state["best_x"] = [x[n] for n in names]
-        _checkpoint(ckpt, {"free": names, "session": str(session), "starts_done": done,
-                           "start": state["start"], "best_x": state["best_x"], "evaluations": i})
-        if not as_json:
-            vals = ", ".join(f"{n} = {v:.4g}" for n, v in x.items())
-            click.echo(f"  start {state['start'] + 1}/{starts} evaluation {i}: objective {phi:.6g}  [{vals}]",
-                       err=True)
+    results, done, failures = [], [], []
+    for k in range(starts):
+        start_vals = dict(zip(names, sc.to_values(x_starts[k]).tolist(), strict=True))
 
-    results = []
-    for k in range(state["start"], starts):
-        state["start"] = k
-        if resume and state.get("best_x") is not None and k == saved.get("start"):
-            start_vals = dict(zip(names, state["best_x"], strict=True))
-        else:
-            start_vals = dict(zip(names, sc.to_values(x_starts[k]).tolist(), strict=True))
-            state["best_phi"], state["best_x"] = None, None
-        r = run_fit(model, obs, names, weighting=weighting, optimiser=optimiser, start=start_vals,
-                    progress=progress)
-        j = fit_json(r)
-        done.append({"start": start_vals, "objective": j["objective"],
-                     "parameters": {n: j["parameters"][n]["value"] for n in names},
-                     "converged": j["converged"]})
-        results.append((j, r))
+        def progress(i: int, phi: float, x: dict, k: int = k) -> None:
+            if not as_json:
+                vals = ", ".join(f"{n} = {v:.4g}" for n, v in x.items())
+                click.echo(f"  start {k + 1}/{starts} evaluation {i}: objective {phi:.6g}  [{vals}]",
+                           err=True)
+
+        try:
+            r = run_fit(model, obs, names, weighting=weighting, optimiser=optimiser, start=start_vals,
+                        ftol=ftol, xtol=xtol, max_iterations=max_iterations,
+                        checkpoint=evals_dir / f"start-{k:03d}", progress=progress)
+        except FitError as exc:
+            if starts == 1:
+                raise
+            # a start the model cannot solve (a design point breaking a constraint of the
+            # model): kept as a failed start, the others go on
+            failures.append(str(exc))
+            done.append({"start": start_vals, "failed": str(exc)})
+            if not as_json:
+                click.echo(f"  start {k + 1}/{starts} failed: {exc}", err=True)
+            continue
+        done.append({"start": start_vals, "objective": r.objective, "converged": r.converged,
+                     "parameters": {n: r.parameters[n] for n in names}, "n_forward": r.n_forward,
+                     "n_replayed": r.extra.get("n_replayed", 0)})
+        results.append(r)
     if not results:
-        raise SkinkitError(f"--resume: every start of the fit in {out} was already done")
-    best, best_result = min(results, key=lambda jr: jr[0]["objective"])
+        raise SkinkitError(f"every start of the fit failed; the first: {failures[0]}")
+    best_result = min(results, key=lambda r: r.objective)
+    best_result.starts = done
     if str(session).lower().endswith((".h5", ".hdf5")):
         from skinkit.store import open_experiment
-        best_result.extra["starts"] = done
         with open_experiment(session, "a") as exp:
             exp.write_fit(f"fit-{model.name}", best_result)
-    best["starts"] = done
+    best = fit_json(best_result)
+    best["n_forward"] = sum(r.n_forward for r in results)
+    best["n_sensitivity"] = sum(r.n_sensitivity for r in results)
+    best["n_replayed"] = sum(r.extra.get("n_replayed", 0) for r in results)
     best["model"] = model.name
     best["session"] = str(session)
+    if plots:
+        from skinkit.inverse.plots import fit_plots
+        best["plots"] = [str(p) for p in fit_plots(model, obs, best_result, out)]
     _checkpoint(out / "fit.json", best)
-    ckpt.unlink(missing_ok=True)
+    # the fit is whole: its evaluations are no longer needed to resume it
+    shutil.rmtree(evals_dir, ignore_errors=True)
+    state_file.unlink(missing_ok=True)
     if hasattr(model, "close"):
         model.close()
     if as_json:
@@ -134,15 +170,19 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         return
     status = "converged" if best["converged"] else "NOT converged"
     click.echo(f"{model.name} on {session}: chi2/dof {best['chi2_per_dof']:.4g}, {best['n_forward']} forward "
-               f"solves with sensitivities, {best['wall_s']:.1f} s, {status}")
+               f"solves ({best['n_sensitivity']} with sensitivities), {best_result.wall_s:.1f} s, {status}")
     for n in names:
         p = best["parameters"][n]
         if p.get("identifiable") is False:
-            click.echo(f"  {n:28s} not identifiable from these protocols (see below)")
+            click.echo(f"  {n:28s} {p['value']:.6g} {p['unit']}: NOT identifiable from these protocols "
+                       "(see below)")
         else:
-            click.echo(f"  {n:28s} {p['value']:.6g} ± {p['se']:.2g} {p['unit']}")
+            click.echo(f"  {n:28s} {p['value']:.6g} ± {1.96 * p['se']:.2g} {p['unit']} (95 %)"
+                       if p["se"] is not None else f"  {n:28s} {p['value']:.6g} {p['unit']}: undetermined")
     for pr in best["identifiability"]["problems"]:
         click.echo(f"  ! {pr['message']}")
     for p, v in best["held_out"].items():
         click.echo(f"  held out {p}: rms {v:.3g} noise levels")
+    for p in best.get("plots", []):
+        click.echo(f"  plot {p}")
     click.echo(f"wrote {out / 'fit.json'}")

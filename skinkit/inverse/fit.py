@@ -255,6 +255,7 @@ def fit_json(result: FitResult) -> dict[str, Any]:
     pars = {}
     for p in result.parameters:
         s = se.get(p.name)
+        s = float(s) if s is not None and np.isfinite(s) else None   # an undetermined one: no number
         pars[p.name] = {"value": p.value, "unit": p.unit, "se": s, "lower": p.lower, "upper": p.upper,
                         "free": p.free, "identifiable": ident.get(p.name, True) if p.free else None}
     corr = None if result.correlation is None else np.asarray(result.correlation).tolist()

@@ -20,8 +20,12 @@ from typing import Any
 
 import numpy as np
 
-#: |correlation| above which a pair is reported as not separately identifiable
+#: |correlation| above which a pair is reported as not separately identifiable, unless both
+#: standard errors are within PAIR_RELATIVE_SE of the values (then: "correlated", still determined)
 PAIR_LIMIT = 0.95
+PAIR_RELATIVE_SE = 0.1
+#: |correlation| above which a pair is a valley whatever its standard errors
+PAIR_HARD_LIMIT = 0.999
 #: a standard error above this fraction of the parameter's value (or scaled range) is "not determined"
 RELATIVE_SE_LIMIT = 0.5
 
@@ -74,15 +78,26 @@ def analyse(J: np.ndarray, z: np.ndarray, names: list[str], values: np.ndarray,
     problems = []
     for i in range(n):
         for j in range(i + 1, n):
-            if abs(corr[i, j]) > PAIR_LIMIT or (not np.isfinite(se[i]) and not np.isfinite(se[j])):
-                rel = [se[k] / abs(values[k]) if values[k] != 0 else se[k] for k in (i, j)]
+            rel = [se[k] / abs(values[k]) if values[k] != 0 else se[k] / abs(dvalue_dscaled[k])
+                   for k in (i, j)]
+            c = abs(corr[i, j])
+            if c > PAIR_LIMIT and max(rel) <= PAIR_RELATIVE_SE and c <= PAIR_HARD_LIMIT:
+                # correlated, yet both pinned down: worth saying, not a failure
+                problems.append({"kind": "correlated", "parameters": [names[i], names[j]],
+                                 "correlation": float(corr[i, j]), "fix": None,
+                                 "message": f"{names[i]} and {names[j]} are strongly correlated "
+                                            f"({corr[i, j]:+.3f}) but both determined (standard "
+                                            f"errors {100 * rel[0]:.2g} % and {100 * rel[1]:.2g} % of "
+                                            "their values)"})
+                continue
+            if c > PAIR_LIMIT or (not np.isfinite(se[i]) and not np.isfinite(se[j])):
                 fix = names[i] if rel[0] >= rel[1] else names[j]
                 msg = (f"{names[i]} and {names[j]} are not separately identifiable from these protocols "
                        f"(correlation {corr[i, j]:+.3f}): they trade off along a valley of the objective; "
                        f"fix {fix} (e.g. at a literature value) and fit the other")
                 problems.append({"kind": "pair", "parameters": [names[i], names[j]],
                                  "correlation": float(corr[i, j]), "fix": fix, "message": msg})
-    flagged = {p for pr in problems for p in pr["parameters"]}
+    flagged = {p for pr in problems if pr["kind"] != "correlated" for p in pr["parameters"]}
     for i in range(n):
         scale = abs(values[i]) if values[i] != 0 else abs(dvalue_dscaled[i])
         if names[i] not in flagged and (not np.isfinite(se[i]) or se[i] > RELATIVE_SE_LIMIT * scale):
@@ -97,4 +112,4 @@ def analyse(J: np.ndarray, z: np.ndarray, names: list[str], values: np.ndarray,
             "identifiable": {nm: nm not in flagged for nm in names}}
 
 
-__all__ = ["PAIR_LIMIT", "RELATIVE_SE_LIMIT", "analyse"]
+__all__ = ["PAIR_HARD_LIMIT", "PAIR_LIMIT", "PAIR_RELATIVE_SE", "RELATIVE_SE_LIMIT", "analyse"]
