@@ -22,6 +22,27 @@ def _checkpoint(path: Path, payload: dict) -> None:
     os.replace(tmp, path)
 
 
+def _value(text: str, unit: str, where: str) -> float:
+    from skinkit.fem.model import quantity
+    text = text.strip()
+    try:
+        return float(text)
+    except ValueError:
+        return float(quantity(text, unit, where))
+
+
+def _bound(item: str, params) -> tuple[str, float, float]:
+    name, eq, rng = item.partition("=")
+    name = name.strip()
+    lo, colon, hi = rng.partition(":")
+    if not eq or not colon:
+        raise SkinkitError(f"--bounds {item!r}: expected NAME=LOWER:UPPER")
+    if name not in params:
+        raise SkinkitError(f"--bounds {name!r}: no such parameter; the model has {params.names}")
+    unit = params.param(name).unit
+    return name, _value(lo, unit, f"--bounds {name}"), _value(hi, unit, f"--bounds {name}")
+
+
 @click.command("fit")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.argument("session", type=click.Path(dir_okay=False))
@@ -30,6 +51,10 @@ def _checkpoint(path: Path, payload: dict) -> None:
               help="weighting: noise, unweighted, displacement, threshold, robot-only, strain")
 @click.option("--optimiser", default="scipy-lsq", show_default=True,
               help="a skinkit.optimisers plugin (skinkit plugins lists them)")
+@click.option("--start", "start_items", multiple=True, metavar="NAME=VALUE",
+              help="start a free parameter here (SI value or '<number> <unit>'), repeatable")
+@click.option("--bounds", "bound_items", multiple=True, metavar="NAME=LOWER:UPPER",
+              help="narrow a parameter's bounds for the fit (SI or with units), repeatable")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
               help="multi-start: this many starts from a space-filling design; every start is kept")
 @click.option("--holdout", default=None, help="protocols kept out of the fit and predicted (comma-separated)")
@@ -49,7 +74,8 @@ def _checkpoint(path: Path, payload: dict) -> None:
 @click.option("--plots", is_flag=True, help="write plots of the fit to --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
-def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str, starts: int,
+def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,
+        start_items: tuple[str, ...], bound_items: tuple[str, ...], starts: int,
         holdout: str | None, segments: str | None, ftol: float, xtol: float, max_iterations: int,
         resume: bool, out_dir: str | None, plots: bool, workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
@@ -66,7 +92,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     from skinkit.forward import load, read_observations
     from skinkit.inverse import WEIGHTINGS, fit_json
     from skinkit.inverse import fit as run_fit
-    from skinkit.inverse.fit import FitError, free_set
+    from skinkit.inverse.fit import FitError, free_set, with_bounds
     from skinkit.inverse.scaling import Scaling
 
     if weighting not in WEIGHTINGS:
@@ -82,12 +108,34 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     evals_dir = out / "evaluations"
     state_file = out / "checkpoint.json"
     params = free_set(model.parameters(), _names(free))
+    bounds = {}
+    for item in bound_items:
+        name, lo, hi = _bound(item, params)
+        bounds[name] = (lo, hi)
+    if bounds:
+        params = with_bounds(params, bounds)
     names = params.free_names
+    given = {}
+    for item in start_items:
+        name, eq, val = item.partition("=")
+        name = name.strip()
+        if not eq or name not in params:
+            raise SkinkitError(f"--start {item!r}: expected NAME=VALUE with NAME one of {params.names}")
+        if name not in names:
+            raise SkinkitError(f"--start {name}: not a free parameter (free: {', '.join(names)})")
+        v = _value(val, params.param(name).unit, f"--start {name}")
+        p = params.param(name)
+        if not p.lower <= v <= p.upper:
+            raise SkinkitError(f"--start {name} = {v:g} {p.unit} is outside its bounds "
+                               f"[{p.lower:g}, {p.upper:g}]")
+        given[name] = v
+    params = params.with_values(given) if given else params
     # what makes two runs the same fit: a resumed run must match it exactly
     identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
                 "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
-                "holdout": _names(holdout) or [], "segments": segments, "ftol": ftol, "xtol": xtol,
-                "max_iterations": max_iterations}
+                "holdout": _names(holdout) or [], "start": given,
+                "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "ftol": ftol,
+                "xtol": xtol, "max_iterations": max_iterations}
     if resume:
         if not state_file.is_file():
             raise SkinkitError(f"--resume: no checkpoint in {out} "
@@ -126,7 +174,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
 
         try:
             r = run_fit(model, obs, names, weighting=weighting, optimiser=optimiser, start=start_vals,
-                        ftol=ftol, xtol=xtol, max_iterations=max_iterations,
+                        ftol=ftol, xtol=xtol, max_iterations=max_iterations, bounds=bounds or None,
                         checkpoint=evals_dir / f"start-{k:03d}", progress=progress)
         except FitError as exc:
             if starts == 1:

@@ -47,6 +47,24 @@ def free_set(params: ParameterSet, free: Sequence[str] | None) -> ParameterSet:
     return ParameterSet(replace(p, free=p.name in set(free)) for p in params)
 
 
+def with_bounds(params: ParameterSet, bounds: dict[str, tuple[float, float]]) -> ParameterSet:
+    """``params`` with the fit's own bounds (name -> (lower, upper) [SI]) inside the admissible ones."""
+    from dataclasses import replace
+    out = {}
+    for name, (lo, hi) in bounds.items():
+        if name not in params:
+            raise FitError(f"--bounds: the model has no parameter {name!r}; it has {params.names}")
+        p = params.param(name)
+        if not lo < hi:
+            raise FitError(f"--bounds {name}: inverted or empty, lower {lo:g} >= upper {hi:g} {p.unit}")
+        if lo < p.lower or hi > p.upper:
+            raise FitError(f"--bounds {name}: [{lo:g}, {hi:g}] {p.unit} leaves the admissible range "
+                           f"[{p.lower:g}, {p.upper:g}]")
+        value = min(max(p.value, lo), hi)
+        out[name] = replace(p, lower=lo, upper=hi, value=value)
+    return ParameterSet(out.get(p.name, p) for p in params)
+
+
 def aic(chi2: float, n: int, k: int) -> tuple[float, float]:
     """AIC and AICc of a fit with Σz² = ``chi2`` over ``n`` observations and ``k`` free
     parameters: Eq 7.14, AIC = n ln(SSE/n) + 2(k + 1), and the small-sample correction."""
@@ -101,6 +119,7 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
         weighting: str = "noise", optimiser: str = "scipy-lsq", start: dict[str, float] | None = None,
         ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50, jacobian: str = "analytic",
         checkpoint: str | os.PathLike[str] | None = None,
+        bounds: dict[str, tuple[float, float]] | None = None,
         progress: Callable[[int, float, dict[str, float]], None] | None = None) -> FitResult:
     """Fit ``free`` parameters of ``model`` to the non-held-out protocols of ``observations``.
 
@@ -110,6 +129,7 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
     ``jacobian``: ``"analytic"`` (the model's sensitivities, default), ``"fd"`` (the optimiser
     differences the residual itself, as FEBio and GIBBON do) or ``"none"`` (derivative-free
     optimisers); the last two exist for comparison (``skinkit bench fit``).
+    ``bounds``: name -> (lower, upper) [SI], narrowing the model's admissible bounds for the fit.
     ``checkpoint``: a directory keeping every evaluation, so that a killed fit resumes
     (:class:`_Evaluations`). ``progress(evaluation, objective, values)`` after each evaluation.
     A forward solve that fails during the fit gives a non-finite residual there, which the
@@ -124,6 +144,8 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
     names = params.free_names
     if not names:
         raise FitError(f"model {model.name!r} has no free parameter")
+    if bounds:
+        params = with_bounds(params, bounds)
     for n in names:
         p = params.param(n)
         if not p.lower < p.upper:
@@ -270,5 +292,5 @@ def fit_json(result: FitResult) -> dict[str, Any]:
             "n_failed_solves": result.extra.get("n_failed_solves", 0)}
 
 
-__all__ = ["FitError", "aic", "fit", "fit_json", "free_set"]
+__all__ = ["FitError", "aic", "fit", "fit_json", "free_set", "with_bounds"]
 

@@ -24,6 +24,8 @@ import numpy as np
 #: standard errors are within PAIR_RELATIVE_SE of the values (then: "correlated", still determined)
 PAIR_LIMIT = 0.95
 PAIR_RELATIVE_SE = 0.1
+#: |correlation| above which a pair is reported when one of the two is undetermined
+PAIR_LIMIT_WITH_UNDETERMINED = 0.8
 #: |correlation| above which a pair is a valley whatever its standard errors
 PAIR_HARD_LIMIT = 0.999
 #: a standard error above this fraction of the parameter's value (or scaled range) is "not determined"
@@ -90,7 +92,10 @@ def analyse(J: np.ndarray, z: np.ndarray, names: list[str], values: np.ndarray,
                                             f"errors {100 * rel[0]:.2g} % and {100 * rel[1]:.2g} % of "
                                             "their values)"})
                 continue
-            if c > PAIR_LIMIT or (not np.isfinite(se[i]) and not np.isfinite(se[j])):
+            # a correlated partner of an undetermined parameter: its linearised interval assumes
+            # the partner known, which it is not, so neither value can be trusted alone
+            weak_pair = c > PAIR_LIMIT_WITH_UNDETERMINED and max(rel) > RELATIVE_SE_LIMIT
+            if c > PAIR_LIMIT or weak_pair or (not np.isfinite(se[i]) and not np.isfinite(se[j])):
                 fix = names[i] if rel[0] >= rel[1] else names[j]
                 msg = (f"{names[i]} and {names[j]} are not separately identifiable from these protocols "
                        f"(correlation {corr[i, j]:+.3f}): they trade off along a valley of the objective; "
