@@ -110,16 +110,15 @@ def run(seed: int = 0) -> dict[str, Any]:
         wall = time.perf_counter() - t0
         est = {n: r.parameters[n] for n in FREE}
         err = max(abs(est[n] - truth[n]) / abs(truth[n]) for n in FREE)
-        ex = r.extra
-        equiv = (ex["n_forward"] - ex["n_sensitivity"]) + ex["n_sensitivity"] * ratio
+        equiv = (r.n_forward - r.n_sensitivity) + r.n_sensitivity * ratio
         out[f"{label}_forward_equivalents"] = float(equiv)
-        out[f"{label}_forward_solves"] = int(ex["n_forward"])
+        out[f"{label}_forward_solves"] = int(r.n_forward)
         out[f"{label}_param_error"] = float(err)
         out[f"{label}_wall_s"] = wall
         out[f"{label}_parameters"] = est
         out[f"{label}_converged"] = bool(r.converged)
         if label == "skinkit":
-            out["skinkit_se"] = ex["se"]
+            out["skinkit_se"] = r.se
     out["fd_over_skinkit"] = out["fd_forward_equivalents"] / out["skinkit_forward_equivalents"]
     out["dfo_over_skinkit"] = out["dfo_forward_equivalents"] / out["skinkit_forward_equivalents"]
     return out

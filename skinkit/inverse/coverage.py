@@ -3,7 +3,7 @@
 :func:`coverage` fits many virtual sessions of one known truth (one per seed) with
 :func:`skinkit.inverse.fit` and counts, per parameter and overall, the parameter-seed pairs with
 ``|estimate − truth| ≤ z · se`` (z = 1.96 at the 95 % level; ``se`` the fit's standard error,
-``FitResult.extra["se"]``). If the intervals are honest the fraction is the level; too few
+``FitResult.se``). If the intervals are honest the fraction is the level; too few
 inside means hidden uncertainty (intervals too narrow, or a bias), too many means inflated
 intervals. The count expected for exact coverage is binomial (n pairs, p = level); its central
 95 % range is reported so a reader can judge a measured count. Pairs within one seed share that
@@ -264,7 +264,7 @@ def coverage(model: Any, make_observations: Callable[[int], Observations], free:
                    "inside": dict.fromkeys(free, False)}
         else:
             est = {n: float(r.parameters[n]) for n in free}
-            se = {n: float(r.extra["se"][n]) for n in free}
+            se = {n: float(r.se[n]) for n in free}
             z = {n: (est[n] - true[n]) / se[n] if se[n] > 0 else math.copysign(math.inf, est[n] - true[n])
                  for n in free}
             rec = {"seed": seed, "start": s0, "estimates": est, "se": se, "z": z,

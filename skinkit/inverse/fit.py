@@ -251,11 +251,6 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
         "n_failed_solves": sum(1 for h in history if not h["solved"]),
         "n_forward_optimiser": n_fit_forward, "n_sensitivity_optimiser": n_fit_sens,
         "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations,
-        # mirrors of the fields above, for readers of the earlier layout
-        "se": se, "n_forward": n_fwd, "n_sensitivity": n_sens, "wall_s": wall, "held_out": held,
-        "chi2_per_dof": ident["chi2_per_dof"], "correlation": ident["correlation"],
-        "identifiability": identifiability, "aicc": ac,
-        "residual_by_protocol": out.residual_by_protocol, "residual_by_channel": out.residual_by_channel,
     })
     return out
 
