@@ -18,6 +18,7 @@ _BENCHES: dict[str, str] = {
     "vision": "skinkit.bench.vision:bench_vision",
     "forward": "skinkit.bench.forward:bench_forward",
     "fit": "skinkit.bench.fit:bench_fit",
+    "fit-invivo": "skinkit.bench.fit_invivo:bench_fit_invivo",
     "coverage": "skinkit.bench.coverage:bench_coverage",
 }
 
