@@ -61,6 +61,8 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 @click.option("--segments", type=click.Choice(["cycles"]), default=None,
               help="split every record into protocols first (cycles: one per loading cycle, "
                    "named <protocol>-cycle-<k>), so --holdout can name a cycle")
+@click.option("--until", "until_s", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="fit only the first part of every record, up to this time [s]")
 @click.option("--ftol", type=click.FloatRange(min=0, min_open=True), default=1e-6, show_default=True,
               help="stop when the objective changes by less than this, relatively")
 @click.option("--xtol", type=click.FloatRange(min=0, min_open=True), default=1e-3, show_default=True,
@@ -76,7 +78,8 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,
         start_items: tuple[str, ...], bound_items: tuple[str, ...], starts: int,
-        holdout: str | None, segments: str | None, ftol: float, xtol: float, max_iterations: int,
+        holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
+        max_iterations: int,
         resume: bool, out_dir: str | None, plots: bool, workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
 
@@ -104,6 +107,8 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     axis = str(getattr(model, "axis", "z"))
     obs = read_observations(session, held_out=_names(holdout) or [], axis=axis if axis in "xyz" else "z",
                             segments=segments)
+    if until_s is not None:
+        obs = obs.until(until_s)
     out = Path(out_dir) if out_dir else Path.cwd() / f"fit-{model.name}"
     evals_dir = out / "evaluations"
     state_file = out / "checkpoint.json"
@@ -134,8 +139,8 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
                 "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
                 "holdout": _names(holdout) or [], "start": given,
-                "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "ftol": ftol,
-                "xtol": xtol, "max_iterations": max_iterations}
+                "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "until": until_s,
+                "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations}
     if resume:
         if not state_file.is_file():
             raise SkinkitError(f"--resume: no checkpoint in {out} "

@@ -210,10 +210,15 @@ class FEForwardModel:
                 nm = f"{f.name}.{key}"
                 if nm not in effect_names:
                     out.append(Parameter(nm, v, UNITS[key], -math.inf, math.inf))
-        for ent in eff.get("instrument", []) or []:
-            nm = str(ent.get("parameter", ""))
-            if nm and nm not in effect_names and nm not in {p.name for p in out}:
-                out.append(Parameter(nm, float(ent.get("value", 0.0)), "1"))
+        from skinkit.forward import instrument as inst_mod
+        seen = {p.name for p in out} | set(effect_names)
+        for e in inst_mod.parse(eff.get("instrument")):
+            for nm, val, unit in ((e.parameter, e.value, inst_mod.parameter_unit(e)),
+                                  (e.azimuth_parameter, e.azimuth, "rad")):
+                if nm and nm not in seen:
+                    lo = 0.0 if e.kind == "series" and val >= 0 else -math.inf
+                    out.append(Parameter(nm, val, unit, lo, math.inf))
+                    seen.add(nm)
         for e in self.effects:
             out.extend(e.parameter_set())
         return ParameterSet(out)
