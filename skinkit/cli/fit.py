@@ -74,13 +74,17 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="directory for fit.json, plots and the checkpoint (default: fit-<model name>)")
 @click.option("--plots", is_flag=True, help="write plots of the fit to --out")
+@click.option("--name", "fit_name", default=None,
+              help="name of the fit stored in an experiment-file SESSION (default: fit-<model name>)")
+@click.option("--overwrite", is_flag=True, help="replace a fit of that name already stored in SESSION")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,
         start_items: tuple[str, ...], bound_items: tuple[str, ...], starts: int,
         holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
         max_iterations: int,
-        resume: bool, out_dir: str | None, plots: bool, workers: int | None, as_json: bool) -> None:
+        resume: bool, out_dir: str | None, plots: bool, fit_name: str | None, overwrite: bool,
+        workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
 
     Every evaluation is kept under --out until the fit ends, so a killed fit run again with
@@ -109,6 +113,14 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
                             segments=segments)
     if until_s is not None:
         obs = obs.until(until_s)
+    fit_name = fit_name or f"fit-{model.name}"
+    stores = str(session).lower().endswith((".h5", ".hdf5"))
+    if stores and not overwrite:
+        from skinkit.store import open_experiment
+        with open_experiment(session) as exp:
+            if fit_name in exp.fit_names():
+                raise SkinkitError(f"{session} already holds a fit named {fit_name!r}: give another --name, "
+                                   "or --overwrite to replace it")
     out = Path(out_dir) if out_dir else Path.cwd() / f"fit-{model.name}"
     evals_dir = out / "evaluations"
     state_file = out / "checkpoint.json"
@@ -199,16 +211,18 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         raise SkinkitError(f"every start of the fit failed; the first: {failures[0]}")
     best_result = min(results, key=lambda r: r.objective)
     best_result.starts = done
-    if str(session).lower().endswith((".h5", ".hdf5")):
+    if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:
-            exp.write_fit(f"fit-{model.name}", best_result)
+            exp.write_fit(fit_name, best_result)
     best = fit_json(best_result)
     best["n_forward"] = sum(r.n_forward for r in results)
     best["n_sensitivity"] = sum(r.n_sensitivity for r in results)
     best["n_replayed"] = sum(r.extra.get("n_replayed", 0) for r in results)
     best["model"] = model.name
     best["session"] = str(session)
+    if stores:
+        best["stored_as"] = fit_name
     if plots:
         from skinkit.inverse.plots import fit_plots
         best["plots"] = [str(p) for p in fit_plots(model, obs, best_result, out)]

@@ -76,7 +76,7 @@ outside = "nearest"
 max_step = "1 s"
 """
 FIT_ARGS = ["--free", "skin.E,subdermal.E", "--start", "skin.E=15 kPa", "--start", "subdermal.E=20 kPa",
-            "--workers", "1"]
+            "--workers", "1", "--overwrite"]
 
 
 @pytest.fixture(scope="module")
@@ -128,6 +128,24 @@ def test_killed_fit_resumes_to_the_same_optimum(disc_session, tmp_path):
     # completed evaluations are not solved again: the new solves are the rest of the path
     assert resumed["n_forward"] == n_total - done
     assert not evals.exists()   # a whole fit leaves no checkpoint behind
+
+
+def test_stored_fit_is_not_overwritten_silently(disc_session, tmp_path):
+    """A fit stored in the session under a name: a new fit of that name is refused before it
+    starts, another --name is stored beside it, --overwrite replaces."""
+    from skinkit.store import open_experiment
+    d = disc_session
+    args = ["fit", str(d / "m.toml"), str(d / "s.h5"), "--free", "skin.E", "--out", str(tmp_path),
+            "--workers", "1", "--name", "first"]
+    r = CliRunner().invoke(main, [*args, "--overwrite"])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and "already holds a fit" in r.output
+    r = CliRunner().invoke(main, [*args[:-1], "second"])
+    assert r.exit_code == 0, r.output
+    with open_experiment(d / "s.h5") as exp:
+        assert {"first", "second"} <= set(exp.fit_names())
+        assert exp.read_fit("second").parameters.free_names == ["skin.E"]
 
 
 def test_resume_refuses_another_fit(disc_session, tmp_path):
