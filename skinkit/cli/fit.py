@@ -115,12 +115,6 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         obs = obs.until(until_s)
     fit_name = fit_name or f"fit-{model.name}"
     stores = str(session).lower().endswith((".h5", ".hdf5"))
-    if stores and not overwrite:
-        from skinkit.store import open_experiment
-        with open_experiment(session) as exp:
-            if fit_name in exp.fit_names():
-                raise SkinkitError(f"{session} already holds a fit named {fit_name!r}: give another --name, "
-                                   "or --overwrite to replace it")
     out = Path(out_dir) if out_dir else Path.cwd() / f"fit-{model.name}"
     evals_dir = out / "evaluations"
     state_file = out / "checkpoint.json"
@@ -162,7 +156,13 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         if diff:
             raise SkinkitError(f"--resume: the checkpoint in {out} is of another fit (it differs in "
                                f"{', '.join(diff)})")
-    else:
+    if stores and not overwrite:   # checked before the fit runs, not after it
+        from skinkit.store import open_experiment
+        with open_experiment(session) as exp:
+            if fit_name in exp.fit_names():
+                raise SkinkitError(f"{session} already holds a fit named {fit_name!r}: give another --name, "
+                                   "or --overwrite to replace it")
+    if not resume:   # a fresh fit: evaluations of an earlier one in this --out are not its own
         shutil.rmtree(evals_dir, ignore_errors=True)
     out.mkdir(parents=True, exist_ok=True)
     _checkpoint(state_file, identity)
