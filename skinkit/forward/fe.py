@@ -211,14 +211,8 @@ class FEForwardModel:
                 if nm not in effect_names:
                     out.append(Parameter(nm, v, UNITS[key], -math.inf, math.inf))
         from skinkit.forward import instrument as inst_mod
-        seen = {p.name for p in out} | set(effect_names)
-        for e in inst_mod.parse(eff.get("instrument")):
-            for nm, val, unit in ((e.parameter, e.value, inst_mod.parameter_unit(e)),
-                                  (e.azimuth_parameter, e.azimuth, "rad")):
-                if nm and nm not in seen:
-                    lo = 0.0 if e.kind == "series" and val >= 0 else -math.inf
-                    out.append(Parameter(nm, val, unit, lo, math.inf))
-                    seen.add(nm)
+        out += inst_mod.parameters(inst_mod.parse(eff.get("instrument")),
+                                   {p.name for p in out} | set(effect_names))
         for e in self.effects:
             out.extend(e.parameter_set())
         return ParameterSet(out)

@@ -38,6 +38,7 @@ Every transform is exactly the identity at value 0 (a tilt: at angle 0, any azim
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -45,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from skinkit.errors import ForwardError
+from skinkit.schemas import Parameter
 
 KINDS = ("bias", "series", "similarity", "tilt")
 _CHANNELS = ("tip_force", "tip_position", "points", "points_2d")
@@ -138,6 +140,21 @@ def parameter_names(entries: Sequence[Entry]) -> list[str]:
         for n in (e.parameter, e.azimuth_parameter):
             if n and n not in out:
                 out.append(n)
+    return out
+
+
+def parameters(entries: Sequence[Entry], exclude: set[str] | frozenset[str] = frozenset()) -> list[Parameter]:
+    """The entries' parameters (value, SI unit, bounds: a series compliance that starts
+    non-negative stays so), each once, skipping names in ``exclude``."""
+    out: list[Parameter] = []
+    seen = set(exclude)
+    for e in entries:
+        for nm, val, unit in ((e.parameter, e.value, parameter_unit(e)),
+                              (e.azimuth_parameter, e.azimuth, "rad")):
+            if nm and nm not in seen:
+                lo = 0.0 if e.kind == "series" and val >= 0 else -math.inf
+                out.append(Parameter(nm, val, unit, lo, math.inf))
+                seen.add(nm)
     return out
 
 
@@ -269,4 +286,4 @@ def measure(entries: Sequence[Entry], channel: str, time_s: np.ndarray, values: 
     return v, out
 
 
-__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parameter_unit", "parse"]
+__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parameter_unit", "parameters", "parse"]

@@ -34,7 +34,6 @@ along their analytic drive derivative. Effect parameters bound to a model parame
 from __future__ import annotations
 
 import copy
-import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -141,14 +140,7 @@ class LumpedForwardModel:
             if nm not in bound:
                 unit, lo, hi = self.spec.parameter_bounds(nm)
                 out.append(Parameter(nm, v, unit, lo, hi))
-        seen = {p.name for p in out} | effect_names
-        for e in self.spec.entries:
-            for nm, val, unit in ((e.parameter, e.value, inst_mod.parameter_unit(e)),
-                                  (e.azimuth_parameter, e.azimuth, "rad")):
-                if nm and nm not in seen:
-                    lo = 0.0 if e.kind == "series" and val >= 0 else -math.inf
-                    out.append(Parameter(nm, val, unit, lo, math.inf))
-                    seen.add(nm)
+        out += inst_mod.parameters(self.spec.entries, {p.name for p in out} | effect_names)
         for e in self.effects:
             out.extend(e.parameter_set())
         return ParameterSet(out)
