@@ -8,11 +8,8 @@ from typing import Any
 
 import click
 
+from skinkit.cli._session import read_session, split_names
 from skinkit.errors import SkinkitError
-
-
-def _names(text: str | None) -> list[str]:
-    return [s.strip() for s in text.split(",") if s.strip()] if text else []
 
 
 def read_fit(path: str) -> tuple[dict[str, float], list[str]]:
@@ -54,7 +51,7 @@ def design(model_file: str, session: str, free: str | None, at: str | None, cand
            holdout: str | None, workers: int | None, as_json: bool) -> None:
     """Rank protocols of the library by the gain in log det of the Fisher information they
     would add to SESSION's fit of MODEL_FILE (D-optimality), and say what each pins down."""
-    from skinkit.forward import load, read_observations
+    from skinkit.forward import load
     from skinkit.inverse.design import format_ranking, parse_candidates, rank_protocols
 
     values, fit_free = read_fit(at) if at else ({}, [])
@@ -66,9 +63,8 @@ def design(model_file: str, session: str, free: str | None, at: str | None, cand
         if unknown:
             raise SkinkitError(f"--at {at}: parameters {', '.join(unknown)} are not the model's "
                                f"(a fit of another model?)")
-        names = _names(free) or fit_free or None
-        axis = str(getattr(model, "axis", "z"))
-        obs = read_observations(session, held_out=_names(holdout), axis=axis if axis in "xyz" else "z")
+        names = split_names(free) or fit_free or None
+        obs = read_session(model, session, holdout)
 
         def progress(msg: str) -> None:
             if not as_json:

@@ -8,11 +8,8 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._session import read_session, split_names
 from skinkit.errors import SkinkitError
-
-
-def _names(text: str | None) -> list[str] | None:
-    return [s.strip() for s in text.split(",") if s.strip()] if text else None
 
 
 def _checkpoint(path: Path, payload: dict) -> None:
@@ -96,7 +93,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     import numpy as np
 
     from skinkit import registry
-    from skinkit.forward import load, read_observations
+    from skinkit.forward import load
     from skinkit.inverse import WEIGHTINGS, fit_json
     from skinkit.inverse import fit as run_fit
     from skinkit.inverse.fit import FitError, free_set, with_bounds
@@ -108,9 +105,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         raise SkinkitError(f"--optimiser {optimiser!r} is not installed; installed: "
                            f"{', '.join(registry.names('skinkit.optimisers'))}")
     model = load(model_file, workers=workers)
-    axis = str(getattr(model, "axis", "z"))
-    obs = read_observations(session, held_out=_names(holdout) or [], axis=axis if axis in "xyz" else "z",
-                            segments=segments)
+    obs = read_session(model, session, holdout, segments)
     if until_s is not None:
         obs = obs.until(until_s)
     fit_name = fit_name or f"fit-{model.name}"
@@ -118,7 +113,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     out = Path(out_dir) if out_dir else Path.cwd() / f"fit-{model.name}"
     evals_dir = out / "evaluations"
     state_file = out / "checkpoint.json"
-    params = free_set(model.parameters(), _names(free))
+    params = free_set(model.parameters(), split_names(free) or None)
     bounds = {}
     for item in bound_items:
         name, lo, hi = _bound(item, params)
@@ -144,7 +139,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     # what makes two runs the same fit: a resumed run must match it exactly
     identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
                 "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
-                "holdout": _names(holdout) or [], "start": given,
+                "holdout": split_names(holdout), "start": given,
                 "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "until": until_s,
                 "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations}
     if resume:

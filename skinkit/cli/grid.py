@@ -10,19 +10,15 @@ from typing import Any
 
 import click
 
+from skinkit.cli._session import read_session, split_names
 from skinkit.errors import SkinkitError
 
 
-def _names(text: str | None) -> list[str] | None:
-    return [s.strip() for s in text.split(",") if s.strip()] if text else None
-
-
 def _session(model_file: str, session: str, holdout: str | None, workers: int | None) -> tuple[Any, Any]:
-    from skinkit.forward import load, read_observations
+    from skinkit.forward import load
 
     model = load(model_file, workers=workers)
-    axis = str(getattr(model, "axis", "z"))
-    obs = read_observations(session, held_out=_names(holdout) or [], axis=axis if axis in "xyz" else "z")
+    obs = read_session(model, session, holdout)
     return model, obs
 
 
@@ -95,7 +91,7 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
     from skinkit.inverse.plots import grid_plot
     from skinkit.inverse.scaling import Scaling
 
-    names = _names(pair) or []
+    names = split_names(pair)
     if len(names) != 2:
         raise GridError(f"--pair {pair!r}: name exactly two parameters, as A,B")
     if names[0] == names[1]:
@@ -195,8 +191,8 @@ def profile(model_file: str, session: str, name: str, free: str | None, n: int, 
             raise GridError(f"--values {values!r}: give numbers in SI, comma-separated") from None
     model, obs = _session(model_file, session, holdout, workers)
     out = Path(out_dir) if out_dir else Path.cwd() / f"profile-{model.name}-{name}"
-    pr = profile_likelihood(model, obs, name, _names(free), values=vals, n=n, weighting=weighting,
-                            progress=_say)
+    pr = profile_likelihood(model, obs, name, split_names(free) or None, values=vals, n=n,
+                            weighting=weighting, progress=_say)
     pr = _clean({**pr, "session": str(session)})
     out.mkdir(parents=True, exist_ok=True)
     (out / "profile.json").write_text(json.dumps(pr, indent=1))

@@ -7,11 +7,8 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._session import read_session, split_names
 from skinkit.errors import SkinkitError
-
-
-def _names(text: str | None) -> list[str]:
-    return [s.strip() for s in text.split(",") if s.strip()] if text else []
 
 
 @click.command("predict")
@@ -40,15 +37,13 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
             out_file: str | None, as_json: bool) -> None:
     """Predict SESSION (experiment file or CSV record) with MODEL_FILE; report the residuals."""
     from skinkit.fem.model import quantity
-    from skinkit.forward import load, read_observations
+    from skinkit.forward import load
     from skinkit.forward.residuals import summarise
 
     model = load(model_file, workers=workers, scheduler=scheduler)
-    if axis is None:
-        axis = str(getattr(model, "axis", "z")) if str(getattr(model, "axis", "z")) in "xyz" else "z"
-    obs = read_observations(session, held_out=_names(holdout), axis=axis, segments=segments)
+    obs = read_session(model, session, holdout, segments, axis)
     if protocols:
-        obs = obs.select(_names(protocols))
+        obs = obs.select(split_names(protocols))
     if until_s is not None:
         obs = obs.until(until_s)
     params = model.parameters()

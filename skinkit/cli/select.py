@@ -6,11 +6,8 @@ import json
 
 import click
 
+from skinkit.cli._session import read_session
 from skinkit.errors import SkinkitError
-
-
-def _names(text: str | None) -> list[str]:
-    return [s.strip() for s in text.split(",") if s.strip()] if text else []
 
 
 @click.command("select")
@@ -36,7 +33,7 @@ def select(model_file: str, session: str, subsets: str, weighting: str, holdout:
            rank_by: str, segments: str | None, workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE to SESSION with each subset of free parameters; rank by AIC (thesis
     Eq 7.14) and AICc beside the held-out error (k-fold by protocol, and --holdout)."""
-    from skinkit.forward import load, read_observations
+    from skinkit.forward import load
     from skinkit.inverse import WEIGHTINGS
     from skinkit.inverse.selection import check_subsets, format_table, parse_subsets
     from skinkit.inverse.selection import select as run_select
@@ -50,9 +47,7 @@ def select(model_file: str, session: str, subsets: str, weighting: str, holdout:
     model = load(model_file, workers=workers)
     try:
         check_subsets(model.parameters(), wanted)   # before the session is read
-        axis = str(getattr(model, "axis", "z"))
-        obs = read_observations(session, held_out=_names(holdout), axis=axis if axis in "xyz" else "z",
-                                segments=segments)
+        obs = read_session(model, session, holdout, segments)
 
         def progress(msg: str) -> None:
             if not as_json:

@@ -1,0 +1,25 @@
+"""What the commands that read a session share: comma-separated name lists, and reading the
+session along the axis the model acts on."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+
+def split_names(text: str | None) -> list[str]:
+    """``"a, b,c"`` -> ``["a", "b", "c"]``; None or empty -> ``[]``."""
+    return [s.strip() for s in text.split(",") if s.strip()] if text else []
+
+
+def read_session(model: Any, session: str | os.PathLike[str], holdout: str | None = None,
+                 segments: str | None = None, axis: str | None = None) -> Any:
+    """The observations of ``session`` for ``model``: ``holdout`` (comma-separated protocols)
+    marked held out, records split into ``segments`` first, a one-axis CSV read along ``axis``
+    (default: the model's own axis when it is x, y or z, else z)."""
+    from skinkit.forward import read_observations
+
+    if axis is None:
+        axis = str(getattr(model, "axis", "z"))
+        axis = axis if axis in ("x", "y", "z") else "z"
+    return read_observations(session, held_out=split_names(holdout), axis=axis, segments=segments)
