@@ -351,8 +351,12 @@ class Experiment:
     def set_record_attrs(self, name: str, **items: Any) -> None:
         """Attach JSON-ready facts to record ``name`` (e.g. the link's ``samples_lost``), merged
         into its ``extra`` attribute; call once its writer has closed (or crashed)."""
+        self._merge_extra(L.RECORDS, "record", name, items)
+
+    def _merge_extra(self, base: str, kind: str, name: str, items: dict[str, Any]) -> None:
+        """Merge ``items`` into the ``extra`` JSON attribute of ``base/name``."""
         f = self._writable()
-        path = f"{L.RECORDS}/{name}"
+        path = f"{base}/{name}"
         if path not in f:
             raise self._err(path, "missing")
         g = f[path]
@@ -361,7 +365,7 @@ class Experiment:
         try:
             g.attrs["extra"] = json.dumps(extra, allow_nan=True)
         except TypeError as exc:
-            raise SchemaError(f"record {name!r} attrs", f"not JSON-ready ({exc})") from None
+            raise SchemaError(f"{kind} {name!r} attrs", f"not JSON-ready ({exc})") from None
         f.flush()
 
     def _committed(self, g: h5py.Group) -> int:
@@ -564,18 +568,7 @@ class Experiment:
     def set_track_attrs(self, name: str, **items: Any) -> None:
         """Attach JSON-ready facts to track ``name`` (e.g. its producer's ``noise_m`` [m] per
         axis, ``dimensions``), merged into its ``extra`` attribute."""
-        f = self._writable()
-        path = f"{L.TRACKS}/{name}"
-        if path not in f:
-            raise self._err(path, "missing")
-        g = f[path]
-        extra = json.loads(g.attrs["extra"]) if "extra" in g.attrs else {}
-        extra.update(items)
-        try:
-            g.attrs["extra"] = json.dumps(extra, allow_nan=True)
-        except TypeError as exc:
-            raise SchemaError(f"track {name!r} attrs", f"not JSON-ready ({exc})") from None
-        f.flush()
+        self._merge_extra(L.TRACKS, "track", name, items)
 
     @_reading
     def track_attrs(self, name: str) -> dict[str, Any]:
