@@ -196,14 +196,17 @@ class Problem:
         return bool(self.state)
 
     def material_response(self, k: int, F: np.ndarray, with_tangent: bool, dt: float | None,
-                          sub: slice | None = None):
+                          sub: slice | None = None, keep: list | None = None):
         """``(S, CC)`` of material ``k`` at deformation gradients ``F`` of its elements (or of
-        the elements ``sub`` of them, a slice relative to the material)."""
+        the elements ``sub`` of them, a slice relative to the material). ``keep``: a list to
+        which ``(C, Ce, Se, CCe)`` (right Cauchy-Green tensor, its natural-configuration form
+        and the elastic response there) are appended, for a sensitivity pass at this state."""
         m = self.materials[k]
-        C = np.swapaxes(F, -1, -2) @ F
-        if m.F0 is not None:
-            C = np.swapaxes(m.F0, -1, -2) @ C @ m.F0
+        C0 = np.swapaxes(F, -1, -2) @ F
+        C = C0 if m.F0 is None else np.swapaxes(m.F0, -1, -2) @ C0 @ m.F0
         S, CC = self.elastic_response(k, C, with_tangent, sub)
+        if keep is not None:
+            keep.append((C0, C, S, CC))
         if k in self.state and dt is not None:
             g, tau = m.prony()
             st = self.state[k]
@@ -216,11 +219,14 @@ class Problem:
             S, CC = push_with(m.F0, S, CC)
         return S, CC
 
-    def evaluate(self, u: np.ndarray, with_tangent: bool = True, dt: float | None = None):
+    def evaluate(self, u: np.ndarray, with_tangent: bool = True, dt: float | None = None,
+                 keep: dict | None = None):
         """Element forces ``(n_el, 81)`` [N] and tangents ``(n_el, 81, 81)`` [N/m] (or None).
 
         ``dt`` [s] advances viscous histories by a trial step (None: elastic response of
         viscous laws, as for a static solve). Raises :class:`InvertedElementError`.
+        ``keep`` (with a tangent only): filled with material -> ``(F, C, Ce, Se, CCe)`` at
+        ``u``, so a sensitivity pass does not evaluate the laws a second time.
         """
         g = self.geom
         ne = self.mesh.n_elements
@@ -235,12 +241,15 @@ class Problem:
                 continue
             # tangents chunk by chunk: the fourth-order arrays stay in cache
             n = el.stop - el.start
+            parts: list | None = [] if keep is not None else None
             for a in range(0, n, _CHUNK):
                 sub = slice(a, min(a + _CHUNK, n))
                 ge = slice(el.start + sub.start, el.start + sub.stop)
-                S, CC = self.material_response(k, F[sub], True, dt, sub)
+                S, CC = self.material_response(k, F[sub], True, dt, sub, parts)
                 re[ge] = element_residual(g.dN[ge], g.w[ge], F[sub], S, g.dNT[ge])
                 element_tangent(g.dN[ge], g.w[ge], F[sub], S, CC, g.dNT[ge], out=Ke[ge])
+            if keep is not None:
+                keep[k] = (F, *(np.concatenate([p[i] for p in parts]) for i in range(4)))
         return re, Ke
 
     def _F(self, u: np.ndarray, k: int) -> np.ndarray:

@@ -202,7 +202,8 @@ class HistorySensitivity:
         npar = len(self.pars)
         prob.t = t
         viscous = dt is not None and prob.viscous
-        re, Ke = prob.evaluate(u, True, dt if viscous else None)
+        states: dict = {}
+        re, Ke = prob.evaluate(u, True, dt if viscous else None, keep=states)
         K = solver.tangent(Ke)
         solver.linear.factor(K)
         solver.factored = True
@@ -211,10 +212,7 @@ class HistorySensitivity:
         cache = {}
         for k, m in enumerate(prob.materials):
             sl = prob.slices[k]
-            F = prob._F(u, k)
-            C = np.swapaxes(F, -1, -2) @ F
-            Ce = C if m.F0 is None else np.swapaxes(m.F0, -1, -2) @ C @ m.F0
-            Se, CCe = prob.elastic_response(k, Ce, True)
+            F, C, Ce, Se, CCe = states[k]
             need_law_S = any(p.kind == "field" for p in self.pars) and prob.fields_of(k)
             law_S = lawkit.response(m.law, Ce, m.params, False)[0] if need_law_S else None
             cache[k] = (F, C, Ce, Se, CCe)
@@ -306,8 +304,12 @@ class HistorySensitivity:
             dC = np.swapaxes(dF, -1, -2) @ F + np.swapaxes(F, -1, -2) @ dF
             if m.F0 is not None:
                 dC = np.swapaxes(m.F0, -1, -2) @ dC @ m.F0
+            # every parameter's ½ CCe : dC at once, as one batched (9 x 9) @ (9 x npar) product
+            ne, nq = CCe.shape[:2]
+            dSe_all = 0.5 * (CCe.reshape(ne, nq, 9, 9) @ np.moveaxis(dC, 0, -1).reshape(ne, nq, 9, npar))
+            dSe_all = np.moveaxis(dSe_all.reshape(ne, nq, 3, 3, npar), -1, 0)
             for j, p in enumerate(self.pars):
-                dSe_tot = 0.5 * np.einsum("eqIJKL,eqKL->eqIJ", CCe, dC[j])
+                dSe_tot = dSe_all[j]
                 if p.kind != "prony":
                     ex = self._explicit_dSe(k, p, Ce, C, Se, CCe, law_S)
                     if ex is not None:
