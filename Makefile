@@ -3,29 +3,48 @@
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
+# what the user's job needs (the engines, the built-in plugins, the robot drivers, MKL PARDISO);
+# the test suite adds pytest, ruff and the benchmark peers (sfepy, scikit-image) and Dask
+RUN_STAMP  := $(VENV)/.installed-run
+TEST_STAMP := $(VENV)/.installed-test
+RUN_REQS   := -e ".[fast]" -e ./plugins -e ./hardware
+TEST_REQS  := -e ".[fast,test,dev,bench,cluster]" -e ./plugins -e ./hardware
+# uv (from PyPI) resolves and installs several times faster than pip; pip when uv cannot be had
+INSTALL = if [ -x $(BIN)/uv ]; then $(BIN)/uv pip install --python $(BIN)/python $(1); \
+          else $(BIN)/python -m pip install --progress-bar on $(1); fi
 
-.PHONY: venv demo test lint tox clean
+.PHONY: venv venv-test demo test lint tox clean
 
-venv: $(STAMP)
+venv: $(RUN_STAMP)
+venv-test: $(TEST_STAMP)
 
-$(STAMP): pyproject.toml plugins/pyproject.toml hardware/pyproject.toml
+$(BIN)/python:
+	@echo "== creating $(VENV) with $(PYTHON)"
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,dev,bench,cluster]" -e ./plugins -e ./hardware
-	touch $(STAMP)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check uv \
+	    || echo "note: uv could not be installed; installing with pip (slower)"
+
+$(RUN_STAMP): pyproject.toml plugins/pyproject.toml hardware/pyproject.toml | $(BIN)/python
+	@echo "== installing skinkit and its plugins (what the main job needs)"
+	@$(call INSTALL,$(RUN_REQS))
+	touch $(RUN_STAMP)
+
+$(TEST_STAMP): pyproject.toml plugins/pyproject.toml hardware/pyproject.toml | $(BIN)/python
+	@echo "== installing skinkit with the test tools and benchmark peers"
+	@$(call INSTALL,$(TEST_REQS))
+	touch $(RUN_STAMP) $(TEST_STAMP)
 
 demo: venv
 	$(BIN)/skinkit demo --out demo-output
 
-test: venv
+test: venv-test
 	$(BIN)/python -m pytest -n 2 -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
-lint: venv
+lint: venv-test
 	$(BIN)/ruff check skinkit plugins hardware tests
 
 # With pyenv, make every installed 3.10-3.13 visible to tox at once.
-tox: venv
+tox: venv-test
 	PYENV_VERSION="$$(pyenv versions --bare 2>/dev/null | grep -E '^3\.1[0-3]\.' | paste -sd: -)" $(BIN)/tox
 
 clean:
