@@ -114,68 +114,181 @@ class FitResult:
         return cls(**d)
 
 
-@dataclass(frozen=True)
-class EffectScore:
-    """How much of the gap one candidate effect closes.
+def _finite_or_none(x: Any) -> Any:
+    """JSON-safe copies: NaN and infinities become None, arrays lists, in nested containers."""
+    if isinstance(x, dict):
+        return {str(k): _finite_or_none(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite_or_none(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _finite_or_none(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(float(x)) else None
+    return x
 
-    ``gap_before_m`` and ``gap_after_m`` are residual RMS [m] on held-out data before and after
-    adding the effect and refitting; ``reduction`` = 1 - after/before.
+
+def _fraction(value: Any, field: str) -> float | None:
+    """A shrinkage: a fraction of the excess residual removed (None when there was no excess).
+    It may be negative (a model that fits worse) but never above 1 + rounding."""
+    if value is None:
+        return None
+    x = as_float(value, field, "1", allow_nan=True)
+    if math.isnan(x):
+        return None
+    if x > 1 + 1e-9:
+        raise SchemaError(field, f"a fraction of the excess removed cannot exceed 1, got {x:g}")
+    return x
+
+
+@dataclass
+class EffectScore:
+    """One candidate effect of a gap diagnosis: its score test at the null, and its refit.
+
+    Attributes:
+        effect: the effect plugin's name.
+        score: the Lagrange-multiplier (score) statistic [1]: the part of the noise-normalised
+            residual's Σz² the effect's signature explains to first order, with the fitted
+            parameters' directions projected out.
+        p_value: its upper-tail probability (χ² with ``dof``), before the many-effects correction.
+        dof: degrees of freedom of the test (the rank of the projected signature).
+        refitted: whether the model was refitted with the effect added.
+        delta_aic: AIC(with the effect) − AIC(without) [1] after the refit, or None.
+        shrinkage: fraction of the excess residual (χ² − dof) the refit removed, or None.
+        parameters: the effect's identified parameters ``{name: {"value", "se"}}`` [SI], or None.
+        not_separable_from: effects leaving nearly the same signature on these protocols.
+        extra: further JSON-ready facts (how the sensitivity was obtained, parameters held at
+            their null, the admissible direction, held-out χ², ...).
     """
 
     effect: str
-    gap_before_m: float
-    gap_after_m: float
-    parameters: ParameterSet | None = None
+    score: float
+    p_value: float
+    dof: int = 0
+    refitted: bool = False
+    delta_aic: float | None = None
+    shrinkage: float | None = None
+    parameters: dict[str, dict[str, float]] | None = None
+    not_separable_from: list[str] = field(default_factory=list)
+    extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for key in ("gap_before_m", "gap_after_m"):
-            as_float(getattr(self, key), f"EffectScore[{self.effect!r}].{key}", "m", lo=0)
+        f = f"EffectScore[{self.effect!r}]"
+        self.score = as_float(self.score, f"{f}.score", "1", lo=0)
+        self.p_value = as_float(self.p_value, f"{f}.p_value", "1", lo=0, hi=1)
+        if int(self.dof) < 0:
+            raise SchemaError(f"{f}.dof", "must be >= 0")
+        self.dof = int(self.dof)
+        if self.delta_aic is not None:
+            self.delta_aic = as_float(self.delta_aic, f"{f}.delta_aic", "1", allow_nan=True)
+        self.shrinkage = _fraction(self.shrinkage, f"{f}.shrinkage")
+        if self.parameters is not None:
+            for name, v in self.parameters.items():
+                if not isinstance(v, dict) or "value" not in v or "se" not in v:
+                    raise SchemaError(f"{f}.parameters[{name!r}]", "must be {'value': ..., 'se': ...}")
+        self.not_separable_from = [str(e) for e in self.not_separable_from]
 
-    @property
-    def reduction(self) -> float:
-        return 1.0 - self.gap_after_m / self.gap_before_m if self.gap_before_m > 0 else 0.0
+    def to_dict(self) -> dict[str, Any]:
+        return _finite_or_none({
+            "effect": self.effect, "score": self.score, "p_value": self.p_value, "dof": self.dof,
+            "refitted": self.refitted, "delta_aic": self.delta_aic, "shrinkage": self.shrinkage,
+            "parameters": self.parameters, "not_separable_from": list(self.not_separable_from),
+            **self.extra})
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> EffectScore:
+        d = dict(d)
+        known = {k: d.pop(k) for k in ("effect", "score", "p_value", "dof", "refitted", "delta_aic",
+                                       "shrinkage", "parameters", "not_separable_from") if k in d}
+        return cls(**known, extra=d)
+
+
+#: the keys of a gap report's JSON form pinned by issue 11 (others may be added)
+GAP_KEYS = ("model", "session", "fit", "gap", "candidates", "named", "shrinkage")
 
 
 @dataclass
 class GapReport:
-    """Where the calibrated model misses the data, which effect explains it, by how much.
+    """Where a calibrated model misses a session, which unmodelled effect explains it, how far
+    the gap shrinks once that effect is added (issue 11). Every residual is noise-normalised
+    (each sample over its channel's noise), so force, motion and surface channels are
+    commensurate and χ²/ν = 1 is the noise level.
 
     Attributes:
         model: the calibrated model's name.
-        gap_rms_m: residual RMS of the calibrated model on held-out data [m].
-        residual_by_point_m: ``(P,)`` RMS residual per tracked point [m], or None.
-        candidates: scores of the candidate effects, best first.
-        withheld_effect: in a virtual-lab check, the effect withheld from the model, else None.
+        session: where the observations came from.
+        fit: the calibration: ``parameters`` (free name -> SI value), ``chi2_per_dof``,
+            ``n_forward``, and more (``se``, ``aic``, ``held_out``, ...).
+        gap: step 1: ``significant``, ``chi2_per_dof`` and ``cells`` (per axis and label:
+            ``share`` of the excess, ``chi2_per_dof``, ``p_value``, ``significant``), and
+            optionally ``whiteness``, ``cross_correlation``, ``point_map``.
+        candidates: every candidate effect of the first round, ranked by its score test.
+        named: the effects named, in the order they were named (empty: none).
+        shrinkage: ``overall`` and ``held_out`` fractions of the excess residual removed by the
+            named effects, and ``cells`` (``axis``, ``label``, ``before``, ``after`` χ²/ν).
+        extra: further JSON-ready keys at the top level of :meth:`to_dict` (``points``,
+            ``point_map_after``, ``separation``, ``rounds``, ``messages``, ...).
     """
 
     model: str
-    gap_rms_m: float
-    residual_by_point_m: Any = None
+    session: str = ""
+    fit: dict[str, Any] = field(default_factory=dict)
+    gap: dict[str, Any] = field(default_factory=dict)
     candidates: list[EffectScore] = field(default_factory=list)
-    withheld_effect: str | None = None
+    named: list[str] = field(default_factory=list)
+    shrinkage: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.gap_rms_m = as_float(self.gap_rms_m, "GapReport.gap_rms_m", "m", lo=0)
-        if self.residual_by_point_m is not None:
-            self.residual_by_point_m = as_array(self.residual_by_point_m, "GapReport.residual_by_point_m",
-                                                ("P",), "m", {})
-        self.candidates = sorted(self.candidates, key=lambda c: -c.reduction)
+        for c in self.candidates:
+            if not isinstance(c, EffectScore):
+                raise SchemaError("GapReport.candidates", f"must be EffectScore, got {type(c).__name__}")
+        known = {c.effect for c in self.candidates} | {e for r in self.extra.get("rounds", [])
+                                                        for e in _round_effects(r)}
+        for e in self.named:
+            if e not in known:
+                raise SchemaError("GapReport.named", f"effect {e!r} is not among the candidates")
+        if "chi2_per_dof" in self.fit and self.fit["chi2_per_dof"] is not None:
+            as_float(self.fit["chi2_per_dof"], "GapReport.fit.chi2_per_dof", "1", lo=0, allow_nan=True)
+        if "chi2_per_dof" in self.gap and self.gap["chi2_per_dof"] is not None:
+            as_float(self.gap["chi2_per_dof"], "GapReport.gap.chi2_per_dof", "1", lo=0, allow_nan=True)
+        for key in ("overall", "held_out"):
+            if key in self.shrinkage:
+                self.shrinkage[key] = _fraction(self.shrinkage[key], f"GapReport.shrinkage.{key}")
+        clash = sorted(set(self.extra) & set(GAP_KEYS))
+        if clash:
+            raise SchemaError("GapReport.extra", f"must not repeat the report's own keys {clash}")
 
     @property
     def best(self) -> EffectScore | None:
+        """The candidate ranked first by its score test (None when none was tested)."""
         return self.candidates[0] if self.candidates else None
 
+    @property
+    def significant(self) -> bool:
+        """Whether the calibrated model's residual is above the noise (step 1)."""
+        return bool(self.gap.get("significant", False))
+
     def to_dict(self) -> dict[str, Any]:
-        def nan_to_none(x: float) -> float | None:
-            return None if isinstance(x, float) and math.isnan(x) else x
-        return {
-            "model": self.model,
-            "gap_rms_m": self.gap_rms_m,
-            "residual_by_point_m": None if self.residual_by_point_m is None
-            else [nan_to_none(float(v)) for v in self.residual_by_point_m],
-            "candidates": [{"effect": c.effect, "gap_before_m": c.gap_before_m,
-                            "gap_after_m": c.gap_after_m, "reduction": c.reduction,
-                            "parameters": None if c.parameters is None else c.parameters.to_list()}
-                           for c in self.candidates],
-            "withheld_effect": self.withheld_effect,
-        }
+        """The JSON form (``skinkit gap diagnose --json``): the pinned keys of :data:`GAP_KEYS`,
+        then ``extra``; NaN and infinities as null."""
+        return _finite_or_none({
+            "model": self.model, "session": self.session, "fit": self.fit, "gap": self.gap,
+            "candidates": [c.to_dict() for c in self.candidates], "named": list(self.named),
+            "shrinkage": self.shrinkage, **self.extra})
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> GapReport:
+        d = dict(d)
+        core = {k: d.pop(k) for k in GAP_KEYS if k in d}
+        core["candidates"] = [EffectScore.from_dict(c) for c in core.get("candidates", [])]
+        return cls(**core, extra=d)
+
+
+def _round_effects(r: Any) -> list[str]:
+    if not isinstance(r, dict):
+        return []
+    return [str(c.get("effect")) for c in r.get("candidates", []) if isinstance(c, dict)]

@@ -166,10 +166,32 @@ def test_fit_result_and_gap_report_roundtrip():
     assert back.parameters == ps and back.covariance.shape == (1, 1)
     with pytest.raises(SchemaError, match="FitResult.covariance"):
         FitResult("m", ps, objective=0.0, covariance=np.eye(2))
-    gap = GapReport("m", gap_rms_m=2e-5, residual_by_point_m=[1e-5, 3e-5], withheld_effect="prestress",
-                    candidates=[EffectScore("slip", 2e-5, 1.8e-5), EffectScore("prestress", 2e-5, 0.5e-5)])
-    assert gap.best.effect == "prestress" and gap.best.reduction == pytest.approx(0.75)
+
+
+def test_gap_report_roundtrip_and_checks():
+    cands = [EffectScore("prestress", score=250.0, p_value=1e-50, dof=2, refitted=True, delta_aic=-240.0,
+                         shrinkage=0.8, parameters={"prestress.l1": {"value": 1.1, "se": 0.01}},
+                         not_separable_from=["fibres"], extra={"sensitivity": {"prestress.l1": "analytic"}}),
+             EffectScore("fibres", score=3e4, p_value=0.0, dof=1, delta_aic=float("nan"))]
+    gap = GapReport("m", "s.h5", fit={"parameters": {"skin.c": 1e4}, "chi2_per_dof": 1.7, "n_forward": 9},
+                    gap={"significant": True, "chi2_per_dof": 1.7, "cells": []}, candidates=cands,
+                    named=["prestress"], shrinkage={"overall": 0.8, "held_out": None, "cells": []},
+                    extra={"messages": ["x"], "point_map_after": {"p": np.array([1.0, np.nan])}})
+    assert gap.best.effect == "prestress" and gap.significant
     d = gap.to_dict()
-    assert d["candidates"][0]["effect"] == "prestress"
-    with pytest.raises(SchemaError, match="GapReport.gap_rms_m"):
-        GapReport("m", gap_rms_m=-1.0)
+    assert list(d)[:7] == ["model", "session", "fit", "gap", "candidates", "named", "shrinkage"]
+    assert d["candidates"][1]["delta_aic"] is None        # NaN is not JSON: null
+    assert d["point_map_after"]["p"] == [1.0, None]
+    assert d["candidates"][0]["sensitivity"] == {"prestress.l1": "analytic"}
+    import json
+    back = GapReport.from_dict(json.loads(json.dumps(d, allow_nan=False)))
+    assert back.named == ["prestress"] and back.candidates[0].not_separable_from == ["fibres"]
+    assert back.extra["messages"] == ["x"] and back.candidates[0].extra == cands[0].extra
+    with pytest.raises(SchemaError, match=r"GapReport.named.*'slip'"):
+        GapReport("m", candidates=cands, named=["slip"])
+    with pytest.raises(SchemaError, match=r"shrinkage.overall.*cannot exceed 1"):
+        GapReport("m", shrinkage={"overall": 1.5})
+    with pytest.raises(SchemaError, match=r"EffectScore\['x'\].p_value"):
+        EffectScore("x", score=1.0, p_value=2.0)
+    with pytest.raises(SchemaError, match="GapReport.extra"):
+        GapReport("m", extra={"named": []})
