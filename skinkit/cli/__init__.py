@@ -23,6 +23,7 @@ _COMMANDS: dict[str, str] = {
     "inspect": "skinkit.cli.inspect:inspect",
     "import-csv": "skinkit.cli.import_csv:import_csv",
     "import-extensometer": "skinkit.cli.import_extensometer:import_extensometer_cmd",
+    "import-images": "skinkit.cli.import_vision:import_images",
     "recover": "skinkit.cli.recover:recover",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",

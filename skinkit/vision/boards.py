@@ -15,17 +15,23 @@ from skinkit.vision.scene import Board, CharucoTarget
 FRONT_HANDEDNESS = -1.0
 
 
-def check_board(inner: tuple[int, int]) -> None:
+def check_board(inner: tuple[int, int], symmetric_ok: bool = False) -> None:
     """Refuse a board whose pattern looks the same after a half turn.
 
     A board of ``(cols, rows)`` inner corners has ``(cols + 1) x (rows + 1)`` squares; when
     ``cols + rows`` is even the 180-degree rotation maps black squares onto black squares,
-    so the corner order (and hence the camera poses) cannot be told apart.
+    so the corner order (and hence the camera poses) cannot be told apart from one image.
+    ``symmetric_ok``: accept such a board (a rig calibration resolves the half turn with the
+    cameras' geometry, :mod:`skinkit.vision.board_symmetry`); a square board (also symmetric
+    under a quarter turn) is always refused.
     """
     c, r = (int(v) for v in inner)
     if c < 3 or r < 3:
         raise VisionError(f"board of {c}x{r} inner corners is too small (need at least 3x3)")
-    if (c + r) % 2 == 0:
+    if c == r:
+        raise VisionError(f"board of {c}x{r} inner corners is symmetric under a quarter turn "
+                          "(square): its corner order is ambiguous; use a board with unequal counts")
+    if (c + r) % 2 == 0 and not symmetric_ok:
         raise VisionError(f"board of {c}x{r} inner corners is symmetric under a half turn "
                           "(columns + rows is even): its corner order is ambiguous; use a board "
                           "with one even and one odd count, e.g. 9x6")
@@ -53,7 +59,8 @@ def _first_square_is_dark(image: np.ndarray, corners: np.ndarray, cols: int) -> 
     return inside < other
 
 
-def detect_board(image: np.ndarray, inner: tuple[int, int]) -> np.ndarray | None:
+def detect_board(image: np.ndarray, inner: tuple[int, int],
+                 symmetric_ok: bool = False) -> np.ndarray | None:
     """``(cols * rows, 2)`` inner corners [px] in board order, or None when not found.
 
     The order is fixed geometrically: the board's x (along a row) and y (down the columns)
@@ -61,8 +68,10 @@ def detect_board(image: np.ndarray, inner: tuple[int, int]) -> np.ndarray | None
     corner 0 is the corner whose first inner square (between corners 0, 1, cols, cols + 1)
     is dark, as on :class:`skinkit.vision.scene.Board`.
     Raises :class:`VisionError` when the colour cannot tell the order.
+    A symmetric board (``symmetric_ok``, see :func:`check_board`) is returned in either of its
+    two orders: the colours cannot tell them apart.
     """
-    check_board(inner)
+    check_board(inner, symmetric_ok)
     img = np.asarray(image)
     if img.dtype != np.uint8:
         img = cv2.normalize(img.astype(np.float32), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
@@ -85,6 +94,8 @@ def detect_board(image: np.ndarray, inner: tuple[int, int]) -> np.ndarray | None
         # Mirrored order: reverse each row so the board's x, y, z frame is right-handed
         # with z towards the camera (the printed face).
         corners = corners.reshape(rows, cols, 2)[:, ::-1].reshape(-1, 2).copy()
+    if (cols + rows) % 2 == 0:
+        return corners
     dark = _first_square_is_dark(img.astype(float), corners, int(inner[0]))
     if dark is None:
         raise VisionError("board corners found but the square colours cannot fix their order "

@@ -17,6 +17,7 @@ import numpy as np
 
 from skinkit.schemas import CameraModel, CameraRig
 from skinkit.vision import VisionError
+from skinkit.vision.board_symmetry import is_symmetric, resolve_half_turns
 from skinkit.vision.boards import check_board, detect_board, detect_charuco, handedness
 from skinkit.vision.scene import CharucoTarget
 
@@ -57,9 +58,12 @@ class Calibration:
 
 
 def detect_all(images: np.ndarray, inner: tuple[int, int],
-               camera_names: Sequence[str] | None = None) -> Detections:
-    """Detect the board in ``(F, C, H, W)`` images; check corner orderings are consistent."""
-    check_board(inner)
+               camera_names: Sequence[str] | None = None, symmetric_ok: bool = False) -> Detections:
+    """Detect the board in ``(F, C, H, W)`` images; check corner orderings are consistent.
+
+    ``symmetric_ok``: accept a board symmetric under a half turn, whose views then come in
+    either corner order (see :func:`skinkit.vision.board_symmetry.resolve_half_turns`)."""
+    check_board(inner, symmetric_ok)
     imgs = np.asarray(images)
     if imgs.ndim != 4:
         raise VisionError(f"calibration images: expected (frames, cameras, H, W), got shape {imgs.shape}")
@@ -72,7 +76,7 @@ def detect_all(images: np.ndarray, inner: tuple[int, int],
     for f in range(F):
         for c in range(C):
             try:
-                pts = detect_board(imgs[f, c], inner)
+                pts = detect_board(imgs[f, c], inner, symmetric_ok)
             except VisionError as exc:
                 raise VisionError(f"{names[c]}, frame {f}: {exc}") from None
             if pts is not None:
@@ -120,10 +124,19 @@ def calibrate(images: np.ndarray, inner: tuple[int, int], square_m: float,
     """Calibrate the cameras that took ``images`` ``(F, C, H, W)`` of a checkerboard.
 
     ``inner``: (columns, rows) of inner corners; ``square_m``: square side [m].
+    A board symmetric under a half turn (``cols + rows`` even, e.g. 12 x 8) is accepted: its
+    corner order is made consistent across the cameras of each frame with the rig's geometry
+    (:mod:`skinkit.vision.board_symmetry`), and the world frame's corner 0 is then the one
+    camera 0 labelled first.
     Raises :class:`VisionError` if any camera saw the board in fewer than ``min_views``
     frames or shares no view with another camera.
     """
-    det = detect_all(images, inner, camera_names)
+    det = detect_all(images, inner, camera_names, symmetric_ok=True)
+    C = det.found.shape[1]
+    names = list(camera_names) if camera_names is not None else [f"cam{c}" for c in range(C)]
+    if is_symmetric(inner) and len(names) == C:  # (a wrong name count is refused below)
+        corners, found = resolve_half_turns(det.corners, det.found, inner, square_m, det.image_size, names)
+        det = Detections(corners, found, det.image_size)
     return calibrate_detections(det, inner, square_m, camera_names, min_views, world_view, fix_k3)
 
 

@@ -1,0 +1,40 @@
+"""``skinkit import-images | import-calibration | import-tracks``: a lab's own camera data in."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("import-images")
+@click.argument("experiment", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--camera", "cameras", nargs=2, multiple=True, required=True, metavar="NAME GLOB",
+              help="a camera's name and its image files: a quoted glob ('cam0/*.tif') or a folder; "
+                   "repeat once per camera, in the rig's order")
+@click.option("--name", default="images", show_default=True,
+              help="name of the image sequence in EXPERIMENT (e.g. calibration, indentation)")
+@click.option("--match", type=click.Choice(["auto", "name", "order"]), default="auto", show_default=True,
+              help="match frames across cameras by the number in the file names, or by sort order "
+                   "(auto: by name when every camera's names carry distinct numbers)")
+@click.option("--fps", default=1.0, show_default=True,
+              help="frame rate [Hz]: frame k is stored at k / fps seconds")
+def import_images(experiment: Path, cameras: tuple[tuple[str, str], ...], name: str, match: str,
+                  fps: float) -> None:
+    """Import image files (TIFF, PNG, BMP, JPEG; 8/16-bit) of each camera into EXPERIMENT
+    (created if it does not exist), for `skinkit vision calibrate | profile | track-3d`."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from skinkit.vision.image_import import import_images as run
+    from skinkit.vision.image_import import plan_frames
+
+    plan = plan_frames(cameras, match)
+    with Progress(TextColumn(f"importing {name}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=Console(stderr=True), transient=True) as prog:
+        task = prog.add_task("frames", total=plan.n_frames)
+        done = run(experiment, plan, name, fps, lambda k, n: prog.update(task, completed=k))
+    w, h = done.image_size
+    click.echo(f"imported {done.n_frames} frames x {len(done.camera_names)} cameras "
+               f"({', '.join(done.camera_names)}), {w}x{h} px {done.dtype}, matched by {done.matched_by}, "
+               f"as image sequence {done.name!r} into {experiment}")
