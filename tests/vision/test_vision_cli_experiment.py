@@ -26,7 +26,7 @@ def test_calibrate_profile_track(tmp_path, true_rig, board_set, arm_scene):
         exp.write_images(ImageSequence("calib", boards_img, true_rig.names, np.arange(len(boards_img)) * 1.0))
         exp.write_images(arm_scene["images"])
 
-    r = _run("calibrate", str(path), "--images", "calib", "--board", "8x6", "--square-mm", "3")
+    r = _run("calibrate", str(path), "--images", "calib", "--board", "7x7", "--square-mm", "3")
     assert r.returncode == 2 and "symmetric" in r.stderr, r.stderr
     r = _run("profile", str(path), "--images", "indent")
     assert r.returncode == 2 and "error:" in r.stderr and "Traceback" not in r.stderr
