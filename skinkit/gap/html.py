@@ -63,6 +63,9 @@ def _num(x: Any, digits: int = 3) -> str:
         return "—"
     if math.isinf(v):
         return "∞" if v > 0 else "−∞"
+    r = float(f"{v:.{digits}g}")
+    if r == 0 or 1e-3 <= abs(r) < 1e6:   # plainly: 2100, 0.0123, rather than 2.1e+03
+        return np.format_float_positional(r, trim="-")
     return f"{v:.{digits}g}"
 
 
@@ -85,8 +88,11 @@ def _mpl(s: Any) -> str:
     return str(s).replace("$", r"\$")
 
 
-def _cell_name(c: Mapping[str, Any]) -> str:
-    return f"{c.get('axis', '?')}: {c.get('label', '?')}"
+def _axis_name(c: Mapping[str, Any]) -> str:
+    """The cell's axis, with its partition when the axis has more than one (phase: direction and
+    cycle; region: radius and sector): shares add up to 1 within a partition."""
+    axis, part = str(c.get("axis", "?")), c.get("partition")
+    return f"{axis} ({part})" if part and str(part) != axis else axis
 
 
 # ---------------------------------------------------------------------------- figures
@@ -184,7 +190,8 @@ def _magnitudes(cand: Mapping[str, Any] | None) -> str:
         if isinstance(pv, Mapping):
             se = _f(pv.get("se"))
             interval = "" if math.isnan(se) else f" ± {_num(se, 2)}"
-            parts.append(f"{name} = {_num(pv.get('value'))}{interval}")
+            unit = f" {pv['unit']}" if pv.get("unit") else ""
+            parts.append(f"{name} = {_num(pv.get('value'), 4)}{interval}{unit}")
         else:
             parts.append(f"{name} = {_num(pv)}")
     return ", ".join(parts)
@@ -201,7 +208,8 @@ def _pairs(report: Mapping[str, Any]) -> list[dict[str, Any]]:
         eff = [str(x) for x in (s.get("effects") or [])][:2]
         if len(eff) == 2 and frozenset(eff) not in seen:
             seen.add(frozenset(eff))
-            out.append({"effects": eff, "protocol": s.get("protocol"), "cosine": s.get("cosine")})
+            out.append({"effects": eff, "protocol": s.get("protocol"), "cosine": s.get("cosine"),
+                        "cosine_after": s.get("cosine_after")})
     for c in report.get("candidates") or []:
         if not isinstance(c, Mapping):
             continue
@@ -209,7 +217,7 @@ def _pairs(report: Mapping[str, Any]) -> list[dict[str, Any]]:
             pair = [str(c.get("effect")), str(other)]
             if frozenset(pair) not in seen:
                 seen.add(frozenset(pair))
-                out.append({"effects": pair, "protocol": None, "cosine": None})
+                out.append({"effects": pair, "protocol": None, "cosine": None, "cosine_after": None})
     return out
 
 
@@ -237,14 +245,14 @@ def _verdict(report: Mapping[str, Any]) -> tuple[str, list[str]]:
             out.append(f"The residual as a whole is at the noise level ({level}), yet effects were named.")
         top = [c for c in _ranked(_cells(report)) if c.get("significant")][:N_VERDICT_CELLS]
         if top:
-            where = "; ".join(f"{c.get('label')} ({c.get('axis')}, {_pct(c.get('share'))} of its axis's "
-                              f"excess, χ²/dof {_num(c.get('chi2_per_dof'))})" for c in top)
+            where = "; ".join(f"{c.get('label')} ({_axis_name(c)}, {_pct(c.get('share'))} of the excess "
+                              f"along it, χ²/dof {_num(c.get('chi2_per_dof'))})" for c in top)
             out.append(f"It lies mainly in: {where}.")
         if named:
             what = []
             for n in named:
                 mag = _magnitudes(_candidate(report, n))
-                what.append(f"{n} ({mag})" if mag else n)
+                what.append(f"{n} ({mag}; value ± standard error)" if mag else n)
             out.append(f"Named effect{'s' if len(named) > 1 else ''}: {', '.join(what)}.")
             shr = report.get("shrinkage") or {}
             ov, ho = _f(shr.get("overall")), _f(shr.get("held_out"))
@@ -339,10 +347,11 @@ def _section_residual(report: Mapping[str, Any]) -> str:
              + (f", p = {_e(_p(gap.get('p_value')))}" if "p_value" in gap else "")
              + f"; {'significant' if gap.get('significant') else 'not significant'} against the noise. "
              "Each cell's χ²/dof is 1 at the noise level; a cell is significant after the correction "
-             "for testing many cells. Share: the cell's part of its axis's excess (above-noise) "
-             "residual. Click a column header to sort.</p>")
+             "for testing many cells. Share: the cell's part of the excess (above-noise) residual "
+             "along its axis (within its partition, for the axes cut two ways). Click a column header to "
+             "sort.</p>")
     ranked = _ranked(cells)
-    rows = [[_t(i + 1, i + 1), _t(c.get("axis", "?"), str(c.get("axis", ""))),
+    rows = [[_t(i + 1, i + 1), _t(_axis_name(c), _axis_name(c)),
              _t(c.get("label", "?"), str(c.get("label", ""))),
              _t(_pct(c.get("share")), _f(c.get("share"))),
              _t(_num(c.get("chi2_per_dof")), _f(c.get("chi2_per_dof"))),
@@ -410,19 +419,23 @@ def _maps_matplotlib(maps: list[dict[str, Any]], M: float) -> str:
             v = m[key]
             ax.set_title(f"{_mpl(m['protocol'])}: {what}", fontsize=9)
             ax.set_aspect("equal")
+            pad = 0.06 * float(np.ptp(m["xy"], axis=0).max() or 1.0)   # edge points whole, not cut
+            ax.set_xlim(m["xy"][:, 0].min() - pad, m["xy"][:, 0].max() + pad)
+            ax.set_ylim(m["xy"][:, 1].min() - pad, m["xy"][:, 1].max() + pad)
             ax.set_xlabel("x [mm]", fontsize=8)
             ax.set_ylabel("y [mm]", fontsize=8)
             ax.tick_params(labelsize=7)
             if v is None:
                 ax.text(0.5, 0.5, "no map after the named effect", ha="center", va="center",
                         transform=ax.transAxes, fontsize=8)
+                ax.set_axis_off()
                 continue
             ok = np.isfinite(v)
             if ok.sum() >= 3 and _spread(m["xy"][ok]):
                 try:
                     tri = Triangulation(m["xy"][ok, 0], m["xy"][ok, 1])
                     ax.tricontourf(tri, np.clip(v[ok], 1.0 / M, M), levels=levels, norm=norm, cmap="RdBu_r",
-                                   alpha=0.55)
+                                   alpha=0.8)
                 except (ValueError, RuntimeError):   # a degenerate triangulation: the scatter alone
                     pass
             mappable = ax.scatter(m["xy"][ok, 0], m["xy"][ok, 1], c=np.clip(v[ok], 1.0 / M, M), norm=norm,
@@ -432,19 +445,29 @@ def _maps_matplotlib(maps: list[dict[str, Any]], M: float) -> str:
                            label="not observed")
                 ax.legend(fontsize=7, loc="lower right")
     if mappable is not None:
-        fig.colorbar(mappable, ax=fig.axes, label="χ²/dof per point (white: 1, the noise level)", shrink=0.8)
+        from matplotlib.ticker import NullFormatter
+
+        cb = fig.colorbar(mappable, ax=fig.axes, label="χ²/dof per point (white: 1, the noise level)",
+                          shrink=0.8)
+        # 0.5, 1, 2, 5 … written plainly rather than 5×10⁻¹, 10⁰, 2×10⁰
+        ticks = [m * 10.0 ** k for k in range(-6, 7) for m in (1, 2, 5) if 1 / M <= m * 10.0 ** k <= M]
+        cb.set_ticks(ticks, labels=[f"{t:g}" for t in ticks])
+        cb.ax.yaxis.set_minor_formatter(NullFormatter())
     return _png_uri(fig)
 
 
 def _maps_pyvista(maps: list[dict[str, Any]], M: float) -> str | None:
-    """The same maps as coloured surfaces triangulated through the points, rendered by pyvista
-    off screen; None whenever that is not possible here (no pyvista, no VTK rendering, too few
-    points) — the matplotlib maps stand alone then."""
+    """The same maps as surfaces triangulated through the points, lifted by log10 χ²/dof (above the
+    translucent plane of the noise level where the model misses, below it where it fits better
+    than the noise), coloured on the same scale, all panels seen from the same oblique camera;
+    rendered by pyvista off screen. None whenever that is not possible here (no pyvista, no VTK
+    rendering, too few points): the matplotlib maps stand alone then."""
     import importlib.util
 
     if importlib.util.find_spec("pyvista") is None:
         return None
-    if not all(_spread(m["xy"][np.isfinite(m["before"])]) for m in maps):
+    if not all(_spread(m["xy"][np.isfinite(m[k])]) for m in maps for k in ("before", "after")
+               if m[k] is not None):
         return None
     try:
         import pyvista as pv
@@ -456,22 +479,32 @@ def _maps_pyvista(maps: list[dict[str, Any]], M: float) -> str | None:
             lim = math.log10(M)
             label = "log10 chi2/dof"
             for i, m in enumerate(maps):
-                pts = np.column_stack([m["xy"], np.zeros(len(m["xy"]))])
+                lo, hi = m["xy"].min(axis=0), m["xy"].max(axis=0)
+                height = 0.35 * float(np.max(hi - lo)) / lim   # [mm per decade]: a relief, not a tower
                 for j, key in enumerate(("before", "after")[:ncol]):
                     pl.subplot(i, j)
-                    v = m[key]
                     pl.add_text(f"{m['protocol']}: {key}", font_size=9, position="upper_left")
+                    v = m[key]
                     if v is None:
+                        pl.add_text("no map after the named effect", font_size=8, position="lower_left")
                         continue
                     ok = np.isfinite(v)
-                    surf = pv.PolyData(pts[ok]).delaunay_2d()
-                    surf[label] = np.log10(np.clip(v[ok], 1.0 / M, M))
-                    pl.add_mesh(surf, scalars=label, cmap="RdBu_r", clim=(-lim, lim), show_edges=False,
-                                scalar_bar_args={"title": label, "vertical": True, "position_x": 0.85,
-                                                 "position_y": 0.15, "height": 0.6, "width": 0.07,
+                    z = np.log10(np.clip(v[ok], 1.0 / M, M))
+                    pts = np.column_stack([m["xy"][ok], z * height])
+                    flat = pv.PolyData(np.column_stack([m["xy"][ok], np.zeros(ok.sum())])).delaunay_2d()
+                    surf = pv.PolyData(pts, faces=flat.faces)
+                    surf[label] = z
+                    pl.add_mesh(pv.Plane(center=(*((lo + hi) / 2), 0.0), i_size=float(hi[0] - lo[0]),
+                                         j_size=float(hi[1] - lo[1])), color="grey", opacity=0.25)
+                    pl.add_mesh(surf, scalars=label, cmap="RdBu_r", clim=(-lim, lim), lighting=False,
+                                scalar_bar_args={"title": label, "vertical": True, "position_x": 0.88,
+                                                 "position_y": 0.15, "height": 0.6, "width": 0.06,
                                                  "title_font_size": 11, "label_font_size": 10})
-                    pl.add_points(pts[ok], color="black", point_size=4, render_points_as_spheres=True)
-                    pl.view_xy()
+                    pl.add_points(pts, color="black", point_size=4, render_points_as_spheres=True)
+            pl.subplot(0, 0)
+            pl.view_vector((-0.6, -1.0, 0.9))
+            pl.camera.zoom(0.85)
+            pl.link_views()   # one camera: a flatter surface must not be drawn larger
             img = pl.screenshot(return_img=True)
         finally:
             pl.close()
@@ -500,7 +533,8 @@ def _section_maps(report: Mapping[str, Any]) -> str:
     out = head + intro + _img(_maps_matplotlib(maps, M), "χ²/dof per tracked point, before and after")
     uri = _maps_pyvista(maps, M)
     if uri is not None:
-        out += _img(uri, "the same maps as surfaces through the points (pyvista, log10 χ²/dof)")
+        out += _img(uri, "the same maps as surfaces through the points, lifted by log10 χ²/dof above "
+                         "(below) the grey plane of the noise level (pyvista)")
     return out + "</section>"
 
 
@@ -540,14 +574,14 @@ def _section_scores(report: Mapping[str, Any]) -> str:
     for i, c in enumerate(cands):
         eff = str(c.get("effect", "?"))
         rows.append([_t(i + 1, i + 1), _t(eff + (" (named)" if eff in named else ""), eff),
-                     _t(_num(c.get("score")), _f(c.get("score"))),
+                     _t(_num(c.get("score")), _f(c.get("score"))), _t(_num(c.get("dof")), _f(c.get("dof"))),
                      _t(_p(c.get("p_value")), _f(c.get("p_value"))),
                      _t("yes" if c.get("refitted") else "no", 1 if c.get("refitted") else 0),
                      _t(_num(c.get("delta_aic"), 4), _f(c.get("delta_aic"))),
                      _t(_pct(c.get("shrinkage")), _f(c.get("shrinkage"))),
                      _t(_magnitudes(c) or "—", None),
                      _t(", ".join(str(x) for x in c.get("not_separable_from") or []) or "—", None)])
-    table = _table(["rank", "effect", "score", "p-value", "refitted", "ΔAIC", "shrinkage",
+    table = _table(["rank", "effect", "score", "q (its dof)", "p-value", "refitted", "ΔAIC", "shrinkage",
                     "identified magnitude (value ± se)", "not separable from"], rows,
                    row_classes=["named" if str(c.get("effect")) in named else "" for c in cands])
     return head + intro + _img(_scores_figure(cands, named), "score statistic per candidate effect") + table \
@@ -555,10 +589,12 @@ def _section_scores(report: Mapping[str, Any]) -> str:
 
 
 def _fraction(cell: Mapping[str, Any]) -> float:
-    """The fraction of a cell's excess residual removed: the cell's own ``fraction`` when given,
-    else from its χ²/dof before and after, (max(b−1,0) − max(a−1,0)) / max(b−1,0) (NaN without excess)."""
-    if "fraction" in cell:
-        return _f(cell.get("fraction"))
+    """The fraction of a cell's excess residual removed: the diagnosis's own figure when the cell
+    carries one (``shrinkage`` or ``fraction``: from χ² − dof, each state with its own dof), else
+    from its χ²/dof before and after, (max(b−1,0) − max(a−1,0)) / max(b−1,0) (NaN without excess)."""
+    for key in ("shrinkage", "fraction"):
+        if key in cell:
+            return _f(cell.get(key))
     b, a = _f(cell.get("before")), _f(cell.get("after"))
     eb = max(b - 1.0, 0.0)
     return math.nan if not eb > 0 or math.isnan(a) else (eb - max(a - 1.0, 0.0)) / eb
@@ -591,12 +627,14 @@ def _section_separation(report: Mapping[str, Any]) -> str:
         return head + '<p class="note">No non-separable pair: every candidate leaves its own signature.</p>' \
             "</section>"
     intro = ("<p>Two effects are not separable when their (projected) sensitivities point in nearly the same "
-             "direction (|cosine| near 1) on the session's protocols. The last column is the protocol of the "
-             "library under which their signatures differ most.</p>")
+             "direction (|cosine| near 1) on the session's protocols. The protocol is the one of the library "
+             "under which their signatures differ most, with the |cosine| once it is added.</p>")
     rows = [[_t(p["effects"][0], p["effects"][0]), _t(p["effects"][1], p["effects"][1]),
              _t(_num(p.get("cosine")), _f(p.get("cosine"))),
-             _t(p.get("protocol") or "not given", str(p.get("protocol") or ""))] for p in pairs]
-    header = ["effect", "not separable from", "cosine", "protocol that would separate them"]
+             _t(p.get("protocol") or "not given", str(p.get("protocol") or "")),
+             _t(_num(p.get("cosine_after")), _f(p.get("cosine_after")))] for p in pairs]
+    header = ["effect", "not separable from", "|cosine| on these protocols",
+              "protocol that would separate them", "|cosine| with it"]
     return head + intro + _table(header, rows) + "</section>"
 
 
@@ -633,15 +671,26 @@ def _section_tests(report: Mapping[str, Any]) -> str:
 
 
 def _section_rounds(report: Mapping[str, Any]) -> str:
-    rounds = report.get("rounds")
+    rounds = [r for r in report.get("rounds") or [] if isinstance(r, Mapping)]
     if not rounds:
         return ""
+    rows = []
+    for k, r in enumerate(rounds):
+        effects = ", ".join(str(x) for x in r.get("model_effects") or []) or "none"
+        why = r.get("not_named") or {}
+        notes = "; ".join([f"{e}: {w}" for e, w in why.items()] if isinstance(why, Mapping) else [str(why)])
+        if r.get("note"):
+            notes = "; ".join(x for x in (notes, str(r["note"])) if x)
+        n = r.get("round", k + 1)
+        rows.append([_t(n, _f(n)), _t(effects, effects),
+                     _t(_num(r.get("chi2_per_dof")), _f(r.get("chi2_per_dof"))),
+                     _t(r.get("named") or "—", str(r.get("named") or "")), _t(notes or "—", None)])
+    table = _table(["round", "effects in the model", "χ²/ν", "named", "why the others were not named"], rows)
     items = "".join(f"<li><pre>{_e(json.dumps(r, indent=1, default=_json_default))}</pre></li>"
                     for r in rounds)
-    return ('<section id="rounds"><h2>Naming rounds</h2><p>One entry per round: after naming an effect the '
-            "diagnosis is repeated on the augmented model.</p>"
-            f"<details><summary>{len(rounds)} round(s)</summary>"
-            f"<ol>{items}</ol></details></section>")
+    return ('<section id="rounds"><h2>Naming rounds</h2><p>After an effect is named the diagnosis is '
+            "repeated on the model with it, to look for a second.</p>" + table
+            + f"<details><summary>the rounds in full</summary><ol>{items}</ol></details></section>")
 
 
 def _json_default(x: Any) -> Any:
@@ -685,7 +734,10 @@ document.querySelectorAll("table.sortable").forEach(function(t){
 
 
 def render_html(report: Mapping[str, Any], *, title: str | None = None) -> str:
-    """The report (module docstring) as one self-contained HTML document (a string)."""
+    """The report (module docstring; a dict or a ``GapReport``) as one self-contained HTML
+    document (a string)."""
+    if not isinstance(report, Mapping) and callable(getattr(report, "to_dict", None)):
+        report = report.to_dict()   # a skinkit.schemas.GapReport
     if not isinstance(report, Mapping):
         raise SchemaError("gap report", f"expected the report's JSON dict, got {type(report).__name__}")
     model, session = report.get("model"), report.get("session")
@@ -710,11 +762,13 @@ def render_html(report: Mapping[str, Any], *, title: str | None = None) -> str:
 
 
 def write_html(report: Mapping[str, Any], path: str | os.PathLike, *, title: str | None = None) -> Path:
-    """Write the gap report ``report`` (the dict of ``skinkit gap diagnose --json``; optional keys
-    may be missing) as one self-contained HTML file at ``path`` (parent folders are made) and
-    return its path. ``title``: the page's title (default: "Gap diagnosis: MODEL on SESSION").
+    """Write the gap report ``report`` (the dict of ``skinkit gap diagnose --json``, or a
+    :class:`skinkit.schemas.GapReport`; optional keys may be missing) as one self-contained HTML
+    file at ``path`` (parent folders are made) and return its path. ``title``: the page's title
+    (default: "Gap diagnosis: MODEL on SESSION").
 
-    Raises :class:`skinkit.errors.SchemaError` when ``report`` is not a mapping and
+    Raises :class:`skinkit.errors.SchemaError` when ``report`` is neither a mapping nor has a
+    ``to_dict``, and
     :class:`skinkit.errors.StoreError` when ``path`` is a folder or cannot be written.
     """
     path = Path(path)

@@ -118,9 +118,11 @@ def gap_report() -> dict:
         {"axis": "channel", "label": "tip_force", "share": 0.2, "chi2_per_dof": 1.05, "p_value": 0.2,
          "significant": False},
         {"axis": "phase", "label": "hold", "share": 0.6, "chi2_per_dof": 3.1, "p_value": 1e-12,
-         "significant": True},
+         "significant": True, "partition": "direction"},
         {"axis": "phase", "label": "loading", "share": 0.4, "chi2_per_dof": 1.4, "p_value": 0.004,
-         "significant": False},
+         "significant": False, "partition": "direction"},
+        {"axis": "phase", "label": "first cycle", "share": 1.0, "chi2_per_dof": 2.2, "p_value": 1e-6,
+         "significant": True, "partition": "cycle"},
         {"axis": "region", "label": "sector 30-60 deg <Langer & co>", "share": 0.5, "chi2_per_dof": 5.0,
          "p_value": 1e-20, "significant": True},
         {"axis": "frequency", "label": "0.5-2 Hz", "share": 0.1, "chi2_per_dof": 1.1, "p_value": 0.3,
@@ -141,21 +143,31 @@ def gap_report() -> dict:
         "points": {"in_plane_030": pts.tolist(), "in_plane_120": pts.tolist()},
         "point_map_after": {"in_plane_030": [float(v) for v in after]},
         "candidates": [
-            {"effect": "prestress", "score": 85.0, "p_value": 1e-14, "refitted": True, "delta_aic": -160.0,
-             "shrinkage": 0.82, "parameters": {"prestress.magnitude": {"value": 2100.0, "se": 250.0}},
+            {"effect": "prestress", "score": 85.0, "p_value": 1e-14, "dof": 2, "refitted": True,
+             "delta_aic": -160.0, "shrinkage": 0.82,
+             "parameters": {"prestress.magnitude": {"value": 2100.0, "se": 250.0, "unit": "Pa"}},
              "not_separable_from": ["fibres"]},
-            {"effect": "fibres", "score": 80.0, "p_value": 1e-13, "refitted": True, "delta_aic": -150.0,
+            {"effect": "fibres", "score": 80.0, "p_value": 1e-13, "dof": 2, "refitted": True,
+             "delta_aic": -150.0,
              "shrinkage": 0.77, "parameters": {"fibres.k1": {"value": 5.0e4, "se": 9.0e3}},
              "not_separable_from": ["prestress"]},
-            {"effect": "viscoelastic", "score": 3.1, "p_value": 0.21, "refitted": False, "delta_aic": None,
+            {"effect": "viscoelastic", "score": 3.1, "p_value": 0.21, "dof": 2, "refitted": False,
+             "delta_aic": None,
              "shrinkage": None, "parameters": None, "not_separable_from": []},
         ],
         "named": ["prestress"],
         "shrinkage": {"overall": 0.82, "held_out": 0.75,
-                      "cells": [{"axis": "protocol", "label": "in_plane_030", "before": 4.5, "after": 1.25},
+                      # the diagnosis's own fraction for the first cell (from χ² − dof), none for the second
+                      "cells": [{"axis": "protocol", "label": "in_plane_030", "before": 4.5, "after": 1.25,
+                                 "shrinkage": 0.9},
                                 {"axis": "protocol", "label": "in_plane_120", "before": 2.3, "after": 1.1}]},
-        "separation": [{"effects": ["prestress", "fibres"], "protocol": "in_plane_075", "cosine": 0.97}],
-        "rounds": [{"named": "prestress", "score": 85.0}, {"named": None, "score": 2.0}],
+        "separation": [{"effects": ["prestress", "fibres"], "protocol": "in_plane_075", "cosine": 0.97,
+                        "cosine_after": 0.41, "round": 1}],
+        "rounds": [{"round": 1, "model_effects": [], "chi2_per_dof": 3.2, "named": "prestress",
+                    "candidates": [{"effect": "prestress", "score": 85.0}],
+                    "not_named": {"fibres": "its refit lowers the AIC less than prestress's"}},
+                   {"round": 2, "model_effects": ["prestress"], "chi2_per_dof": 1.3, "named": None,
+                    "candidates": [], "not_named": {}}],
         "messages": ["Significant gap in the in-plane protocols."],
     }
 
@@ -205,7 +217,7 @@ def test_gap_report_self_contained_and_complete(gap_html):
     text, p = check(path)
     verdict = p.text("verdict")
     assert "Significant gap" in verdict
-    assert "prestress" in verdict and "2.1e+03 ± 2.5e+02" in verdict       # named, with its magnitude
+    assert "prestress" in verdict and "2100 ± 250 Pa" in verdict    # named, with its magnitude
     assert "in_plane_030" in verdict                                       # the largest share named first
     assert "82.0 %" in verdict and "75.0 %" in verdict                     # shrinkage fitted / held out
     assert "fibres" in verdict and "in_plane_075" in verdict               # not separable; what separates
@@ -219,11 +231,14 @@ def test_gap_report_self_contained_and_complete(gap_html):
     # the shrinkage table: before, after and the fraction of the excess removed,
     # (excess before − excess after) / excess before with excess = χ²/dof − 1
     shrink = p.text("shrinkage")
-    for before, after in ((4.5, 1.25), (2.3, 1.1)):
-        frac = ((before - 1) - (after - 1)) / (before - 1)
+    # the diagnosis's figure where it gives one, else the excess of χ²/dof
+    for before, after, frac in ((4.5, 1.25, 0.9), (2.3, 1.1, (1.3 - 0.1) / 1.3)):
         assert f"{before:g}" in shrink and f"{after:g}" in shrink and f"{100 * frac:.1f} %" in shrink
     sep = p.text("separation")
-    assert "prestress" in sep and "fibres" in sep and "in_plane_075" in sep and "0.97" in sep
+    assert "prestress" in sep and "fibres" in sep and "in_plane_075" in sep
+    assert "0.97" in sep and "0.41" in sep                                 # |cos| now, and with that protocol
+    assert "phase (cycle)" in p.text("residual")                           # the partition of a two-way axis
+    assert "its refit lowers the AIC less" in p.text("rounds")
     tests = p.text("tests")
     assert "in_plane_030/surface x" in tests and "not white" in tests and "not independent" in tests
     assert "rounds" in p.sections
@@ -277,3 +292,41 @@ def test_bad_inputs(tmp_path):
         write_html([1, 2], tmp_path / "x.html")
     with pytest.raises(StoreError, match="is a folder"):
         write_html(minimal_report(), tmp_path)
+
+
+def test_from_the_diagnosis_objects(tmp_path):
+    """The dict as the gap package's own objects serialise it (GapLocation.to_dict with NumPy
+    point maps and NaN, GapReport.to_dict), and the GapReport itself, render the same report."""
+    from skinkit.gap.where import Cell, GapLocation
+    from skinkit.schemas.results import EffectScore, GapReport
+
+    pts = point_grid()
+    pmap = np.linspace(0.5, 3.0, len(pts))
+    pmap[3] = np.nan
+    cells = [Cell("protocol", "in_plane_030", 300.0, 100.0, 3.0, 1e-30, True, 1.0, 100, "protocol"),
+             Cell("channel", "surface z", 250.0, 80.0, 3.125, 1e-25, True, 1.0, 80, "channel"),
+             Cell("phase", "hold", 90.0, 90.0, 1.0, 0.48, False, 0.0, 90, "direction")]
+    loc = GapLocation(640.0, 270.0, 640 / 270, 1e-40, True, cells, point_map={"in_plane_030": pmap},
+                      whiteness={"in_plane_030/surface z": {"statistic": 50.0, "lags": 10, "p_value": 1e-6,
+                                                            "white": False}})
+    fit = {"parameters": {"skin.mu": 1e4}, "chi2_per_dof": 2.37, "n_forward": 9}
+    after = [None if not np.isfinite(v) else 1.0 for v in pmap]
+    rep = GapReport("fe-goh", "s.h5", fit=fit,
+                    gap=loc.to_dict(),
+                    candidates=[EffectScore("prestress", 120.0, 1e-20, 2, True, -90.0, 0.7,
+                                            {"prestress.l1": {"value": 1.1, "se": 0.01}})],
+                    named=["prestress"],
+                    shrinkage={"overall": 0.7, "held_out": None,
+                               "cells": [{"axis": "protocol", "label": "in_plane_030", "before": 3.0,
+                                          "after": 1.6, "shrinkage": 0.7}]},
+                    extra={"points": {"in_plane_030": pts.tolist()},
+                           "point_map_after": {"in_plane_030": after},
+                           "messages": ["Significant gap: χ²/ν 2.37; located in in_plane_030."]})
+    for i, source in enumerate((rep, json.loads(json.dumps(rep.to_dict())))):
+        text, p = check(write_html(source, tmp_path / f"r{i}.html"))
+        verdict = p.text("verdict")
+        assert "Significant gap" in verdict and "prestress" in verdict and "70.0 %" in verdict
+        assert verdict.count("Significant gap") == 1
+        assert "in_plane_030" in p.text("residual") and "surface z" in p.text("residual")
+        assert "not white" in p.text("tests")
+        assert len(pngs(text)) >= 3
