@@ -93,8 +93,12 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
     RECORD is an experiment file (choose the record with --protocol) or a CSV file with
     header time_s,force_N,position_m (uniform sampling; the rate comes from the time column).
     Warnings about the record (gaps, NaNs, clipping, ...) go to stderr and into the JSON.
+    A record that is not a broadband stochastic force test (a ramp-and-hold, relaxation or
+    displacement-controlled test) is refused with exit status 2; non-physical K, B, I (e.g. a
+    negative mass after --robot-mass) are reported as errors, not numbers, also exit 2.
     """
     from skinkit.sysid import RobotDynamics
+    from skinkit.sysid.checks import refuse_if_not_stochastic
     from skinkit.sysid.hammerstein import identify_hammerstein_signals
     from skinkit.sysid.linear import identify_signals
     from skinkit.sysid.record import record_signals
@@ -112,8 +116,11 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
         warnings.simplefilter("always")
         try:
             sig = record_signals(rec, axis, memory_s)
+            # refuse before identifying: an IRF of a ramp-and-hold record is not worth a number
+            refuse_if_not_stochastic(sig.issues, str(record))
             lin = identify_signals(sig, memory_s, robot=robot, hold=hold, two_sided=two_sided,
                                    refine=refine)
+            refuse_if_not_stochastic(sig.issues, str(record))  # the causality check runs here
             if model == "linear":
                 result: Any = lin
             elif model == "wiener":
@@ -132,6 +139,7 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
                 if issubclass(w.category, UserWarning):
                     click.echo(f"warning: {w.category.__name__}: {w.message}", err=True)
     out = _clean(result.to_dict())
+    _withhold(out)
     out["record"] = str(record)
     out["protocol"] = rec.protocol.name
     if models:
@@ -151,8 +159,51 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
                                                     plot_dir / "sysid_comparison.png")))
     if as_json:
         click.echo(json.dumps(out, indent=2))
-        return
-    _table(out, model)
+    else:
+        _table(out, model)
+    if out["errors"]:
+        from skinkit.sysid.checks import NonPhysicalError
+
+        raise NonPhysicalError("; ".join(out["errors"]))
+
+
+#: per parameter: its value and standard-error keys in the result's dictionary
+_SKIN_KEYS = {"K": ("K_N_per_m", "K_se_N_per_m"), "B": ("B_Ns_per_m", "B_se_Ns_per_m"),
+              "I": ("I_kg", "I_se_kg")}
+
+
+def _withhold(out: dict[str, Any]) -> set[str]:
+    """Non-physical or meaningless K, B, I are errors, not numbers: null them and what is
+    derived from them (the messages in ``out["errors"]`` keep the values). Returns the
+    withheld parameters ("K", "B", "I")."""
+    from skinkit.sysid.checks import nonphysical
+
+    if not out.get("errors"):
+        return set()
+    if not out.get("valid", True):
+        bad = set(_SKIN_KEYS)
+    else:
+        vals = [math.nan if out[_SKIN_KEYS[k][0]] is None else out[_SKIN_KEYS[k][0]]
+                for k in ("K", "B", "I")]
+        bad = set(nonphysical(*vals))
+    for k in bad:
+        for key in _SKIN_KEYS[k]:
+            out[key] = None
+    derived = {"gain_m_per_N": {"K"}, "wn_rad_s": {"K", "I"}, "zeta": {"K", "B", "I"}}
+    for key, needs in derived.items():
+        if needs & bad:
+            out[key] = None
+    out["withheld"] = sorted(bad)
+    return bad
+
+
+def _duration(seconds: float | None) -> tuple[str, str]:
+    """A time as (value, unit), in ms below a second and in s above."""
+    if seconds is None:
+        return "-", "s"
+    if abs(seconds) < 1.0:
+        return f"{seconds * 1e3:.4g}", "ms"
+    return f"{seconds:.4g}", "s"
 
 
 def _incremental(rec: Any, record: Path, axis: str, memory_s: float | None, robot: Any,
@@ -228,13 +279,16 @@ def _table(out: dict[str, Any], model: str) -> None:
     def fmt(v: Any, scale: float = 1.0, digits: int = 4) -> str:
         return "-" if v is None else f"{v * scale:.{digits}g}"
 
+    def skin(key: str, scale: float = 1.0) -> str:
+        return "[bold red]error[/]" if key[0] in out.get("withheld", ()) else fmt(out[key], scale)
+
     t = Table(title=f"sysid {model}: {out['record']} ({out['protocol']})")
     t.add_column("quantity")
     t.add_column("value", justify="right")
     t.add_column("unit")
-    rows = [("K", fmt(out["K_N_per_m"]), "N/m"), ("B", fmt(out["B_Ns_per_m"]), "N s/m"),
-            ("I", fmt(out["I_kg"], 1e3), "g"), ("VAF linear", fmt(out["vaf_linear_pct"]), "%"),
-            ("IRF memory", fmt(out["irf_memory_s"], 1e3), "ms"),
+    rows = [("K", skin("K_N_per_m"), "N/m"), ("B", skin("B_Ns_per_m"), "N s/m"),
+            ("I", skin("I_kg", 1e3), "g"), ("VAF linear", fmt(out["vaf_linear_pct"]), "%"),
+            ("IRF memory", *_duration(out["irf_memory_s"])),
             ("IRF rank", str(out["irf_rank"]), "")]
     if model == "wiener":
         rows += [("Is", fmt(out["Is_s2"]), "s²"), ("Bs", fmt(out["Bs_s"]), "s")]
@@ -247,8 +301,5 @@ def _table(out: dict[str, Any], model: str) -> None:
         t.add_row(*r)
     con = Console()
     con.print(t)
-    if not out.get("valid", True):
-        con.print("[bold red]the fit is not a stable under-damped system: K, B, I are not "
-                  "meaningful (see warnings)[/]")
     for p in out.get("plots", []):
         con.print(f"plot: {p}")

@@ -329,3 +329,75 @@ def _check_bandwidth(f: np.ndarray, rate: float, issues: list[str]) -> None:
         warn(NarrowbandInputWarning, f"only {100 * frac:.3g} % of the force variance lies above "
              f"{fc:.3g} Hz: the input is not a broadband stochastic force (a ramp or hold "
              "test?), so the IRF is poorly determined", issues)
+
+
+class NotStochasticError(SysidError):
+    """The record is not a broadband stochastic force test, so an IRF and K, B, I from it
+    would be meaningless (raised by ``skinkit sysid``; the library only warns)."""
+
+
+class NonPhysicalError(SysidError):
+    """An identified stiffness, damping or mass is negative, zero or not finite."""
+
+
+#: warnings that say the record is not a stochastic force-input test at all
+NOT_STOCHASTIC = (NarrowbandInputWarning, NonCausalWarning)
+
+#: what to do instead, for the test these warnings point at
+ALTERNATIVE = ("fit a quasi-static or viscoelastic model to it instead, e.g. "
+               "`skinkit fit docs/models/extension_relaxation_qlv.toml {record}` for an "
+               "extension-relaxation record")
+
+
+def not_stochastic_reason(issues: list[str]) -> str | None:
+    """Why a record is not a broadband stochastic force test, or ``None`` if nothing says so.
+
+    ``issues`` are the ``"WarningName: message"`` strings of :class:`Signals` (or of a
+    result). A :class:`NarrowbandInputWarning` (the force holds little power above 1 % of
+    Nyquist, as in a ramp-and-hold, relaxation or slow cyclic test) or a
+    :class:`NonCausalWarning` (position leads force: the force is not the input) means the
+    IRF, and so K, B, I, describe nothing of the skin.
+    """
+    for category in NOT_STOCHASTIC:
+        prefix = f"{category.__name__}: "
+        for msg in issues:
+            if msg.startswith(prefix):
+                text = msg[len(prefix):]
+                # the measured fact, without the warning's own advice
+                return text.split(":")[0] if category is NarrowbandInputWarning else \
+                    text.split(", so")[0]
+    return None
+
+
+def refuse_if_not_stochastic(issues: list[str], record: str) -> None:
+    """Raise :class:`NotStochasticError` (one line: why, and which analysis fits instead)
+    when :func:`not_stochastic_reason` finds a reason in ``issues``."""
+    why = not_stochastic_reason(issues)
+    if why is not None:
+        raise NotStochasticError(f"{record} is not a broadband stochastic force test ({why}); "
+                                 "K, B, I would be meaningless, so none are given: "
+                                 + ALTERNATIVE.format(record=record))
+
+
+def nonphysical(K: float, B: float, I: float) -> dict[str, str]:  # noqa: N803 (thesis symbols)
+    """The identified parameters that no passive skin can have, each with the reason.
+
+    Args:
+        K: stiffness [N/m]; B: damping [N s/m]; I: mass (inertia) [kg], of the skin after
+            any robot removal.
+
+    Returns:
+        ``{"K"|"B"|"I": "negative stiffness"...}``, empty when all three are finite and
+        positive. (A mass-spring-damper with a zero or negative coefficient is unstable or not
+        second order; a negative skin mass usually means more robot mass was removed than the
+        fit found in total.)
+    """
+    out: dict[str, str] = {}
+    for key, value, what in (("K", K, "stiffness"), ("B", B, "damping"), ("I", I, "mass")):
+        if not np.isfinite(value):
+            out[key] = f"{what} is not finite"
+        elif value < 0:
+            out[key] = f"negative {what}"
+        elif value == 0:
+            out[key] = f"zero {what}"
+    return out

@@ -16,6 +16,7 @@ from skinkit.sysid.checks import (
     PoorFitWarning,
     Signals,
     SysidError,
+    nonphysical,
     warn,
 )
 from skinkit.sysid.damped import DampedFit, fit_damped_sinusoid
@@ -84,9 +85,32 @@ class LinearModel:
         t = self.total
         return bool(self.damped.underdamped and t.K > 0 and t.B > 0 and t.I > 0)
 
+    @property
+    def errors(self) -> list[str]:
+        """Why ``skin`` K, B, I must not be reported as numbers (empty when they may): the
+        fit is not a stable under-damped system, or a value is non-physical (e.g. a
+        negative mass after removing more robot mass than the fit found in total)."""
+        out = []
+        if not self.valid:
+            out.append("the IRF is not a stable under-damped mass-spring-damper, so K, B, I "
+                       "are not meaningful")
+        bad = nonphysical(self.skin.K, self.skin.B, self.skin.I)
+        for key, unit, scale, robot_attr in (("K", "N/m", 1.0, "stiffness_N_per_m"),
+                                             ("B", "N s/m", 1.0, "damping_Ns_per_m"),
+                                             ("I", "g", 1e3, "mass_kg")):
+            if key not in bad:
+                continue
+            msg = f"{key} = {getattr(self.skin, key) * scale:.4g} {unit}: {bad[key]}"
+            removed = 0.0 if self.robot is None else getattr(self.robot, robot_attr)
+            if removed:
+                msg += (f" (robot {removed * scale:.4g} {unit} removed from the identified "
+                        f"total {getattr(self.total, key) * scale:.4g} {unit})")
+            out.append(msg)
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         return {
-            "model": "linear", "valid": self.valid,
+            "model": "linear", "valid": self.valid, "errors": self.errors,
             "K_N_per_m": self.skin.K, "B_Ns_per_m": self.skin.B, "I_kg": self.skin.I,
             "K_se_N_per_m": self.se["K"], "B_se_Ns_per_m": self.se["B"], "I_se_kg": self.se["I"],
             "gain_m_per_N": self.skin.gain_m_per_N if self.skin.K > 0 else float("nan"),

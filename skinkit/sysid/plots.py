@@ -26,8 +26,9 @@ def plot_identification(model: Any, force_N: np.ndarray, position_m: np.ndarray,
     fitted, (c) static nonlinearity (Wiener/Hammerstein) or predicted-vs-measured (linear),
     (d) predicted and measured output. ``model`` is a Linear, Wiener or Hammerstein model;
     when its linear part is not a valid damped sinusoid, the IRF's own prediction is shown.
-    ``window_s`` [s] of the record are shown in (a) and (d) (default 0.5 s, or the whole
-    record when the model is not valid). Returns the written file."""
+    ``window_s`` [s] of the record after the burn-in are shown in (a) and (d) (default: the
+    whole record, so that drift or a change of behaviour is not hidden). Returns the
+    written file."""
     plt = _plt()
     lin = getattr(model, "linear", model)
     rate = lin.rate_hz
@@ -41,7 +42,7 @@ def plot_identification(model: Any, force_N: np.ndarray, position_m: np.ndarray,
     t = np.arange(f.size) / rate
     b = lin.burn_in
     if window_s is None:
-        window_s = 0.5 if lin.valid else f.size / rate
+        window_s = f.size / rate
     w = slice(b, min(f.size, b + int(window_s * rate)))
     fig, ax = plt.subplots(2, 2, figsize=(10, 7))
     ax[0, 0].plot(t[w], f[w], lw=0.8)

@@ -165,3 +165,26 @@ def test_check_signals_never_returns_bad_samples(nan_at, gap_at, jitter):
     assert np.isfinite(sig.force_N).all() and np.isfinite(sig.position_m).all()
     assert sig.force_N.size == sig.position_m.size >= 64
     assert sig.rate_hz == pytest.approx(1000.0, rel=0.02)
+
+
+def test_nonphysical_names_each_bad_parameter():
+    from skinkit.sysid.checks import nonphysical
+
+    assert nonphysical(1450.0, 4.76, 0.0155) == {}
+    bad = nonphysical(-1.0, 0.0, float("nan"))
+    assert bad == {"K": "negative stiffness", "B": "zero damping", "I": "mass is not finite"}
+
+
+def test_not_stochastic_reason_from_the_warnings(rec):
+    from skinkit.sysid.checks import NotStochasticError, not_stochastic_reason, refuse_if_not_stochastic
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ok = check_signals(rec.force_N, rec.position_m, rate_hz=rec.rate_hz)
+        slow = check_signals(np.sin(np.linspace(0, 6, 5000)) + 1e-3 * np.cos(np.arange(5000)),
+                             rec.position_m[:5000], rate_hz=rec.rate_hz)
+    assert not_stochastic_reason(ok.issues) is None
+    refuse_if_not_stochastic(ok.issues, "ok.csv")  # a broadband record passes
+    assert "of the force variance lies above" in not_stochastic_reason(slow.issues)
+    with pytest.raises(NotStochasticError, match=r"^slow.csv is not a broadband stochastic force"):
+        refuse_if_not_stochastic(slow.issues, "slow.csv")

@@ -13,7 +13,9 @@ from sysid_truth import C1_M, C2_PER_N, ROBOT, SKIN
 from skinkit.cli import cli
 from skinkit.sysid.simulate import simulate_record
 
-REAL = Path("/work/shared/data/real/healthy_skin_extension_relaxation.csv")
+#: the real extension-relaxation record lies beside the checkout (``../shared/data/real``)
+REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real" / \
+    "healthy_skin_extension_relaxation.csv"
 
 
 def _csv(path: Path, rec) -> Path:
@@ -76,14 +78,76 @@ def test_cli_errors_are_one_line(tmp_path, total):
     assert r.exit_code == 2 and "no such file" in r.stderr
 
 
-@pytest.mark.skipif(not REAL.exists(), reason="real data file not present")
-def test_cli_real_relaxation_data_warns(tmp_path):
-    r = CliRunner().invoke(cli, ["sysid", str(REAL), "--json"])
-    assert r.exit_code == 0, r.output
+def _refused(r) -> str:
+    """The one error line of a refusal (exit 2, no K, B, I on stdout)."""
+    assert r.exit_code == 2, r.output
+    assert "K_N_per_m" not in r.stdout and "N/m" not in r.stdout
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("error: ") and "not a broadband stochastic force test" in last
+    assert "skinkit fit docs/models/extension_relaxation_qlv.toml" in last
+    return last
+
+
+@pytest.mark.skipif(not REAL.exists(), reason="shared real data not beside the checkout")
+@pytest.mark.parametrize("args", [[], ["--axis", "x", "--json"], ["--memory", "60", "--plot", "P"]])
+def test_cli_refuses_the_real_relaxation_record(tmp_path, args):
+    args = [str(tmp_path / a) if a == "P" else a for a in args]
+    r = CliRunner().invoke(cli, ["sysid", str(REAL), *args])
     assert "warning: NarrowbandInputWarning" in r.stderr
+    assert str(REAL) in _refused(r)
+    assert not (tmp_path / "P").exists()
+
+
+def test_cli_refuses_a_ramp_hold_record(tmp_path):
+    # an extensometer-like test at 100 Hz: ramp to 0.4 N in 8 s, hold 30 s, return, twice;
+    # the position follows with a 5 s creep. Nearly all the force's variance lies below
+    # 0.5 Hz (1 % of Nyquist), the defining property of a non-stochastic test.
+    rate = 100.0
+    one = np.concatenate([np.linspace(0, 0.4, 800), np.full(3000, 0.4), np.linspace(0.4, 0, 800)])
+    f = np.tile(one, 2)
+    t = np.arange(f.size) / rate
+    creep = np.convolve(f, np.exp(-np.arange(2000) / (5 * rate)) / (5 * rate))[:f.size]
+    y = 1e-3 * (f + creep) + 1e-7 * np.random.default_rng(0).standard_normal(f.size)
+    path = tmp_path / "ramp_hold.csv"
+    np.savetxt(path, np.column_stack([t, f, y]), delimiter=",", header="time_s,force_N,position_m",
+               comments="", fmt="%.12g")
+    _refused(CliRunner().invoke(cli, ["sysid", str(path)]))
+    _refused(CliRunner().invoke(cli, ["sysid", str(path), "--model", "wiener", "--json"]))
+
+
+@pytest.fixture(scope="module")
+def linear_csv(tmp_path_factory, total):
+    return _csv(tmp_path_factory.mktemp("sysid") / "lin.csv", simulate_record(total, seed=44))
+
+
+@pytest.mark.parametrize("model", ["linear", "wiener"])
+def test_cli_negative_mass_is_an_error_not_a_number(linear_csv, total, model):
+    # the record's moving mass is skin + robot (40.5 g); removing 60 g of "robot" leaves
+    # about -19.5 g, which the 0.3 %-level error of I at 30 dB SNR cannot make positive
+    robot = 0.060
+    r = CliRunner().invoke(cli, ["sysid", str(linear_csv), "--model", model, "--json",
+                                 "--robot-mass", str(robot)])
+    assert r.exit_code == 2, r.output
     d = json.loads(r.stdout)
-    assert d["valid"] is False
-    assert any(w.startswith("PoorFitWarning") for w in d["warnings"])
+    assert d["I_kg"] is None and d["I_se_kg"] is None and d["withheld"] == ["I"]
+    assert d["K_N_per_m"] == pytest.approx(SKIN.K, rel=0.03)  # K and B stay physical
+    (msg,) = d["errors"]
+    assert "negative mass" in msg and "robot 60 g" in msg
+    assert float(msg.split("=")[1].split("g")[0]) == pytest.approx(
+        (total.I - robot) * 1e3, rel=0.03)
+    assert r.stderr.strip().splitlines()[-1] == f"error: {msg}"
+    table = CliRunner().invoke(cli, ["sysid", str(linear_csv), "--model", model,
+                                     "--robot-mass", str(robot)])
+    assert table.exit_code == 2
+    row = next(ln for ln in table.stdout.splitlines() if ln.strip("│ ").startswith("I "))
+    assert "error" in row and "-" not in row.replace("─", "")
+
+
+def test_cli_irf_memory_in_sensible_units():
+    from skinkit.cli.sysid import _duration
+
+    assert _duration(0.117) == ("117", "ms")
+    assert _duration(60.0) == ("60", "s")  # not "6e+04 ms"
 
 
 def test_bench_sysid_json():
