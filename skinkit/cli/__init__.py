@@ -24,6 +24,7 @@ _COMMANDS: dict[str, str] = {
     "import-csv": "skinkit.cli.import_csv:import_csv",
     "import-extensometer": "skinkit.cli.import_extensometer:import_extensometer_cmd",
     "import-images": "skinkit.cli.import_vision:import_images",
+    "import-calibration": "skinkit.cli.import_vision:import_calibration",
     "recover": "skinkit.cli.recover:recover",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",
@@ -41,6 +42,7 @@ _COMMANDS: dict[str, str] = {
     "select": "skinkit.cli.select:select",
     "design": "skinkit.cli.design:design",
     "lab": "skinkit.cli.lab:lab",
+    "gap": "skinkit.cli.gap:gap",
 }
 
 

@@ -38,3 +38,22 @@ def import_images(experiment: Path, cameras: tuple[tuple[str, str], ...], name: 
     click.echo(f"imported {done.n_frames} frames x {len(done.camera_names)} cameras "
                f"({', '.join(done.camera_names)}), {w}x{h} px {done.dtype}, matched by {done.matched_by}, "
                f"as image sequence {done.name!r} into {experiment}")
+
+
+@click.command("import-calibration")
+@click.argument("experiment", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--unit", type=click.Choice(["m", "mm", "cm", "um"]), default=None,
+              help="length unit of the files' translations T (the unit the board was measured in)")
+@click.option("--replace", is_flag=True, help="replace a rig the file already holds")
+def import_calibration(experiment: Path, files: tuple[Path, ...], unit: str | None, replace: bool) -> None:
+    """Import a camera calibration written by OpenCV (cv::FileStorage YAML or XML: one file per
+    camera, or one file with several) as the rig of EXPERIMENT's cameras."""
+    from skinkit.vision.calibration_io import import_calibration as run
+
+    rig = run(experiment, files, unit, replace)
+    for cam in rig.cameras:
+        w, h = cam.image_size
+        click.echo(f"{cam.name}: f = {cam.K[0, 0]:.1f} px, {w}x{h} px, centre "
+                   f"({', '.join(f'{v * 1e3:.1f}' for v in cam.centre)}) mm")
+    click.echo(f"rig of {len(rig.cameras)} cameras stored in {experiment}")

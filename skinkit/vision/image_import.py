@@ -159,10 +159,17 @@ class ImportSummary:
 
 
 def _read(path: Path, cam: str, frame: tuple[int, ...], first: tuple[Path, np.ndarray] | None) -> np.ndarray:
+    import cv2
+
+    level = cv2.utils.logging.getLogLevel()
+    # OpenCV's own log lines about a corrupt file would precede the one-line error below
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     try:
         img = read_gray(path)
     except VisionError as exc:
         raise VisionError(f"camera {cam}, frame {_list([frame])}: {exc}") from None
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     if first is not None:
         p0, a0 = first
         if img.shape != a0.shape:
