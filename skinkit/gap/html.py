@@ -311,25 +311,28 @@ def _residual_figure(cells: list[Mapping[str, Any]]) -> str:
     heights = [max(1.2, 0.28 * sum(1 for c in cells if str(c.get("axis")) == a) + 0.8) for a in axes]
     fig = _figure(7.5, sum(heights))
     grid = fig.add_gridspec(len(axes), 1, height_ratios=heights)
-    vals = [_f(c.get("chi2_per_dof")) for c in cells]
-    top = max([v for v in vals if math.isfinite(v)] + [1.0])
+    vals = [v for v in (_f(c.get("chi2_per_dof")) for c in cells) if math.isfinite(v)]
+    top = max(vals + [1.0])
     log = top > 20   # a large gap would squash the cells near the noise level into the axis
+    # one x range for every panel; on the log axis the bars grow from below the smallest cell
+    left = min([0.5] + [0.7 * v for v in vals if v > 0]) if log else 0.0
     for k, a in enumerate(axes):
         ax = fig.add_subplot(grid[k])
         cs = [c for c in cells if str(c.get("axis")) == a]
         y = np.arange(len(cs))
         v = np.array([_f(c.get("chi2_per_dof")) for c in cs])
-        v = np.where(np.isfinite(v), v, 0.0)
-        if log:
-            v = np.maximum(v, 1e-2)
+        ok = np.isfinite(v) & (v > left)
         colours = [RED if c.get("significant") else GREY for c in cs]
-        ax.barh(y, v, color=colours, height=0.7)
+        ax.barh(y[ok], v[ok] - left, left=left, color=[col for col, o in zip(colours, ok, strict=True) if o],
+                height=0.7)
+        for i in np.flatnonzero(~np.isfinite(v)):
+            ax.text(left, y[i], " no value", va="center", fontsize=7, color="0.4")
         ax.axvline(1.0, color="k", ls="--", lw=1)
         ax.set_yticks(y, [_mpl(c.get("label", "?")) for c in cs], fontsize=8)
-        ax.invert_yaxis()
+        ax.set_ylim(len(cs) - 0.5, -0.5)   # the first cell on top
         if log:
             ax.set_xscale("log")
-        ax.set_xlim(right=top * (2.0 if log else 1.08))
+        ax.set_xlim(left, top * (2.0 if log else 1.08))
         ax.set_title(f"by {_mpl(a)}", fontsize=9, loc="left")
         ax.grid(axis="x", alpha=0.3)
         ax.tick_params(axis="x", labelsize=8)
@@ -440,10 +443,9 @@ def _maps_matplotlib(maps: list[dict[str, Any]], M: float) -> str:
                     pass
             mappable = ax.scatter(m["xy"][ok, 0], m["xy"][ok, 1], c=np.clip(v[ok], 1.0 / M, M), norm=norm,
                                   cmap="RdBu_r", s=36, edgecolors="k", linewidths=0.4)
-            if (~ok).any():
-                ax.scatter(m["xy"][~ok, 0], m["xy"][~ok, 1], marker="x", color="0.5", s=20,
-                           label="not observed")
-                ax.legend(fontsize=7, loc="lower right")
+            if (~ok).any():   # said in the title: a legend would hide points
+                ax.scatter(m["xy"][~ok, 0], m["xy"][~ok, 1], marker="x", color="0.5", s=20)
+                ax.set_title(f"{_mpl(m['protocol'])}: {what} (×: not observed)", fontsize=9)
     if mappable is not None:
         from matplotlib.ticker import NullFormatter
 
@@ -466,8 +468,8 @@ def _maps_pyvista(maps: list[dict[str, Any]], M: float) -> str | None:
 
     if importlib.util.find_spec("pyvista") is None:
         return None
-    if not all(_spread(m["xy"][np.isfinite(m[k])]) for m in maps for k in ("before", "after")
-               if m[k] is not None):
+    maps = [m for m in maps if _spread(m["xy"][np.isfinite(m["before"])])]   # a surface needs an area
+    if not maps:
         return None
     try:
         import pyvista as pv
@@ -485,10 +487,10 @@ def _maps_pyvista(maps: list[dict[str, Any]], M: float) -> str | None:
                     pl.subplot(i, j)
                     pl.add_text(f"{m['protocol']}: {key}", font_size=9, position="upper_left")
                     v = m[key]
-                    if v is None:
+                    ok = np.zeros(len(m["xy"]), bool) if v is None else np.isfinite(v)
+                    if not _spread(m["xy"][ok]):
                         pl.add_text("no map after the named effect", font_size=8, position="lower_left")
                         continue
-                    ok = np.isfinite(v)
                     z = np.log10(np.clip(v[ok], 1.0 / M, M))
                     pts = np.column_stack([m["xy"][ok], z * height])
                     flat = pv.PolyData(np.column_stack([m["xy"][ok], np.zeros(ok.sum())])).delaunay_2d()
