@@ -131,6 +131,9 @@ def test_demo_runs(tmp_path):
         # In-plane tension adds a membrane stiffness to the out-of-plane response.
         assert 0 < -w["tip_displacement_m"][2] < -wo["tip_displacement_m"][2]
         assert Path(w["paraview"]).exists()
+        for v in (w, wo):  # one count: the demo reports what the FE run's own summary says
+            fe = json.loads((Path(v["paraview"]).parent / "summary.json").read_text())
+            assert v["newton_iterations"] == fe["newton_iterations"]
     vis = data["vision"]
     if "skipped" in vis:
         assert "skinkit.profilers:patchwork" in vis["skipped"] or "skinkit.trackers:gn" in vis["skipped"]
