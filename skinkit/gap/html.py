@@ -20,6 +20,7 @@ Figures are made on matplotlib's Agg canvas directly (no pyplot, no global backe
 from __future__ import annotations
 
 import base64
+import contextlib
 import html
 import io
 import json
@@ -474,47 +475,56 @@ def _maps_pyvista(maps: list[dict[str, Any]], M: float) -> str | None:
     try:
         import pyvista as pv
 
-        ncol = 2 if any(m["after"] is not None for m in maps) else 1
-        pl = pv.Plotter(off_screen=True, shape=(len(maps), ncol), window_size=(480 * ncol, 400 * len(maps)),
-                        border=False)
-        try:
-            lim = math.log10(M)
-            label = "log10 chi2/dof"
-            for i, m in enumerate(maps):
-                lo, hi = m["xy"].min(axis=0), m["xy"].max(axis=0)
-                height = 0.35 * float(np.max(hi - lo)) / lim   # [mm per decade]: a relief, not a tower
-                for j, key in enumerate(("before", "after")[:ncol]):
-                    pl.subplot(i, j)
-                    pl.add_text(f"{m['protocol']}: {key}", font_size=9, position="upper_left")
-                    v = m[key]
-                    ok = np.zeros(len(m["xy"]), bool) if v is None else np.isfinite(v)
-                    if not _spread(m["xy"][ok]):
-                        pl.add_text("no map after the named effect", font_size=8, position="lower_left")
-                        continue
-                    z = np.log10(np.clip(v[ok], 1.0 / M, M))
-                    pts = np.column_stack([m["xy"][ok], z * height])
-                    flat = pv.PolyData(np.column_stack([m["xy"][ok], np.zeros(ok.sum())])).delaunay_2d()
-                    surf = pv.PolyData(pts, faces=flat.faces)
-                    surf[label] = z
-                    pl.add_mesh(pv.Plane(center=(*((lo + hi) / 2), 0.0), i_size=float(hi[0] - lo[0]),
-                                         j_size=float(hi[1] - lo[1])), color="grey", opacity=0.25)
-                    pl.add_mesh(surf, scalars=label, cmap="RdBu_r", clim=(-lim, lim), lighting=False,
-                                scalar_bar_args={"title": label, "vertical": True, "position_x": 0.88,
-                                                 "position_y": 0.15, "height": 0.6, "width": 0.06,
-                                                 "title_font_size": 11, "label_font_size": 10})
-                    pl.add_points(pts, color="black", point_size=4, render_points_as_spheres=True)
-            pl.subplot(0, 0)
-            pl.view_vector((-0.6, -1.0, 0.9))
-            pl.camera.zoom(0.85)
-            pl.link_views()   # one camera: a flatter surface must not be drawn larger
-            img = pl.screenshot(return_img=True)
-        finally:
-            pl.close()
-        if img is None or np.asarray(img).size == 0 or float(np.asarray(img).std()) == 0.0:
-            return None
-        return _array_uri(np.asarray(img, dtype=np.uint8))
+        # VTK's own log (e.g. "bad X server connection" before it falls back to off-screen
+        # rendering) would reach the terminal of a CLI run: silenced while rendering
+        quiet = getattr(pv, "vtk_verbosity", None)
+        with quiet("off") if quiet is not None else contextlib.nullcontext():
+            return _render_pyvista(pv, maps, M)
     except Exception:  # noqa: BLE001 - any VTK failure: the matplotlib maps stand alone
         return None
+
+
+def _render_pyvista(pv: Any, maps: list[dict[str, Any]], M: float) -> str | None:
+    """The relief maps of :func:`_maps_pyvista` rendered: a PNG data URI (None: a blank image)."""
+    ncol = 2 if any(m["after"] is not None for m in maps) else 1
+    pl = pv.Plotter(off_screen=True, shape=(len(maps), ncol), window_size=(480 * ncol, 400 * len(maps)),
+                    border=False)
+    try:
+        lim = math.log10(M)
+        label = "log10 chi2/dof"
+        for i, m in enumerate(maps):
+            lo, hi = m["xy"].min(axis=0), m["xy"].max(axis=0)
+            height = 0.35 * float(np.max(hi - lo)) / lim   # [mm per decade]: a relief, not a tower
+            for j, key in enumerate(("before", "after")[:ncol]):
+                pl.subplot(i, j)
+                pl.add_text(f"{m['protocol']}: {key}", font_size=9, position="upper_left")
+                v = m[key]
+                ok = np.zeros(len(m["xy"]), bool) if v is None else np.isfinite(v)
+                if not _spread(m["xy"][ok]):
+                    pl.add_text("no map after the named effect", font_size=8, position="lower_left")
+                    continue
+                z = np.log10(np.clip(v[ok], 1.0 / M, M))
+                pts = np.column_stack([m["xy"][ok], z * height])
+                flat = pv.PolyData(np.column_stack([m["xy"][ok], np.zeros(ok.sum())])).delaunay_2d()
+                surf = pv.PolyData(pts, faces=flat.faces)
+                surf[label] = z
+                pl.add_mesh(pv.Plane(center=(*((lo + hi) / 2), 0.0), i_size=float(hi[0] - lo[0]),
+                                     j_size=float(hi[1] - lo[1])), color="grey", opacity=0.25)
+                pl.add_mesh(surf, scalars=label, cmap="RdBu_r", clim=(-lim, lim), lighting=False,
+                            scalar_bar_args={"title": label, "vertical": True, "position_x": 0.88,
+                                             "position_y": 0.15, "height": 0.6, "width": 0.06,
+                                             "title_font_size": 11, "label_font_size": 10})
+                pl.add_points(pts, color="black", point_size=4, render_points_as_spheres=True)
+        pl.subplot(0, 0)
+        pl.view_vector((-0.6, -1.0, 0.9))
+        pl.camera.zoom(0.85)
+        pl.link_views()   # one camera: a flatter surface must not be drawn larger
+        img = pl.screenshot(return_img=True)
+    finally:
+        pl.close()
+    if img is None or np.asarray(img).size == 0 or float(np.asarray(img).std()) == 0.0:
+        return None
+    return _array_uri(np.asarray(img, dtype=np.uint8))
 
 
 def _section_maps(report: Mapping[str, Any]) -> str:
