@@ -25,6 +25,7 @@ _COMMANDS: dict[str, str] = {
     "import-extensometer": "skinkit.cli.import_extensometer:import_extensometer_cmd",
     "import-images": "skinkit.cli.import_vision:import_images",
     "import-calibration": "skinkit.cli.import_vision:import_calibration",
+    "import-tracks": "skinkit.cli.import_vision:import_tracks",
     "recover": "skinkit.cli.recover:recover",
     "demo": "skinkit.cli.demo:demo",
     "bench": "skinkit.cli.bench:bench",

@@ -57,3 +57,26 @@ def import_calibration(experiment: Path, files: tuple[Path, ...], unit: str | No
         click.echo(f"{cam.name}: f = {cam.K[0, 0]:.1f} px, {w}x{h} px, centre "
                    f"({', '.join(f'{v * 1e3:.1f}' for v in cam.centre)}) mm")
     click.echo(f"rig of {len(rig.cameras)} cameras stored in {experiment}")
+
+
+@click.command("import-tracks")
+@click.argument("experiment", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("csv_file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--name", default=None, help="track name in EXPERIMENT (default: the CSV file's stem)")
+@click.option("--unit", type=click.Choice(["m", "mm", "cm", "um", "px"]), default=None,
+              help="unit of coordinate columns named without one (x, y, z)")
+@click.option("--m-per-px", type=float, default=None, help="scale of pixel coordinates [m/px]")
+@click.option("--fps", default=1.0, show_default=True,
+              help="frame rate [Hz] when the CSV has no time column: frame k at k / fps seconds")
+@click.option("--ignore", multiple=True, help="a column to skip (e.g. a correlation score); repeatable")
+@click.option("--overwrite", is_flag=True, help="replace a track of that name")
+def import_tracks(experiment: Path, csv_file: Path, name: str | None, unit: str | None,
+                  m_per_px: float | None, fps: float, ignore: tuple[str, ...], overwrite: bool) -> None:
+    """Import 2D/3D point tracks from another DIC tool (CSV: frame, point, x_mm, y_mm[, z_mm],
+    or one row per frame) as a track in EXPERIMENT (created if it does not exist)."""
+    from skinkit.store.track_import import import_tracks as run
+
+    imp = run(experiment, csv_file, name, unit, m_per_px, fps, ignore, overwrite)
+    t = imp.track
+    click.echo(f"imported {t.n_points} points x {t.n_frames} frames ({imp.attrs['dimensions']}D, "
+               f"{int(t.valid.sum())} valid positions) as track {name or csv_file.stem!r} into {experiment}")

@@ -1,0 +1,229 @@
+"""Point tracks from other DIC tools (CSV, 2D or 3D) as a :class:`SurfaceTrack`.
+
+Two layouts, told apart by a ``point`` column (comma, semicolon or tab separated; header
+names are case-insensitive):
+
+* long form, one row per point and frame: ``frame, point, x_<unit>, y_<unit>[, z_<unit>]``;
+* wide form, one row per frame: ``frame, x_<point>_<unit>, y_<point>_<unit>[, z_<point>_<unit>]``
+  for every point (e.g. ``x_1_mm, y_1_mm, z_1_mm, x_2_mm, ...``).
+
+``<unit>`` is ``m``, ``mm``, ``cm``, ``um`` or ``px`` (pixels need a scale); a bare ``x`` takes
+the unit given by the caller. Optional columns: ``time_s`` or ``time_ms`` (else frame ``k``
+is at ``k / fps``), ``valid`` (0/1; else a point is valid where its coordinates are
+numbers), and displacements ``u, v[, w]`` (same naming as ``x, y, z``), in which case ``x, y,
+z`` are the reference coordinates and the position is ``x + u`` (as VIC-2D/3D exports).
+Without ``z`` the track is 2D: ``z`` is stored as 0 and the track's ``dimensions`` attribute
+is 2. Any other column is an error that names it (unless the caller ignores it).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skinkit.errors import SchemaError, StoreError
+from skinkit.schemas import SurfaceTrack
+
+#: metres per unit; ``px`` is scaled by the caller's metres per pixel
+UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6, "px": None}
+_AXES = {"x": 0, "y": 1, "z": 2, "u": 0, "v": 1, "w": 2}
+_NAME = re.compile(r"^([xyzuvw])(?:_(.+?))?(?:_(m|mm|cm|um|px))?$", re.IGNORECASE)
+
+
+@dataclass
+class TrackImport:
+    """A track read from CSV, and facts about it for the track's ``extra`` attribute."""
+
+    track: SurfaceTrack
+    attrs: dict[str, Any]
+
+
+def _column(name: str, long_form: bool) -> tuple[str, str | None, str | None] | None:
+    """``(axis letter, point label or None, unit or None)`` of a coordinate column, or None."""
+    m = _NAME.match(name)
+    if m is None:
+        return None
+    axis, point, unit = m.group(1).lower(), m.group(2), (m.group(3) or "").lower() or None
+    if long_form:
+        if point is not None:
+            if point.lower() in UNITS and unit is None:
+                point = point.lower()
+                return axis, None, point
+            return None
+        return axis, None, unit
+    if point is None or (point.lower() in UNITS and unit is None):
+        return None  # x_mm in a file without a point column: not a per-point column
+    return axis, point, unit
+
+
+def _number(text: str, where: str, col: str) -> float:
+    t = text.strip()
+    if t == "" or t.lower() in ("nan", "na", "null"):
+        return float("nan")
+    try:
+        return float(t)
+    except ValueError:
+        raise StoreError(where, "", f"column {col!r}: {t!r} is not a number") from None
+
+
+def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per_px: float | None = None,
+                    fps: float = 1.0, ignore: Sequence[str] = ()) -> TrackImport:
+    """Read a tracks CSV (module docstring) into a :class:`SurfaceTrack` [m].
+
+    ``unit``: unit of bare ``x, y, z`` columns; ``m_per_px``: scale of ``px`` columns [m/px];
+    ``fps``: frame rate [Hz] when the file has no time column; ``ignore``: columns to skip.
+    Raises :class:`StoreError` in one line naming the file, line and column.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise StoreError(str(p), "", "no such tracks file")
+    if unit is not None and unit not in UNITS:
+        raise StoreError(str(p), "", f"unknown unit {unit!r} (one of {', '.join(UNITS)})")
+    if not (np.isfinite(fps) and fps > 0):
+        raise StoreError(str(p), "", f"frame rate must be positive, got {fps} Hz")
+    text = p.read_text(encoding="utf-8-sig", errors="replace")
+    first = text.splitlines()[0] if text.strip() else ""
+    delim = "," if "," in first else (";" if ";" in first else ("\t" if "\t" in first else ","))
+    rows = list(csv.reader(text.splitlines(), delimiter=delim))
+    if not rows or not any(h.strip() for h in rows[0]):
+        raise StoreError(str(p), "", "is empty (expected a header such as frame,point,x_mm,y_mm,z_mm)")
+    raw = [h.strip() for h in rows[0]]
+    header = [h.lower() for h in raw]
+    skip = {s.strip().lower() for s in ignore}
+    long_form = "point" in header or "point_id" in header
+    if "frame" not in header:
+        raise StoreError(str(p), "line 1", f"no 'frame' column (header: {', '.join(header)})")
+    special = {"frame", "point", "point_id", "time_s", "time_ms", "valid"}
+    coords: dict[int, tuple[str, str | None, str | None]] = {}
+    unknown = []
+    for i, h in enumerate(header):
+        if h in special or h in skip:
+            continue
+        c = _column(raw[i], long_form)
+        if c is None:
+            unknown.append(raw[i])
+        else:
+            coords[i] = c
+    if unknown:
+        form = "long form: frame, point, x_<unit>, y_<unit>[, z_<unit>]" if long_form else \
+            "wide form: frame, x_<point>_<unit>, y_<point>_<unit>[, z_<point>_<unit>]"
+        raise StoreError(str(p), "line 1", f"unknown column(s) {', '.join(repr(u) for u in unknown)} "
+                         f"({form}; optional time_s|time_ms, valid, u/v/w displacements)")
+    scale: dict[int, float] = {}
+    for i, (_axis, _pt, u) in coords.items():
+        u = u or unit
+        if u is None:
+            raise StoreError(str(p), "line 1", f"column {header[i]!r} has no unit: name it "
+                             f"{header[i]}_mm (or _m, _um, _px), or give the unit")
+        if u == "px":
+            if m_per_px is None or not m_per_px > 0:
+                raise StoreError(str(p), "line 1", f"column {header[i]!r} is in pixels: give the "
+                                 "scale in metres per pixel")
+            scale[i] = float(m_per_px)
+        else:
+            scale[i] = float(UNITS[u])  # type: ignore[arg-type]
+    points = sorted({pt for _, pt, _ in coords.values()}, key=str) if not long_form else []
+    axes_given = {a for a, _, _ in coords.values()}
+    for need in ("x", "y"):
+        if need not in axes_given:
+            raise StoreError(str(p), "line 1", f"no {need!r} coordinate column")
+    has_z = "z" in axes_given
+    disp = bool(axes_given & {"u", "v", "w"})
+    ci = {h: header.index(h) for h in special if h in header}
+    pcol = ci.get("point", ci.get("point_id"))
+
+    # (frame, point) -> [position (3,), valid]; frame -> time
+    data: dict[tuple[float, str], tuple[np.ndarray, bool]] = {}
+    times: dict[float, float] = {}
+    for lineno, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        where = f"{p}:line {lineno}"
+        if len(row) < len(header):
+            raise StoreError(where, "", f"has {len(row)} fields, the header {len(header)}")
+        frame = _number(row[ci["frame"]], where, "frame")
+        if not np.isfinite(frame):
+            raise StoreError(where, "", "column 'frame' is empty")
+        if "time_s" in ci or "time_ms" in ci:
+            key = "time_s" if "time_s" in ci else "time_ms"
+            t = _number(row[ci[key]], where, key) * (1.0 if key == "time_s" else 1e-3)
+            if frame in times and times[frame] != t:
+                raise StoreError(where, "", f"frame {frame:g} has two times ({times[frame]:g} and {t:g} s)")
+            times[frame] = t
+        labels = [row[pcol].strip()] if long_form else points  # type: ignore[index]
+        for label in labels:
+            pos = np.zeros(3)
+            ref = np.zeros(3)
+            for i, (axis, pt, _u) in coords.items():
+                if pt != (None if long_form else label):
+                    continue
+                v = _number(row[i], where, header[i]) * scale[i]
+                (pos if axis in "xyz" else ref)[_AXES[axis]] += v
+            ok = bool(np.all(np.isfinite(pos + ref)))
+            if "valid" in ci:
+                ok = ok and _number(row[ci["valid"]], where, "valid") != 0
+            if (frame, label) in data:
+                raise StoreError(where, "", f"point {label!r} appears twice in frame {frame:g}")
+            data[(frame, label)] = (pos + ref if disp else pos, ok)
+    if not data:
+        raise StoreError(str(p), "", "holds no track rows")
+    frames = sorted({f for f, _ in data})
+    labels = sorted({lb for _, lb in data}, key=lambda s: (not _is_int(s), int(s) if _is_int(s) else 0, s))
+    P, F = len(labels), len(frames)
+    pts = np.full((P, F, 3), np.nan)
+    valid = np.zeros((P, F), bool)
+    fi = {f: k for k, f in enumerate(frames)}
+    li = {lb: k for k, lb in enumerate(labels)}
+    for (f, lb), (x, ok) in data.items():
+        if ok:
+            pts[li[lb], fi[f]] = x
+            valid[li[lb], fi[f]] = True
+    time_s = np.array([times[f] for f in frames]) if times else np.asarray(frames, float) / fps
+    ids = np.array([int(s) for s in labels]) if all(_is_int(s) for s in labels) else np.arange(P)
+    try:
+        track = SurfaceTrack(pts, valid, time_s, ids)
+    except SchemaError as exc:
+        raise StoreError(str(p), "", str(exc)) from None
+    attrs: dict[str, Any] = {"source": str(p.resolve()), "dimensions": 3 if has_z else 2,
+                             "layout": "long" if long_form else "wide",
+                             "frames": [float(f) for f in frames]}
+    if not all(_is_int(s) for s in labels):
+        attrs["point_labels"] = labels
+    if not has_z:
+        attrs["z"] = "not measured (2D tracks): stored as 0"
+    return TrackImport(track, attrs)
+
+
+def _is_int(s: str) -> bool:
+    return s.strip().lstrip("-").isdigit()
+
+
+def import_tracks(experiment: str | os.PathLike[str], path: str | os.PathLike[str], name: str | None = None,
+                  unit: str | None = None, m_per_px: float | None = None, fps: float = 1.0,
+                  ignore: Sequence[str] = (), overwrite: bool = False) -> TrackImport:
+    """Read ``path`` (:func:`read_tracks_csv`) and store it as track ``name`` (default: the
+    file's stem) in ``experiment`` (created if missing). The CSV is read and checked whole
+    before the file is touched; an existing track of that name is refused unless ``overwrite``."""
+    from skinkit.store.experiment import create_experiment, open_experiment
+
+    imp = read_tracks_csv(path, unit, m_per_px, fps, ignore)
+    name = name or Path(path).stem
+    if not name or "/" in name:
+        raise StoreError(str(experiment), "", f"track name {name!r} is empty or contains '/'")
+    out = Path(experiment)
+    if out.exists():
+        with open_experiment(out, "r") as exp:
+            if name in exp.track_names() and not overwrite:
+                raise StoreError(str(out), f"/tracks/{name}",
+                                 "already exists (pass --overwrite to replace it)")
+    with open_experiment(out, "a") if out.exists() else create_experiment(out) as exp:
+        exp.write_track(name, imp.track)
+        exp.set_track_attrs(name, **imp.attrs)
+    return imp
