@@ -1,0 +1,545 @@
+"""The sim-to-real gap diagnosis of a calibrated model (issue 11): where, which effect, how far.
+
+:func:`diagnose` fits the model's free parameters to the session (exactly as ``skinkit fit``:
+held-out protocols stay out of the fit), then in rounds:
+
+1. **where** (:func:`skinkit.gap.where.locate`): the noise-normalised residual split by protocol,
+   channel, phase, region and frequency, each cell tested against the noise;
+2. **which** (:mod:`skinkit.gap.score`): a score test of every installed effect that applies
+   to the model, at its null, from one prediction with sensitivities; the top candidates
+   (``candidates``, default 3) whose test survives the Bonferroni correction are refitted with
+   the effect added (its parameters free, started a linearised step from the null) and compared
+   by AIC and held-out error. An effect is **named** only when all of these hold:
+
+   * the gap is significant (step 1's global test);
+   * its score test survives the correction over the K effects tested (p·K < α);
+   * its refit lowers the AIC by more than :data:`AIC_MARGIN` (10: Burnham & Anderson's
+     "essentially no support" for the worse model; for one added parameter under the null the
+     likelihood-ratio statistic would have to exceed 12, probability 5e-4, so noise alone
+     names an effect in fewer than 1 in 400 sessions per candidate);
+   * it does not worsen the held-out χ² by more than 2 per added parameter (under the null a
+     useless parameter costs about 1 out of sample: the optimism of a fit).
+
+   Of the candidates that qualify, the one with the lowest AIC is named; the model is augmented
+   with it at its fitted values and the next round looks for another (``max_effects``).
+3. **how far**: χ² before and after, overall and per cell, on fitted and held-out protocols;
+   shrinkage = the fraction of the excess residual (χ² − dof) removed; the effect's identified
+   magnitude with its standard error (from the refit's covariance).
+
+Non-separable pairs (:func:`skinkit.gap.score.separability`) are reported with the library
+protocol that would separate them best (:func:`skinkit.gap.score.separating_protocol`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skinkit.errors import SkinkitError
+from skinkit.gap.score import (
+    ScoreTest,
+    Sensitivities,
+    collect,
+    corrected,
+    effect_table,
+    separability,
+    separating_protocol,
+    with_effects,
+)
+from skinkit.schemas import EffectScore, FitResult, GapReport, Observations, Prediction
+
+#: an effect is named only if its refit lowers the AIC by more than this (module docstring)
+AIC_MARGIN = 10.0
+#: held-out χ² allowance per added parameter (module docstring)
+HELD_OUT_ALLOWANCE = 2.0
+#: a refit starts at most this many typical magnitudes from the null
+MAX_START = 2.0
+
+
+class GapError(SkinkitError):
+    """A diagnosis that cannot run: no free parameter, an unknown or inapplicable effect, a
+    session without the channels the model predicts."""
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _chi2(observations: Observations, prediction: Prediction, protocols: Sequence[str]) -> tuple[float, int]:
+    """``(Σz², samples)`` of ``prediction`` over ``protocols`` (the fit's residual)."""
+    from skinkit.inverse.objective import Objective
+
+    keep = [p for p in protocols if p in prediction.protocols]
+    if not keep:
+        return 0.0, 0
+    pred = Prediction({p: prediction.protocols[p] for p in keep}, prediction.methods, prediction.inputs)
+    res = Objective(None, observations.select(keep), [], "noise").residual(pred, jacobian=False)
+    return float(res.z @ res.z), int(res.z.size)
+
+
+def _fraction(before: float, after: float) -> float | None:
+    """Fraction of the excess ``before`` removed (None when there was no excess)."""
+    return None if before <= 0 else float(min((before - after) / before, 1.0))
+
+
+def _predict_all(model: Any, params: Any, observations: Observations) -> Prediction:
+    return model.predict(params, observations, sensitivities=False)
+
+
+def _merge(a: Prediction, b: Prediction | None) -> Prediction:
+    if b is None:
+        return a
+    return Prediction({**a.protocols, **b.protocols}, {**a.methods, **b.methods}, {**a.inputs, **b.inputs},
+                      dict(a.info))
+
+
+def _close(model: Any) -> None:
+    if model is not None and hasattr(model, "close"):
+        model.close()
+
+
+def _values(result: FitResult) -> dict[str, float]:
+    return {p.name: float(p.value) for p in result.parameters}
+
+
+def _points(observations: Observations) -> dict[str, list[list[float]]]:
+    out = {}
+    for po in observations:
+        for ch in po.channels.values():
+            if ch.is_points and ch.reference is not None:
+                out[po.name] = np.asarray(ch.reference)[:, :2].tolist()
+    return out
+
+
+def _cells(loc: Any) -> list[dict[str, Any]]:
+    keys = ("axis", "label", "share", "chi2_per_dof", "p_value", "significant", "chi2", "dof", "n",
+            "partition")
+    return [{k: c.to_dict()[k] for k in keys if k in c.to_dict()} for c in loc.cells]
+
+
+def _gap_dict(loc: Any) -> dict[str, Any]:
+    d = loc.to_dict()
+    d["cells"] = _cells(loc)
+    d["ranked"] = [{"axis": c.axis, "label": c.label, "share": c.share} for c in loc.ranked()]
+    return d
+
+
+def _state(model: Any, result: FitResult, observations: Observations, held: Observations
+           ) -> dict[str, Any]:
+    """A calibrated state: its full prediction (fitted and held-out protocols), χ² and dof."""
+    pred = _predict_all(model, result.parameters, observations)
+    fitted = observations.fitted().names
+    c_fit, n_fit = _chi2(observations, pred, fitted)
+    c_ho, n_ho = _chi2(observations, pred, held.names)
+    k = len(result.parameters.free_names)
+    return {"prediction": pred, "chi2": c_fit, "n": n_fit, "k": k, "dof": n_fit - k,
+            "held_chi2": c_ho, "held_n": n_ho, "result": result}
+
+
+# --------------------------------------------------------------------------------- checks
+def check_effects(kind: str, present: Sequence[str], effects: Sequence[str] | None) -> list[str]:
+    """The candidate effects: ``effects`` checked (installed, applicable to ``kind``, not already
+    in the model), or every applicable installed effect the model does not have."""
+    from skinkit import registry
+    from skinkit.forward.visibility import applicable_effects
+
+    ok = applicable_effects(kind)
+    if effects is None:
+        return [e for e in ok if e not in present]
+    installed = registry.names("skinkit.effects")
+    out = []
+    for e in effects:
+        if e not in installed:
+            raise GapError(f"--effects {e!r}: no such effect is installed "
+                           f"(installed: {', '.join(installed)})")
+        if e not in ok:
+            raise GapError(f"--effects {e!r}: does not apply to a {kind!r} model "
+                           f"(effects for {kind} models: {', '.join(ok)})")
+        if e in present:
+            raise GapError(f"--effects {e!r}: the model already has this effect")
+        if e not in out:
+            out.append(e)
+    if not out:
+        raise GapError("--effects: no effect named")
+    return out
+
+
+def _check_channels(model: Any, observations: Observations) -> None:
+    """Every protocol must hold the channel that drives the model and one it predicts (a lumped
+    model predicts the other tip channel; a finite-element one also the tracked points)."""
+    from skinkit.inverse.design import _model_drive
+
+    drive = _model_drive(model)
+    if drive is None:
+        return
+    other = "tip_force" if drive == "tip_position" else "tip_position"
+    predicted = {other} if getattr(model, "kind", "fe") == "lumped" else {other, "points", "points_2d"}
+    for po in observations:
+        if drive not in po.channels:
+            raise GapError(f"session protocol {po.name!r} has no {drive!r} channel to drive the model "
+                           f"(it has {sorted(po.channels)})")
+        if not predicted & set(po.channels):
+            raise GapError(f"session protocol {po.name!r} has no channel the model predicts "
+                           f"({', '.join(sorted(predicted))}; it has {sorted(po.channels)})")
+
+
+# -------------------------------------------------------------------------------- the rounds
+def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observations: Observations,
+           held: Observations, values: Mapping[str, float], theta: Sequence[str], test: ScoreTest,
+           sens: Sensitivities, *, load: Callable[..., Any], say: Callable[[str], None]) -> dict[str, Any]:
+    """The model with ``test.effect`` added, refitted: its state, the added free parameters."""
+    from skinkit.inverse import fit
+    from skinkit.inverse.objective import Objective
+
+    cols = sens.columns[test.effect]
+    model = load(with_effects(spec, effects_in + [{"name": test.effect}]))
+    try:
+        ps = model.parameters()
+        ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
+        start = {}
+        for n in test.tested:
+            lo, hi = cols.bounds[n]
+            span = MAX_START * (abs(cols.typical[n] - cols.null[n]) or abs(cols.typical[n]) or 1.0)
+            v = cols.null[n] + float(np.clip(test.step.get(n, 0.0), -span, span))
+            start[n] = float(np.clip(v, lo + 1e-9 * (hi - lo if math.isfinite(hi - lo) else 1), hi))
+        ps = ps.with_values(start)
+        added = list(test.tested)
+        if cols.held:
+            # parameters without a signature at the null: free those the switched-on effect shows
+            held_names = list(cols.held)
+            res, _ = Objective(model, observations.fitted(), held_names, "noise").evaluate(ps)
+            for i, n in enumerate(held_names):
+                size = abs(cols.typical[n] - cols.null[n]) or abs(cols.typical[n]) or 1.0
+                if float(np.linalg.norm(res.J[:, i])) * size > 1e-3:
+                    added.append(n)
+        free = list(theta) + added
+        say(f"refit with {test.effect}: free {', '.join(added)}")
+        r = fit(model, observations, free, start={n: ps[n] for n in free})
+        state = _state(model, r, observations, held)
+    finally:
+        _close(model)
+    state["added"] = added
+    state["table"] = effect_table(test.effect, _values(r))
+    return state
+
+
+def _candidate(test: ScoreTest, survives: bool, state: dict[str, Any] | None,
+               base: dict[str, Any]) -> EffectScore:
+    extra = test.record()
+    extra["significant"] = survives
+    if state is None:
+        return EffectScore(test.effect, test.statistic, test.p_value, test.dof, extra=extra)
+    r: FitResult = state["result"]
+    pars = {}
+    for n in state["added"]:
+        se = r.se.get(n)
+        se = float(se) if se is not None and np.isfinite(se) else None
+        v = float(r.parameters[n])
+        pars[n] = {"value": v, "se": se, "unit": r.parameters.param(n).unit,
+                   "interval": None if se is None else [v - 1.96 * se, v + 1.96 * se]}
+    d_aic = float(r.aic - base["result"].aic)
+    extra.update({"chi2_per_dof": state["chi2"] / state["dof"], "held_out_chi2": state["held_chi2"],
+                  "held_out_chi2_before": base["held_chi2"], "converged": r.converged,
+                  "n_forward": r.n_forward})
+    shrink = _fraction(base["chi2"] - base["dof"], state["chi2"] - state["dof"])
+    return EffectScore(test.effect, test.statistic, test.p_value, test.dof, refitted=True, delta_aic=d_aic,
+                       shrinkage=shrink, parameters=pars, extra=extra)
+
+
+def _qualifies(c: EffectScore, state: dict[str, Any], base: dict[str, Any]) -> tuple[bool, str]:
+    if not c.extra.get("significant"):
+        return False, "its score test does not survive the correction"
+    if c.delta_aic is None or not c.delta_aic < -AIC_MARGIN:
+        return False, f"its refit does not lower the AIC by more than {AIC_MARGIN:g} (ΔAIC {c.delta_aic:.1f})"
+    if base["held_n"]:
+        allowed = base["held_chi2"] + HELD_OUT_ALLOWANCE * len(state["added"])
+        if state["held_chi2"] > allowed:
+            return False, f"it worsens the held-out χ² ({base['held_chi2']:.1f} -> {state['held_chi2']:.1f})"
+    return True, ""
+
+
+def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
+             observations: Observations | str | os.PathLike[str], *,
+             effects: Sequence[str] | None = None, holdout: Sequence[str] = (),
+             free: Sequence[str] | None = None, max_effects: int = 2, candidates: int = 3,
+             alpha: float = 0.05, workers: int | None = None,
+             progress: Callable[[str], None] | None = None) -> GapReport:
+    """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
+    (an :class:`Observations`, or a session path: experiment file or CSV record).
+
+    ``effects``: candidate effects (default every installed effect that applies and the model
+    lacks); ``holdout``: protocols kept out of the fit and predicted; ``free``: the parameters to
+    calibrate (default the model file's free ones); ``max_effects``: rounds of naming;
+    ``candidates``: refits per round; ``alpha``: the level of every test; ``workers``: worker
+    processes of a finite-element model; ``progress(line)``: what is being done.
+    """
+    from skinkit.forward import load, model_kind, read_description
+    from skinkit.gap.where import cell_chi2, locate
+    from skinkit.inverse import fit
+    from skinkit.inverse.fit import free_set
+
+    t0 = time.perf_counter()
+    say = progress or (lambda _m: None)
+    if max_effects < 0 or candidates < 1:
+        raise GapError(f"max_effects must be >= 0 and candidates >= 1, got {max_effects}, {candidates}")
+    if not 0 < alpha < 1:
+        raise GapError(f"alpha must be in (0, 1), got {alpha!r}")
+    spec = read_description(model)
+    kind = model_kind(spec)
+
+    def loader(s: Mapping[str, Any]) -> Any:
+        return load(s, workers=workers)
+
+    base = loader(spec)
+    try:
+        name = str(getattr(base, "name", "model"))
+        present = [str(t.get("name")) for t in (spec.get("effects") or []) if isinstance(t, Mapping)]
+        if not isinstance(observations, Observations):
+            from skinkit.cli._session import read_session
+            source = str(observations)
+            observations = read_session(base, observations, ",".join(holdout) or None)
+        else:
+            source = observations.source
+            if holdout:
+                observations = observations.with_held_out(list(holdout))
+        theta = free_set(base.parameters(), list(free) if free is not None else None).free_names
+        if not theta:
+            raise GapError(f"model {name!r} has no free parameter: nothing to calibrate before diagnosing "
+                           "(mark some free in the model file, or name them with --free)")
+        if not len(observations.fitted()):
+            raise GapError("session: every protocol is held out; the calibration needs fitted protocols")
+        cands = check_effects(kind, present, list(effects) if effects is not None else None)
+        _check_channels(base, observations)
+        held = observations.held_out()
+        say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
+        r0 = fit(base, observations, theta)
+        state0 = _state(base, r0, observations, held)
+    finally:
+        _close(base)
+    n_forward = r0.n_forward + 1
+    messages: list[str] = []
+    rounds: list[dict[str, Any]] = []
+    named: list[str] = []
+    tables: list[dict[str, Any]] = []
+    separation: list[dict[str, Any]] = []
+    current, theta_r = state0, list(theta)
+    gap0: dict[str, Any] = {}
+    first_candidates: list[EffectScore] = []
+    loc0 = None
+    remaining = list(cands)
+    for rnd in range(max(max_effects, 1)):
+        k = current["k"]
+        say(f"round {rnd + 1}: locating the residual (χ²/ν {current['chi2'] / current['dof']:.4g})")
+        loc = locate(observations, current["prediction"], n_params=k, alpha=alpha)
+        if loc0 is None:
+            loc0 = loc
+        values = _values(current["result"])
+        spec_r = with_effects(spec, tables)
+        entry: dict[str, Any] = {"round": rnd + 1, "model_effects": present + [t["name"] for t in tables],
+                                 "chi2_per_dof": current["chi2"] / current["dof"],
+                                 "gap_significant": bool(loc.significant), "candidates": [], "named": None}
+        if not remaining:
+            rounds.append(entry)
+            break
+        sens = collect(spec_r, observations, values, theta_r, remaining, load=loader, progress=say)
+        n_forward += sens.n_forward
+        from skinkit.gap.score import score_all
+        tests = score_all(sens)
+        ok = corrected(tests, alpha)
+        top = [t for t in tests if ok[t.effect]][:candidates]
+        seps = separability(sens, tests, alpha, [t.effect for t in top])
+        states: dict[str, dict[str, Any]] = {}
+        if max_effects > 0:
+            for t in top:
+                try:
+                    states[t.effect] = _refit(spec, tables, observations, held, values, theta_r, t, sens,
+                                              load=loader, say=say)
+                    n_forward += states[t.effect]["result"].n_forward + 1
+                except SkinkitError as exc:
+                    say(f"refit with {t.effect} failed: {exc}")
+                    entry.setdefault("refit_failures", {})[t.effect] = str(exc)
+        records = [_candidate(t, ok[t.effect], states.get(t.effect), current) for t in tests]
+        for sp in seps:
+            a, b = sp["effects"]
+            if sp["separable"]:
+                continue
+            for c in records:
+                if c.effect == a:
+                    c.not_separable_from.append(b)
+                elif c.effect == b:
+                    c.not_separable_from.append(a)
+            say(f"{a} and {b} leave nearly the same signature (|cos| {sp['cosine']:.3f}): ranking protocols")
+            best = separating_protocol(spec_r, observations, values, theta_r, sens, tests, (a, b),
+                                       load=loader, progress=say)
+            sp_out = {"effects": [a, b], "cosine": sp["cosine"], "round": rnd + 1}
+            if best is not None:
+                sp_out.update({"protocol": best["protocol"], "cosine_after": best["cosine"],
+                               "ranking": best["ranking"][:5]})
+            separation.append(sp_out)
+        if rnd == 0:
+            first_candidates = records
+        entry["candidates"] = [c.to_dict() for c in records]
+        entry["skipped"] = sens.skipped
+        entry["notes"] = sens.notes
+        reasons = {}
+        winner = None
+        # a gap: the residual as a whole, or one of its cells, or along a candidate's signature
+        # (the score test is the more powerful test against that alternative); each at level alpha
+        directed = [t.effect for t in tests if ok[t.effect]]
+        gap_sig = bool(loc.significant or any(c.significant for c in loc.cells) or directed)
+        entry["gap_significant"] = gap_sig
+        entry["directed"] = directed
+        if rnd == 0:
+            gap0 = {"significant": gap_sig, "omnibus_significant": bool(loc.significant),
+                    "directed": directed}
+        if gap_sig:
+            for c in records:
+                if c.effect not in states:
+                    continue
+                good, why = _qualifies(c, states[c.effect], current)
+                if not good:
+                    reasons[c.effect] = why
+                elif winner is None or c.delta_aic < winner.delta_aic:
+                    winner = c
+        entry["not_named"] = reasons
+        rounds.append(entry)
+        if winner is None or len(named) >= max_effects:
+            break
+        st = states[winner.effect]
+        named.append(winner.effect)
+        entry["named"] = winner.effect
+        tables.append(st["table"])
+        theta_r = theta_r + st["added"]
+        current = st
+        remaining = [e for e in remaining if e != winner.effect]
+        if len(named) >= max_effects:
+            rounds.append({"round": rnd + 2, "model_effects": present + [t["name"] for t in tables],
+                           "chi2_per_dof": current["chi2"] / current["dof"], "candidates": [], "named": None,
+                           "note": f"--max-effects {max_effects} reached"})
+            break
+    # how far: the calibrated model against the final one
+    final = current
+    cells_before = [(c.axis, c.label) for c in loc0.cells]
+    after = cell_chi2(observations, final["prediction"], cells_before, n_params=final["k"]) if named else {}
+    shrink_cells = []
+    for c in loc0.cells:
+        a2, d2 = after.get((c.axis, c.label), (c.chi2, c.dof))
+        row = {"axis": c.axis, "label": c.label, "before": c.chi2_per_dof,
+               "after": a2 / d2 if d2 > 0 else None,
+               "shrinkage": _fraction(c.chi2 - c.dof, a2 - d2) if named else 0.0}
+        shrink_cells.append(row)
+    overall = _fraction(state0["chi2"] - state0["dof"], final["chi2"] - final["dof"]) if named else 0.0
+    held_out = None
+    if state0["held_n"]:
+        held_out = _fraction(state0["held_chi2"] - state0["held_n"], final["held_chi2"] - final["held_n"]) \
+            if named else 0.0
+    loc_after = locate(observations, final["prediction"], n_params=final["k"], alpha=alpha) if named else None
+    messages = _messages(loc0, gap0, first_candidates, named, overall, separation, rounds, state0)
+    fit_d = {"parameters": {n: float(r0.parameters[n]) for n in theta}, "chi2_per_dof": r0.chi2_per_dof,
+             "n_forward": r0.n_forward, "se": {n: _num(r0.se.get(n)) for n in theta}, "aic": r0.aic,
+             "held_out": r0.held_out, "converged": r0.converged, "free": list(theta)}
+    extra = {"points": _points(observations),
+             "point_map_after": {} if loc_after is None else
+             {k: [_num(x) for x in v] for k, v in loc_after.point_map.items()},
+             "separation": separation, "rounds": rounds, "messages": messages,
+             "effects_tested": list(cands), "alpha": alpha,
+             "chi2": {"before": state0["chi2"], "after": final["chi2"], "dof_before": state0["dof"],
+                      "dof_after": final["dof"], "held_out_before": state0["held_chi2"],
+                      "held_out_after": final["held_chi2"], "held_out_samples": state0["held_n"]},
+             "final_parameters": {n: float(final["result"].parameters[n]) for n in theta_r},
+             "effects_model": [dict(t) for t in tables],
+             "n_forward": n_forward, "wall_s": time.perf_counter() - t0}
+    gap_d = _gap_dict(loc0)
+    gap_d.update(gap0 or {"significant": bool(loc0.significant),
+                          "omnibus_significant": bool(loc0.significant), "directed": []})
+    return GapReport(name, source, fit=fit_d, gap=gap_d, candidates=first_candidates, named=named,
+                     shrinkage={"overall": overall, "held_out": held_out, "cells": shrink_cells}, extra=extra)
+
+
+def _num(x: Any) -> float | None:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _messages(loc: Any, gap: Mapping[str, Any], cands: Sequence[EffectScore], named: Sequence[str],
+              overall: float | None, separation: Sequence[dict[str, Any]], rounds: Sequence[dict[str, Any]],
+              state0: dict[str, Any]) -> list[str]:
+    """The verdict in plain sentences."""
+    out = []
+    cpd = state0["chi2"] / state0["dof"]
+    if not gap.get("significant", loc.significant):
+        out.append(f"No significant gap: χ²/ν {cpd:.3g} is at the noise level; no effect named.")
+        return out
+    if not gap.get("omnibus_significant", True) and not any(c.significant for c in loc.cells):
+        top = next((c for c in cands if c.effect in gap.get("directed", [])), None)
+        out.append(f"No gap in the residual as a whole (χ²/ν {cpd:.3g} is within the noise), but the "
+                   f"score test finds one along {top.effect if top else 'a candidate'}'s signature"
+                   + (f" (LM {top.score:.3g}, p {top.p_value:.2g})." if top else "."))
+    ranked = loc.ranked()
+    where = []
+    for axis in ("protocol", "channel", "phase", "region", "frequency"):
+        cells = [c for c in ranked if c.axis == axis][:2]
+        if cells:
+            where.append(", ".join(f"{c.label} ({100 * c.share:.0f} % of the excess)" for c in cells))
+    if gap.get("omnibus_significant", True) or ranked:
+        located = f"; located in {'; '.join(where)}." if where else "."
+        out.append(f"Significant gap: χ²/ν {cpd:.3g}{located}")
+    if cands:
+        top = cands[0]
+        out.append(f"Best candidate by score: {top.effect} (LM {top.score:.3g}, q {top.dof}).")
+    for e in named:
+        c = next((c for r in rounds for c in r["candidates"] if c["effect"] == e and c.get("refitted")), None)
+        if c is None:
+            continue
+        pars = ", ".join(f"{n} = {v['value']:.4g}" + (f" ± {1.96 * v['se']:.2g}" if v.get("se") else "")
+                         + f" {v.get('unit', '')}".rstrip() for n, v in (c.get("parameters") or {}).items())
+        shr = (f"shrinkage {100 * c['shrinkage']:.0f} % of the excess" if c["shrinkage"] is not None
+               else "no excess above the noise as a whole to shrink")
+        out.append(f"`{e}` named: ΔAIC {c['delta_aic']:.1f}, {shr} ({pars}).")
+    if named and overall is not None:
+        out.append(f"With {', '.join(named)} the excess residual shrinks by {100 * overall:.0f} %.")
+    if not named:
+        refitted = [c for c in cands if c.refitted]
+        if not refitted:
+            out.append("No installed effect's score test is significant: the gap is not explained by any "
+                       "candidate effect.")
+        else:
+            out.append("No effect named: " + "; ".join(
+                f"{r['not_named'][e]} ({e})" for r in rounds[:1] for e in r.get("not_named", {})) + ".")
+    for sp in separation:
+        a, b = sp["effects"]
+        if "protocol" in sp:
+            out.append(f"{a} and {b} are not separable on these protocols (|cos| {sp['cosine']:.3f}); "
+                       f"{sp['protocol']} would separate them best (|cos| {sp['cosine_after']:.3f}).")
+        else:
+            out.append(f"{a} and {b} are not separable on these protocols (|cos| {sp['cosine']:.3f}).")
+    return out
+
+
+def write_report(report: GapReport, out_dir: str | os.PathLike[str]) -> list[Path]:
+    """``gap.json`` (and ``gap.html`` when :mod:`skinkit.gap.html` is installed) in ``out_dir``."""
+    import json
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    d = report.to_dict()
+    path = out / "gap.json"
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(d, indent=2, allow_nan=False))
+    os.replace(tmp, path)
+    written = [path]
+    try:
+        from skinkit.gap.html import write_html
+    except ImportError:
+        return written
+    written.append(Path(write_html(d, out / "gap.html") or out / "gap.html"))
+    return written
+
+
+__all__ = ["AIC_MARGIN", "GapError", "check_effects", "diagnose", "write_report"]

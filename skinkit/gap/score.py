@@ -1,0 +1,535 @@
+"""Which unmodelled effect: score (Lagrange-multiplier) tests at every candidate's null (issue 11, step 2).
+
+The calibrated model is loaded once more with every candidate effect added at its **null** value
+(where the model with the effect *is* the model without it: same predictions, to rounding) and
+predicted **once**, with sensitivities to the fitted parameters θ and to every effect parameter e.
+In the fit's residual space (``Objective.residual``: z = whiten((y − Y)/σ), so Σz² is the fit's
+χ²) that gives z, J_θ and J_e. With the fitted directions projected out,
+J_e⊥ = (I − P_θ) J_e, the score statistic of effect e is
+
+    LM_e = zᵀ J_e⊥ (J_e⊥ᵀ J_e⊥)⁺ J_e⊥ᵀ z,
+
+the drop of Σz² that adding e would bring to first order, and under "e is absent" (z white,
+unit variance, e's null inside the admissible range) LM_e ~ χ²_q with q the rank of J_e⊥
+(Rao's score test; Engle 1984, "Wald, likelihood ratio and Lagrange multiplier tests"). No refit.
+
+Three refinements the effects need:
+
+* **One-sided nulls.** A null on a bound (a relaxation fraction g ≥ 0, a softening ≥ 0, a
+  compliance ≥ 0, a slip ratio ≤ 1) admits moves one way only. The step δ that minimises
+  ‖z + J_e⊥ δ‖² is then sought with those components of δ kept admissible (an exact small
+  quadratic programme over the active sets); the statistic is the drop it achieves, zero when
+  the residual points out of the admissible range (the effect cannot explain it: p = 1). One
+  constrained parameter: the null distribution is the mixture ½χ²₀ + ½χ²₁ (Chernoff 1954;
+  Self & Liang 1987), so p = ½ P(χ²₁ > LM); several: χ²_q, conservative.
+* **Parameters without a signature at the null.** A relaxation time when the relaxation fraction
+  is 0, an inclusion's position when its stiffness ratio is 1, an in-plane force offset the model
+  does not predict: ∂z/∂e = 0 there. They are held at their null for the test (nuisance
+  parameters identified only jointly with the others; Davies 1977) and freed in the refit once
+  the effect is switched on. If *every* parameter of an effect is flat at the null (a quadratic
+  onset), its sensitivity is a **secant** to a quarter of its typical magnitude (one more
+  prediction per parameter, without sensitivities), and the candidate record says so.
+* **Absorbed directions.** A column of J_e that lies in span(J_θ) (an offset the model already
+  fits) is indistinguishable from the fitted parameters: it is dropped and named.
+
+**Separability.** Two effects leave "nearly the same signature" when the residual parts they
+explain, s_e = J_e⊥ δ_e, have |cos| > :data:`COS_NOT_SEPARABLE`; they are then *not separable*
+unless the data still tell them apart: the conditional score test of each given the other
+(project out J_θ and the other effect's columns) is significant for at least one of them.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from skinkit import registry
+from skinkit.errors import SkinkitError
+from skinkit.schemas import Observations, Prediction
+
+#: a parameter whose linearised effect over its whole typical magnitude moves the residual
+#: vector by less than this (in noise units, ‖J_j‖·|typical − null|) has no signature there
+FLAT = 1e-3
+#: a column keeping less than this fraction of its length once the fitted directions are
+#: projected out lies in their span (numerical sensitivities are accurate to ~1e-6 relative)
+ABSORBED = 1e-4
+#: singular values (of unit columns) below this are rank deficiency
+RANK_TOL = 1e-6
+#: a secant's step, as a fraction of the way from the null to the typical magnitude
+SECANT_STEP = 0.25
+#: |cos| between two effects' explained signatures above which they "look the same"
+COS_NOT_SEPARABLE = 0.9
+
+
+# ----------------------------------------------------------------------------------- columns
+@dataclass
+class EffectColumns:
+    """One effect's sensitivities at its null in the fit's residual space.
+
+    Attributes:
+        effect: the effect's name.
+        names: the tested parameters (model names ``"<effect>.<local>"``).
+        J: ``(m, q)`` ∂z/∂e [1 per SI unit] (analytic, complex-step or secant).
+        methods: name -> how its column was obtained.
+        sides: ``(q,)`` +1 where only increases from the null are admissible, −1 only
+            decreases, 0 both.
+        null: name -> null value [SI]; typical: name -> the plugin's typical magnitude [SI].
+        held: parameters held at their null for the test, name -> why.
+        bounds: name -> (lower, upper) admissible [SI], for every parameter of the effect.
+    """
+
+    effect: str
+    names: list[str]
+    J: np.ndarray
+    methods: dict[str, str]
+    sides: np.ndarray
+    null: dict[str, float]
+    typical: dict[str, float]
+    held: dict[str, str] = field(default_factory=dict)
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass
+class Sensitivities:
+    """What one round of the score step measured: z and J_θ of the calibrated model, the
+    columns of every candidate, the candidates that could not be added, and the cost."""
+
+    z: np.ndarray
+    J_theta: np.ndarray
+    theta: list[str]
+    columns: dict[str, EffectColumns]
+    skipped: dict[str, str]
+    prediction: Prediction
+    n_forward: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+def effect_table(name: str, values: Mapping[str, float] | None = None) -> dict[str, Any]:
+    """An ``[[effects]]`` table for effect ``name``: its parameters from ``values`` (model names
+    ``"<name>.<local>"`` -> SI), the others at their null."""
+    out: dict[str, Any] = {"name": name}
+    for k, v in (values or {}).items():
+        head, _, local = k.partition(".")
+        if head == name and local:
+            out[local] = float(v)
+    return out
+
+
+def with_effects(spec: Mapping[str, Any], tables: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """A copy of the description ``spec`` with the ``[[effects]]`` ``tables`` appended."""
+    out = copy.deepcopy(dict(spec))
+    out["effects"] = list(out.get("effects") or []) + [dict(t) for t in tables]
+    return out
+
+
+def _declared(name: str) -> tuple[dict[str, Any], dict[str, float]]:
+    plugin = registry.create("skinkit.effects", name)
+    declared = {p.name: p for p in plugin.parameters()}
+    null = {k: float(dict(plugin.null()).get(k, d.value)) for k, d in declared.items()}
+    return declared, null
+
+
+def _only(pred: Prediction, names: Sequence[str]) -> Prediction:
+    keep = set(names)
+    return Prediction({p: c for p, c in pred.protocols.items() if p in keep}, pred.methods, pred.inputs,
+                      pred.info)
+
+
+def _close(model: Any) -> None:
+    if model is not None and hasattr(model, "close"):
+        model.close()
+
+
+def _load_group(spec: Mapping[str, Any], effects: Sequence[str], load: Callable[..., Any]) -> Any:
+    return load(with_effects(spec, [{"name": e} for e in effects]))
+
+
+def collect(spec: Mapping[str, Any], observations: Observations, values: Mapping[str, float],
+            theta: Sequence[str], effects: Sequence[str], *, load: Callable[..., Any],
+            progress: Callable[[str], None] | None = None) -> Sensitivities:
+    """Sensitivities of the calibrated model ``spec`` (at ``values``: name -> SI, the fitted
+    ones) to ``theta`` and to every effect of ``effects`` at its null, on the fitted protocols
+    of ``observations``. ``load(spec)`` builds a forward model (workers bound by the caller).
+
+    All candidates go into one model and one prediction; if the combination is refused (two
+    effects editing the same thing), each effect is first tried alone (those refused alone
+    are skipped with the reason), then the rest together, then one model per effect.
+    """
+    from skinkit.inverse.objective import Objective
+
+    say = progress or (lambda _m: None)
+    fitted = observations.fitted()
+    skipped: dict[str, str] = {}
+    groups: list[list[str]] = [list(effects)] if effects else [[]]
+    n_forward = 0
+    notes: list[str] = []
+
+    def run(group: list[str]) -> tuple[Any, Prediction, list[str]]:
+        model = _load_group(spec, group, load)
+        try:
+            ps = model.parameters()
+            ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
+            names = list(theta) + [n for e in group for n in ps.names if n.startswith(e + ".")]
+            pred = model.predict(ps, fitted, sensitivities=names)
+            return model, pred, names
+        except BaseException:
+            _close(model)
+            raise
+
+    results: list[tuple[list[str], Any, Prediction, list[str]]] = []
+    say(f"score step: one prediction with {len(theta)} fitted and the candidate effects' sensitivities"
+        f" ({len(effects)} effect(s))")
+    try:
+        model, pred, names = run(groups[0])
+        n_forward += 1
+        results.append((groups[0], model, pred, names))
+    except SkinkitError as exc:
+        notes.append(f"the candidates together were refused ({exc}); tried one by one")
+        good = []
+        for e in effects:
+            try:
+                _close(_load_group(spec, [e], load))
+                good.append(e)
+            except SkinkitError as exc1:
+                skipped[e] = str(exc1)
+        try:
+            if good:
+                model, pred, names = run(good)
+                n_forward += 1
+                results.append((good, model, pred, names))
+        except SkinkitError:
+            for e in good:
+                say(f"score step: {e} alone")
+                try:
+                    model, pred, names = run([e])
+                    n_forward += 1
+                    results.append(([e], model, pred, names))
+                except SkinkitError as exc2:
+                    skipped[e] = str(exc2)
+    if not results:
+        # nothing could be added: the calibrated model alone, for z and J_θ
+        model, pred, names = run([])
+        n_forward += 1
+        results.append(([], model, pred, names))
+    columns: dict[str, EffectColumns] = {}
+    z0 = J_theta = None
+    try:
+        for group, model, pred, names in results:
+            obj = Objective(model, fitted, names, "noise")
+            res = obj.residual(_only(pred, fitted.names))
+            k = len(theta)
+            if z0 is None:
+                z0, J_theta = res.z, res.J[:, :k]
+                base_pred = pred
+            for e in group:
+                idx = [i for i, n in enumerate(names) if n.startswith(e + ".")]
+                cols, extra = _classify(e, [names[i] for i in idx], res.J[:, idx], pred.methods)
+                if extra:   # every parameter flat at the null: secants
+                    cols, n_sec = _secants(cols, extra, model, fitted, values, res.z, say)
+                    n_forward += n_sec
+                columns[e] = cols
+    finally:
+        for _, model, _, _ in results:
+            _close(model)
+    return Sensitivities(z0, J_theta, list(theta), columns, skipped, base_pred, n_forward, notes)
+
+
+def _classify(effect: str, names: list[str], J: np.ndarray, methods: Mapping[str, str]
+              ) -> tuple[EffectColumns, list[str]]:
+    """Columns with a signature at the null, held ones, and (second) the parameters needing a
+    secant (all of them when none has a signature)."""
+    declared, null = _declared(effect)
+    typical = {f"{effect}.{k}": float(d.value) for k, d in declared.items()}
+    nul = {f"{effect}.{k}": v for k, v in null.items()}
+    bounds = {f"{effect}.{k}": (float(d.lower), float(d.upper)) for k, d in declared.items()}
+    size = {n: abs(typical[n] - nul[n]) or abs(typical[n]) or 1.0 for n in names}
+    signal = {n: float(np.linalg.norm(J[:, i])) * size[n] for i, n in enumerate(names)}
+    seen = [n for n in names if signal[n] > FLAT]
+    held = {}
+    secant = []
+    if not seen:
+        secant = [n for n in names if typical[n] != nul[n]]
+        held = {n: "no signature at the null, and its typical value is its null" for n in names
+                if n not in secant}
+    else:
+        held = {n: "no signature at the null (identified only with the effect switched on)" for n in names
+                if n not in seen}
+    keep = [names.index(n) for n in seen]
+    sides = np.array([_side(nul[n], *bounds[n]) for n in seen], dtype=float)
+    cols = EffectColumns(effect, seen, J[:, keep], {n: methods.get(n, "analytic") for n in seen}, sides,
+                         nul, typical, held, bounds)
+    return cols, secant
+
+
+def _side(null: float, lower: float, upper: float) -> int:
+    if null <= lower:
+        return 1
+    if null >= upper:
+        return -1
+    return 0
+
+
+def _secants(cols: EffectColumns, names: list[str], model: Any, fitted: Observations,
+             values: Mapping[str, float], z0: np.ndarray, say: Callable[[str], None]
+             ) -> tuple[EffectColumns, int]:
+    """Secant columns (z(null + h) − z(null))/h for ``names``, h a :data:`SECANT_STEP` of the way
+    to the typical magnitude; those still without a signature stay held."""
+    from skinkit.inverse.objective import Objective
+
+    seen, Js, sides, n_forward = [], [], [], 0
+    ps = model.parameters()
+    ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
+    for n in names:
+        h = SECANT_STEP * (cols.typical[n] - cols.null[n])
+        say(f"score step: {n} is flat at its null; secant to {cols.null[n] + h:g}")
+        try:
+            pred = model.predict(ps.with_values({n: cols.null[n] + h}), fitted, sensitivities=False)
+            n_forward += 1
+            z = Objective(model, fitted, [], "noise").residual(_only(pred, fitted.names), jacobian=False).z
+        except SkinkitError as exc:
+            cols.held[n] = f"flat at the null and not solvable a step away ({exc})"
+            continue
+        if z.shape != z0.shape:
+            cols.held[n] = "flat at the null; a step away predicts other samples"
+            continue
+        col = (z - z0) / h
+        if np.linalg.norm(col) * abs(cols.typical[n] - cols.null[n]) <= FLAT:
+            cols.held[n] = "no signature on these protocols, at the null or a step away"
+            continue
+        seen.append(n)
+        Js.append(col)
+        sides.append(_side(cols.null[n], *cols.bounds[n]))
+        cols.methods[n] = f"secant ({SECANT_STEP:g} of the typical magnitude)"
+    J = np.stack(Js, axis=1) if Js else np.zeros((z0.size, 0))
+    return EffectColumns(cols.effect, seen, J, cols.methods, np.array(sides, float), cols.null, cols.typical,
+                         cols.held, cols.bounds), n_forward
+
+
+# ------------------------------------------------------------------------------------- tests
+def fitted_basis(J_theta: np.ndarray) -> np.ndarray:
+    """``(m, r)`` orthonormal basis of span(J_θ) (columns normalised first: SI units differ)."""
+    m = J_theta.shape[0]
+    if J_theta.shape[1] == 0:
+        return np.zeros((m, 0))
+    nrm = np.linalg.norm(J_theta, axis=0)
+    A = J_theta[:, nrm > 0] / nrm[nrm > 0]
+    if A.shape[1] == 0:
+        return np.zeros((m, 0))
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    return U[:, s > RANK_TOL * s.max()]
+
+
+def _project(U: np.ndarray, J: np.ndarray) -> np.ndarray:
+    return J - U @ (U.T @ J) if U.shape[1] else J.copy()
+
+
+@dataclass
+class ScoreTest:
+    """The score test of one effect.
+
+    Attributes:
+        effect: its name. statistic: LM [1]. dof: q, the rank of its projected signature.
+        p_value: upper tail (½χ²₁ for one constrained parameter, else χ²_q); log_p its log.
+        step: name -> the linearised step from the null that explains most of the residual [SI].
+        signature: ``(m,)`` J_e⊥ δ: the residual part the effect explains (−z's projection).
+        tested, held, absorbed, methods: which parameters entered, which were held at the null
+            (and why), which lie in the fitted parameters' span, how each column was obtained.
+        one_sided: some tested parameter has its null on a bound.
+    """
+
+    effect: str
+    statistic: float
+    dof: int
+    p_value: float
+    log_p: float
+    step: dict[str, float]
+    signature: np.ndarray
+    tested: list[str]
+    held: dict[str, str]
+    absorbed: list[str]
+    methods: dict[str, str]
+    one_sided: bool
+
+    def record(self) -> dict[str, Any]:
+        """JSON-ready facts for the candidate record (no arrays)."""
+        return {"log10_p": self.log_p / math.log(10), "tested": self.tested, "held": self.held,
+                "absorbed": self.absorbed, "sensitivity": self.methods, "one_sided": self.one_sided,
+                "step": self.step}
+
+
+def _qp(G: np.ndarray, g: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """argmin ½δᵀGδ − gᵀδ with δ_i·side_i ≥ 0 where side_i ≠ 0: every active set is tried
+    (q is a handful); rank-deficient blocks through the pseudo-inverse."""
+    q = g.size
+    cons = [i for i in range(q) if sides[i] != 0]
+    best, best_val = np.zeros(q), 0.0
+    for k in range(len(cons) + 1):
+        for fixed in itertools.combinations(cons, k):
+            free = [i for i in range(q) if i not in fixed]
+            d = np.zeros(q)
+            if free:
+                d[free] = np.linalg.pinv(G[np.ix_(free, free)], rcond=RANK_TOL) @ g[free]
+            if any(d[i] * sides[i] < -1e-12 * (abs(d[i]) + 1) for i in cons):
+                continue
+            val = 0.5 * d @ G @ d - g @ d
+            if val < best_val - 1e-12 * abs(best_val):
+                best, best_val = d, val
+    return best
+
+
+def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns) -> ScoreTest:
+    """The score test of ``cols`` against the residual ``z`` with span ``U`` projected out."""
+    Jp = _project(U, cols.J)
+    raw = np.linalg.norm(cols.J, axis=0)
+    nrm = np.linalg.norm(Jp, axis=0)
+    keep = [i for i in range(len(cols.names)) if raw[i] > 0 and nrm[i] > ABSORBED * raw[i]]
+    absorbed = [cols.names[i] for i in range(len(cols.names)) if i not in keep]
+    tested = [cols.names[i] for i in keep]
+    if not keep:
+        return ScoreTest(cols.effect, 0.0, 0, 1.0, 0.0, {}, np.zeros(z.size), [], dict(cols.held), absorbed,
+                         dict(cols.methods), False)
+    A = Jp[:, keep] / nrm[keep]
+    sides = cols.sides[keep]
+    G = A.T @ A
+    g = -(A.T @ z)
+    s = np.linalg.svd(G, compute_uv=False)
+    q = int(np.sum(np.sqrt(np.maximum(s, 0)) > RANK_TOL))
+    d = _qp(G, g, sides)
+    lm = max(float(2 * g @ d - d @ G @ d), 0.0)
+    one_sided = bool(np.any(sides != 0))
+    if one_sided and q == 1:
+        # Chernoff: ½χ²₀ + ½χ²₁; an explanation outside the admissible range has LM = 0, p = 1
+        p = 0.5 * float(stats.chi2.sf(lm, 1)) if lm > 0 else 1.0
+        logp = math.log(0.5) + float(stats.chi2.logsf(lm, 1)) if lm > 0 else 0.0
+    else:
+        p = float(stats.chi2.sf(lm, max(q, 1))) if q else 1.0
+        logp = float(stats.chi2.logsf(lm, max(q, 1))) if q else 0.0
+    step = {n: float(d[j] / nrm[keep[j]]) for j, n in enumerate(tested)}
+    return ScoreTest(cols.effect, lm, q, min(max(p, 0.0), 1.0), min(logp, 0.0), step, A @ d, tested,
+                     dict(cols.held), absorbed, {n: cols.methods[n] for n in tested}, one_sided)
+
+
+def score_all(sens: Sensitivities) -> list[ScoreTest]:
+    """Every candidate's score test, most significant first (by log p, then the statistic)."""
+    U = fitted_basis(sens.J_theta)
+    out = [score_test(sens.z, U, c) for c in sens.columns.values()]
+    return sorted(out, key=lambda t: (t.log_p, -t.statistic))
+
+
+def corrected(tests: Sequence[ScoreTest], alpha: float) -> dict[str, bool]:
+    """Effect -> whether its score test survives the Bonferroni correction over the K effects
+    that could be tested (those with a signature): p·K < alpha, in logs (p underflows)."""
+    K = max(sum(1 for t in tests if t.dof > 0), 1)
+    return {t.effect: t.dof > 0 and t.statistic > 0 and t.log_p + math.log(K) < math.log(alpha)
+            for t in tests}
+
+
+def cosine(a: np.ndarray, b: np.ndarray) -> float | None:
+    """|cos| of the angle between two signatures (None if either is zero)."""
+    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+    if na == 0 or nb == 0:
+        return None
+    return abs(float(a @ b)) / (na * nb)
+
+
+def conditional_test(sens: Sensitivities, a: str, given: str) -> ScoreTest:
+    """The score test of effect ``a`` with J_θ *and* effect ``given``'s columns projected out:
+    what ``a`` explains that ``given`` cannot."""
+    J = np.hstack([sens.J_theta, sens.columns[given].J])
+    return score_test(sens.z, fitted_basis(J), sens.columns[a])
+
+
+def separability(sens: Sensitivities, tests: Sequence[ScoreTest], alpha: float,
+                 effects: Sequence[str] | None = None) -> list[dict[str, Any]]:
+    """Pairs of effects with |cos| of their explained signatures above :data:`COS_NOT_SEPARABLE`,
+    each with ``cosine``, the conditional tests' ``p_value`` both ways (``a_given_b``,
+    ``b_given_a``) and ``separable`` (True when either survives the correction over the K
+    tested effects). ``effects``: restrict pairs to those involving these."""
+    by = {t.effect: t for t in tests}
+    K = max(sum(1 for t in tests if t.dof > 0), 1)
+    out = []
+    names = [t.effect for t in tests if t.dof > 0 and t.statistic > 0]
+    for a, b in itertools.combinations(names, 2):
+        if effects is not None and a not in effects and b not in effects:
+            continue
+        c = cosine(by[a].signature, by[b].signature)
+        if c is None or c <= COS_NOT_SEPARABLE:
+            continue
+        ab, ba = conditional_test(sens, a, b), conditional_test(sens, b, a)
+        sep = any(t.dof > 0 and t.log_p + math.log(K) < math.log(alpha) for t in (ab, ba))
+        out.append({"effects": [a, b], "cosine": c,
+                    "a_given_b": {"statistic": ab.statistic, "p_value": ab.p_value},
+                    "b_given_a": {"statistic": ba.statistic, "p_value": ba.p_value}, "separable": sep})
+    return out
+
+
+# ----------------------------------------------------------------------- separating protocol
+def separating_protocol(spec: Mapping[str, Any], observations: Observations, values: Mapping[str, float],
+                        theta: Sequence[str], sens: Sensitivities, tests: Sequence[ScoreTest],
+                        pair: Sequence[str], *, load: Callable[..., Any],
+                        candidates: Sequence[str] | None = None,
+                        progress: Callable[[str], None] | None = None) -> dict[str, Any] | None:
+    """The library protocol that would best separate the two effects of ``pair``: for each
+    candidate protocol, the session augmented with it (one prediction with the sensitivities to
+    θ and to both effects), the fitted directions projected out over the augmented session,
+    and |cos| of the two effects' signatures J_e⊥ δ_e with the steps δ_e the session gave.
+    Returns ``{"protocol", "cosine", "ranking": [{"protocol", "cosine"}]}`` (smallest |cos|
+    first), or None when no candidate applies."""
+    from skinkit.inverse.design import _drive_with, candidate_observations, default_candidates
+    from skinkit.inverse.objective import Objective
+
+    say = progress or (lambda _m: None)
+    by = {t.effect: t for t in tests}
+    a, b = pair
+    names_ab = by[a].tested + by[b].tested
+    names = list(theta) + names_ab
+    model = _load_group(spec, [a, b], load)
+    rows = []
+    try:
+        ps = model.parameters()
+        ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
+        cands = list(candidates) if candidates is not None else default_candidates(model)
+        # the session's own rows: z-space columns already measured
+        col = {n: sens.columns[e].J[:, sens.columns[e].names.index(n)] for e in (a, b)
+               for n in by[e].tested}
+        base_rows = np.hstack([sens.J_theta, np.stack([col[n] for n in names_ab], axis=1)])
+        for i, c in enumerate(cands, 1):
+            if c in observations.names:
+                continue
+            say(f"separating {a} from {b}: candidate {i}/{len(cands)} {c}")
+            try:
+                obs_c, drive = candidate_observations(model, observations, c)
+                obs_c = _drive_with(model, ps, obs_c, drive)
+                pred = model.predict(ps, obs_c, sensitivities=names)
+                res = Objective(model, obs_c, names, "noise").residual(pred)
+            except SkinkitError:
+                continue
+            J = np.vstack([base_rows, res.J])
+            k = len(theta)
+            U = fitted_basis(J[:, :k])
+            sig = {}
+            for e in (a, b):
+                idx = [k + names_ab.index(n) for n in by[e].tested]
+                d = np.array([by[e].step[n] for n in by[e].tested])
+                sig[e] = _project(U, J[:, idx]) @ d
+            cs = cosine(sig[a], sig[b])
+            if cs is not None:
+                rows.append({"protocol": c, "cosine": cs})
+    finally:
+        _close(model)
+    if not rows:
+        return None
+    rows.sort(key=lambda r: r["cosine"])
+    return {"protocol": rows[0]["protocol"], "cosine": rows[0]["cosine"], "ranking": rows}
+
+
+__all__ = ["COS_NOT_SEPARABLE", "EffectColumns", "ScoreTest", "Sensitivities", "collect", "conditional_test",
+           "corrected", "cosine", "effect_table", "fitted_basis", "score_all", "score_test", "separability",
+           "separating_protocol", "with_effects"]
