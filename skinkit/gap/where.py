@@ -30,6 +30,7 @@ import numpy as np
 from scipy import stats
 
 from skinkit.errors import SchemaError
+from skinkit.fem.threads import single_threaded_blas
 from skinkit.inverse.objective import WEIGHTINGS, Objective
 from skinkit.schemas import Channel, Observations, Prediction, ProtocolObservations
 
@@ -166,14 +167,16 @@ def _drive_channel(po: ProtocolObservations, predicted: set[str], declared: str 
     return tips[0] if tips else None
 
 
-def make_drive(ch: Channel, rel_threshold: float = 0.05) -> Drive | None:
+def make_drive(ch: Channel, rel_threshold: float = 0.25) -> Drive | None:
     """The :class:`Drive` of a tip channel ``ch``; None when it does not move.
 
-    Loading / unloading: the magnitude of the smoothed level (moving average over 1 % of the
-    record) grows / shrinks faster than ``rel_threshold`` of its 99th-percentile rate; hold
-    otherwise. Cycles: upward crossings of the level's mid-range (with a hysteresis of 10 % of
-    the range); each cycle after the first starts at the trough before its crossing.
-    Band: the frequencies between 2.5 % and 97.5 % of the cumulative power of the demeaned level.
+    Band: the frequencies between 2.5 % and 97.5 % of the cumulative power of the demeaned
+    level. Loading / unloading: the magnitude of the level, smoothed by a moving average over
+    1/20 of the band's upper period (5 samples at least), grows / shrinks faster than both
+    ``rel_threshold`` of its 99th-percentile rate and five standard deviations of the rate's
+    noise (from the level's second differences); hold otherwise. Cycles: upward crossings of the
+    smoothed level's mid-range (hysteresis 10 % of the range); each cycle after the first starts
+    where the level leaves the trough before its crossing; a monotonic record is one cycle.
     """
     from scipy.ndimage import uniform_filter1d
 
@@ -192,30 +195,38 @@ def make_drive(ch: Channel, rel_threshold: float = 0.05) -> Drive | None:
     if not (rng > 0 and dt > 0):
         return None
     T = s.size
-    S = uniform_filter1d(s, max(5, T // 100), mode="nearest")
-    tt = t if np.all(dts > 0) else t[0] + dt * np.arange(T)
-    rate = np.gradient(S, tt)
-    da = np.gradient(np.abs(S), tt)
-    thr = rel_threshold * float(np.percentile(np.abs(da), 99))
-    phase = np.where(da > thr, 0, np.where(da < -thr, 1, 2)).astype(np.int8)
-    # cycles: a Schmitt trigger on the smoothed level
-    mid, hyst = 0.5 * (S.max() + S.min()), 0.1 * rng
-    event = (S > mid + hyst) | (S < mid - hyst)
-    last = np.maximum.accumulate(np.where(event, np.arange(T), -1))
-    high = (last >= 0) & (S[np.maximum(last, 0)] > mid)
-    ups = np.flatnonzero(high[1:] & ~high[:-1]) + 1
-    starts = [int(a + np.argmin(S[a:b])) for a, b in zip(ups[:-1], ups[1:], strict=True)]
-    cycle = np.searchsorted(np.asarray(starts, dtype=int), np.arange(T), side="right")
     # the band holding 95 % of the drive's power
     P = np.abs(np.fft.rfft(s - s.mean())) ** 2
     f = np.fft.rfftfreq(T, dt)
     cum = np.cumsum(P[1:])
-    if cum[-1] > 0:
-        cum = cum / cum[-1]
-        hi = min(int(np.searchsorted(cum, 0.975)), cum.size - 1)
-        band = (float(f[1 + np.searchsorted(cum, 0.025)]), float(f[1 + hi]))
-    else:
-        band = (float(f[1]), float(f[-1]))
+    cum = cum / cum[-1]
+    hi = min(int(np.searchsorted(cum, 0.975)), cum.size - 1)
+    band = (float(f[1 + np.searchsorted(cum, 0.025)]), float(f[1 + hi]))
+    w = int(np.clip(round(0.05 / (band[1] * dt)), 5, max(5, T // 20)))
+    S = uniform_filter1d(s, w, mode="nearest")
+    tt = t if np.all(dts > 0) else t[0] + dt * np.arange(T)
+    hw = max(w // 2, 1)
+    i = np.arange(T)
+    lo_, hi_ = np.maximum(i - hw, 0), np.minimum(i + hw, T - 1)
+    span = tt[hi_] - tt[lo_]
+    rate = (S[hi_] - S[lo_]) / span
+    da = (np.abs(S[hi_]) - np.abs(S[lo_])) / span
+    # noise of the rate: S over adjacent windows of w samples differs by σ√(2/w)
+    sigma = 1.4826 * float(np.median(np.abs(np.diff(s, 2) - np.median(np.diff(s, 2))))) / np.sqrt(6.0)
+    noise_rate = sigma * np.sqrt(2.0 / w) / (2 * hw * dt)
+    thr = max(rel_threshold * float(np.percentile(np.abs(da), 99)), 5.0 * noise_rate)
+    phase = np.where(da > thr, 0, np.where(da < -thr, 1, 2)).astype(np.int8)
+    # cycles: a Schmitt trigger on the smoothed level
+    mid, hyst = 0.5 * (S.max() + S.min()), 0.1 * rng
+    event = (S > mid + hyst) | (S < mid - hyst)
+    last = np.maximum.accumulate(np.where(event, i, -1))
+    high = (last >= 0) & (S[np.maximum(last, 0)] > mid)
+    ups = np.flatnonzero(high[1:] & ~high[:-1]) + 1
+    # a cycle starts where its loading leaves the trough (the last sample within 2 % of the range
+    # of the trough's bottom), so a rest at the bottom ends the cycle before
+    starts = [int(a + np.flatnonzero(S[a:b] <= S[a:b].min() + 0.02 * rng)[-1])
+              for a, b in zip(ups[:-1], ups[1:], strict=True)]
+    cycle = np.searchsorted(np.asarray(starts, dtype=int), i, side="right")
     return Drive(ch.name, t, s, rate, phase, cycle, band)
 
 
@@ -437,18 +448,20 @@ class _Table:
         onpts = np.isfinite(r)
         if not onpts.any():
             return []
-        # band edges at quantiles of the distinct points' radii (each band holds as many points)
-        rp = np.unique(np.round(r[onpts], 7))
-        edges = np.unique(np.round(np.quantile(rp, np.linspace(0, 1, self.radial_bands + 1)), 4))
-        edges[0], edges[-1] = min(edges[0], rp.min()), max(edges[-1], rp.max())
+        # bands of equal width between the nearest and farthest point, edges on 0.1 mm (readable
+        # labels; quantile edges would cut through the rings a regular layout puts points on)
+        lo, hi = float(r[onpts].min()), float(r[onpts].max())
+        edges = np.unique(np.round(np.linspace(lo, hi, self.radial_bands + 1), 4))
+        edges[0], edges[-1] = min(edges[0], lo), max(edges[-1], hi)
         nb = max(edges.size - 1, 1)
         code = np.full(r.size, -1)
-        code[onpts] = np.clip(np.searchsorted(edges, r[onpts], side="right") - 1, 0, nb - 1)
+        code[onpts] = np.clip(np.searchsorted(edges, r[onpts] + 1e-10, side="right") - 1, 0, nb - 1)
         top = edges.size - 1
         labels = [f"r {1e3 * edges[i]:.1f}-{1e3 * edges[min(i + 1, top)]:.1f} mm" for i in range(nb)]
         parts = [self._tally("region", "radius", code, labels)]
         width = 360.0 / self.sectors
-        ang = np.degrees(np.arctan2(ref[:, 1], ref[:, 0])) % 360.0
+        # points on a sector's edge (grids put many there) go to the sector above, consistently
+        ang = (np.degrees(np.arctan2(ref[:, 1], ref[:, 0])) + 1e-7) % 360.0
         sector = np.floor(np.nan_to_num(ang) / width).astype(int) % self.sectors
         code = np.where(onpts & (r > 1e-9), sector, -1)
         labels = [f"sector {i * width:g}-{(i + 1) * width:g} deg" for i in range(self.sectors)]
@@ -597,8 +610,9 @@ def _cross(full: np.ndarray, mask: np.ndarray, ax: int, X: np.ndarray, h: int) -
     Xp = np.vstack([np.zeros((h, R)), X])
     width = R * (h + 1)
     # series sharing a mask share the Gram matrix of their valid rows (tips: one; points: few)
-    patterns, inverse = np.unique(M.T, axis=0, return_inverse=True)
-    inverse = np.ravel(inverse)
+    keys: dict[bytes, int] = {}
+    inverse = np.array([keys.setdefault(c.tobytes(), len(keys)) for c in np.packbits(M, axis=0).T], dtype=int)
+    patterns = [M[:, int(np.argmax(inverse == i))] for i in range(len(keys))]
     Gs = np.zeros((len(patterns), width, width))
     C = np.zeros((width, Z.shape[1]))
     step = 1 << 16
@@ -687,6 +701,13 @@ def locate(observations: Observations, prediction: Prediction, *, n_params: int 
         raise SchemaError("alpha", f"must be in (0, 1), got {alpha!r}")
     if n_params < 0:
         raise SchemaError("n_params", f"must be >= 0, got {n_params!r}")
+    with single_threaded_blas():     # small products: BLAS threads only spin on a shared machine
+        return _locate(observations, prediction, n_params, alpha, protocols, centre, radial_bands, sectors)
+
+
+def _locate(observations: Observations, prediction: Prediction, n_params: int, alpha: float,
+            protocols: Sequence[str] | None, centre: Sequence[float], radial_bands: int,
+            sectors: int) -> GapLocation:
     ss = samples(observations, prediction, protocols=protocols)
     table = _Table(ss, centre, radial_bands, sectors)
     if n_params >= table.N:
