@@ -13,7 +13,11 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from skinkit.errors import PluginError
-from skinkit.protocols import GROUPS, missing_members
+
+#: the plugin groups, in the order of :data:`skinkit.protocols.GROUPS` (which maps each to
+#: its protocol); named here so that listing plugins imports neither the protocols nor numpy
+GROUP_NAMES: tuple[str, ...] = ("skinkit.drivers", "skinkit.trackers", "skinkit.profilers",
+                                "skinkit.laws", "skinkit.optimisers", "skinkit.effects")
 
 
 @dataclass(frozen=True)
@@ -39,9 +43,17 @@ class PluginStatus:
                 "status": self.status, "error": self.error}
 
 
+#: status of a plugin listed from its metadata and not imported
+UNCHECKED = "unchecked"
+
+
+def _known(group: str) -> None:
+    if group not in GROUP_NAMES:
+        raise PluginError(f"unknown plugin group {group!r}; groups are {sorted(GROUP_NAMES)}")
+
+
 def _group(group: str) -> list[EntryPoint]:
-    if group not in GROUPS:
-        raise PluginError(f"unknown plugin group {group!r}; groups are {sorted(GROUPS)}")
+    _known(group)
     return sorted(entry_points(group=group), key=lambda ep: ep.name)
 
 
@@ -53,6 +65,18 @@ def _info(group: str, ep: EntryPoint) -> PluginInfo:
 def available(group: str) -> list[PluginInfo]:
     """Plugins registered under ``group``, without importing them."""
     return [_info(group, ep) for ep in _group(group)]
+
+
+def listing(groups: list[str] | None = None) -> dict[str, list[PluginInfo]]:
+    """Every plugin of ``groups`` (all by default) from entry-point metadata alone: names,
+    targets and distributions, no plugin module imported (one scan of the installed
+    distributions for all groups, so that listing stays fast)."""
+    wanted = groups or list(GROUP_NAMES)
+    for group in wanted:
+        _known(group)
+    eps = entry_points()
+    return {g: [_info(g, ep) for ep in sorted(eps.select(group=g), key=lambda ep: ep.name)]
+            for g in wanted}
 
 
 def names(group: str) -> list[str]:
@@ -87,6 +111,8 @@ def load(group: str, name: str) -> Any:
             f"plugin {name!r} in {group} (from {info.dist}, {info.value}) failed to import: "
             f"{type(exc).__name__}: {exc}"
         ) from exc
+    from skinkit.protocols import GROUPS, missing_members
+
     missing = missing_members(obj, GROUPS[group])
     if missing:
         raise PluginError(
@@ -106,7 +132,7 @@ def create(group: str, name: str, *args: Any, **kwargs: Any) -> Any:
 def report(groups: list[str] | None = None) -> dict[str, list[PluginStatus]]:
     """Load every plugin of ``groups`` (all by default) and report each one's status."""
     out: dict[str, list[PluginStatus]] = {}
-    for group in groups or list(GROUPS):
+    for group in groups or list(GROUP_NAMES):
         statuses = []
         for ep in _group(group):
             info = _info(group, ep)

@@ -42,6 +42,35 @@ class _Entry:
     defaults: dict[str, Any]
     units: dict[str, str]
     build: Callable[[dict[str, Any]], Programme]
+    #: number of setpoints ``build`` makes, without making them (listing stays cheap: the
+    #: stochastic programmes would import scipy.signal and filter 10^5 samples each)
+    length: Callable[[dict[str, Any]], int]
+
+
+def _n(seconds: Any, p: dict[str, Any]) -> int:
+    """Setpoints in ``seconds`` at the programme's rate (the builders' own rounding)."""
+    return int(round(float(seconds) * float(p["setpoint_rate"])))
+
+
+def _sine_length(p: dict[str, Any]) -> int:
+    return _n(float(p["periods"]) / float(p["frequency"]), p) + 1
+
+
+def _precondition_length(p: dict[str, Any]) -> int:
+    return _n(2 * float(p["ramp"]) + float(p["hold"]), p) + 1
+
+
+def _full_scale_length(p: dict[str, Any]) -> int:
+    return _n(p["duration"], p) + 1
+
+
+def _stoch_precondition_length(p: dict[str, Any]) -> int:
+    return _n(3 / 0.5, p) + _n(p["hold"], p) + _n(p["duration"], p) + 1
+
+
+def _incremental_length(p: dict[str, Any]) -> int:
+    return 2 * int(p["increments"]) * (_n(p["increment_duration"], p)
+                                       + _n(p["precondition_duration"], p)) + 1
 
 
 _SINE_UNITS = {
@@ -160,6 +189,7 @@ def _catalogue() -> dict[str, _Entry]:
             {"depth": 2e-3, "hold": 30.0, "ramp": 1.0, "setpoint_rate": 100.0, "camera_rate": 0.0},
             {"depth": "m", "hold": "s", "ramp": "s", "setpoint_rate": "Hz", "camera_rate": "Hz"},
             _precondition,
+            _precondition_length,
         ),
         "normal_indentation": _Entry(
             "trajectory",
@@ -167,6 +197,7 @@ def _catalogue() -> dict[str, _Entry]:
             {"theta": 0.0, "phi": 90.0, **sine},
             _SINE_UNITS,
             _sine,
+            _sine_length,
         ),
     }
     for theta in range(0, 360, 30):
@@ -176,6 +207,7 @@ def _catalogue() -> dict[str, _Entry]:
             {"theta": float(theta), "phi": 0.0, **sine},
             _SINE_UNITS,
             _sine,
+            _sine_length,
         )
     out["normal_retraction"] = _Entry(
         "trajectory",
@@ -183,6 +215,7 @@ def _catalogue() -> dict[str, _Entry]:
         {"theta": 0.0, "phi": -90.0, **sine},
         _SINE_UNITS,
         _sine,
+        _sine_length,
     )
     for theta in (330, 285, 240):
         out[f"out_of_plane_{theta:03d}"] = _Entry(
@@ -191,6 +224,7 @@ def _catalogue() -> dict[str, _Entry]:
             {"theta": float(theta), "phi": 45.0, **sine},
             _SINE_UNITS,
             _sine,
+            _sine_length,
         )
     force = {
         "force_max": 3.5,
@@ -207,6 +241,7 @@ def _catalogue() -> dict[str, _Entry]:
         {**force, "hold": 10.0, "duration": 100.0},
         {**_FORCE_UNITS, "hold": "s"},
         _stoch_precondition,
+        _stoch_precondition_length,
     )
     out["stochastic_full_scale"] = _Entry(
         "force",
@@ -214,6 +249,7 @@ def _catalogue() -> dict[str, _Entry]:
         {**force, "duration": 100.0},
         _FORCE_UNITS,
         _full_scale,
+        _full_scale_length,
     )
     inc = {**force, "increments": 15, "scale": 0.2, "increment_duration": 10.0, "precondition_duration": 2.0}
     inc_units = {
@@ -230,6 +266,7 @@ def _catalogue() -> dict[str, _Entry]:
         inc,
         inc_units,
         _incremental("a"),
+        _incremental_length,
     )
     out["incremental_b"] = _Entry(
         "force",
@@ -237,6 +274,7 @@ def _catalogue() -> dict[str, _Entry]:
         inc,
         inc_units,
         _incremental("b"),
+        _incremental_length,
     )
     return out
 
@@ -249,9 +287,8 @@ def names() -> list[str]:
     return list(_CATALOGUE)
 
 
-def make_protocol(name: str, **parameters: Any) -> Protocol:
-    """The protocol ``name`` with its defaults overridden by ``parameters`` (in the units
-    :func:`describe` lists). Raises :class:`ProtocolError` naming an unknown protocol or parameter."""
+def _resolve(name: str, parameters: dict[str, Any]) -> tuple[_Entry, dict[str, Any]]:
+    """The catalogue entry of ``name`` and its defaults overridden by ``parameters``."""
     entry = _CATALOGUE.get(name)
     if entry is None:
         raise ProtocolError(f"unknown protocol {name!r}; known: {', '.join(_CATALOGUE)}")
@@ -268,6 +305,14 @@ def make_protocol(name: str, **parameters: Any) -> Protocol:
             raise ProtocolError(
                 f"protocol {name!r}: parameter {key!r} must be a number, got {value!r}"
             ) from None
+    return entry, params
+
+
+def make_protocol(name: str, **parameters: Any) -> Protocol:
+    """The protocol ``name`` with its defaults overridden by ``parameters`` (in the units
+    :func:`describe` lists). Raises :class:`ProtocolError` naming an unknown protocol or parameter,
+    or parameters its programme cannot be built from (the programme is built to check)."""
+    entry, params = _resolve(name, parameters)
     proto = Protocol(
         name, kind=entry.kind, parameters=params, units=dict(entry.units), description=entry.description
     )
@@ -300,5 +345,15 @@ def programme(protocol: Protocol) -> Programme:
 
 
 def catalogue() -> list[Protocol]:
-    """Every built-in protocol with its default parameters and planned duration."""
-    return [make_protocol(n) for n in _CATALOGUE]
+    """Every built-in protocol with its default parameters and planned duration [s].
+
+    The durations come from each programme's length rule, not from building the
+    programmes (the defaults are valid, so nothing is left unchecked), which keeps
+    ``skinkit robot protocols`` fast."""
+    out = []
+    for name, entry in _CATALOGUE.items():
+        params = dict(entry.defaults)
+        out.append(Protocol(name, kind=entry.kind, parameters=params, units=dict(entry.units),
+                            duration_s=(entry.length(params) - 1) / float(params["setpoint_rate"]),
+                            description=entry.description))
+    return out

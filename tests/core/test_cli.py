@@ -39,15 +39,16 @@ def test_help_on_every_command():
     assert seen >= 4
 
 
-def test_plugins_json_has_all_groups():
-    res = CliRunner().invoke(cli, ["plugins", "--json"])
+@pytest.mark.parametrize(("args", "statuses"), [([], {"unchecked"}), (["--check"], {"ok", "error"})])
+def test_plugins_json_has_all_groups(args, statuses):
+    res = CliRunner().invoke(cli, ["plugins", "--json", *args])
     assert res.exit_code == 0, res.output
     data = json.loads(res.output)
-    assert set(data["groups"]) == set(GROUPS)
+    assert set(data["groups"]) == set(GROUPS) and data["checked"] == bool(args)
     for entries in data["groups"].values():
         for e in entries:
-            assert set(e) >= {"name", "dist", "status", "error"}
-            assert e["status"] in ("ok", "error")
+            assert set(e) >= {"name", "dist", "value", "status", "error"}
+            assert e["status"] in statuses
 
 
 def test_plugins_table():

@@ -78,8 +78,8 @@ def env(tmp_path_factory):
 
 
 def _plugins_json(python) -> dict:
-    out = subprocess.run([str(python), "-m", "skinkit", "plugins", "--json"], capture_output=True,
-                         text=True, check=True)
+    out = subprocess.run([str(python), "-m", "skinkit", "plugins", "--json", "--check"],
+                         capture_output=True, text=True, check=True)
     return json.loads(out.stdout)
 
 
