@@ -1,0 +1,135 @@
+"""``skinkit bench cli``: how fast the listing commands answer, and how fast the simulated
+robot runs against real time.
+
+``plugins_s`` and ``robot_protocols_s`` are the wall times of ``skinkit plugins`` and
+``skinkit robot protocols`` in a fresh interpreter (a subprocess: start-up and imports are
+what a user waits for), best of ``--repeat``. ``robot_realtime_factor`` is simulated
+seconds per wall second of the ``sim`` driver (skinkit-hardware) running a short normal
+indentation (one 1.5 mm sinusoid of ``--robot-seconds``) after homing, in this process;
+above 1 the simulation runs faster than the robot would. The targets (issue 16) are
+``plugins_s < 1`` and ``robot_realtime_factor >= 1``; the figures depend on the machine's
+load (reported) and on whether Python may cache bytecode (without a cache every start-up
+compiles every module it imports).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from typing import Any
+
+import click
+
+#: targets of issue 16
+PLUGINS_TARGET_S = 1.0
+REALTIME_TARGET = 1.0
+
+
+def command_wall_s(args: list[str], repeat: int = 3) -> float:
+    """Best wall time [s] of ``python -m skinkit ARGS`` in a fresh interpreter over ``repeat``
+    runs (output discarded; a failing command raises :class:`SkinkitError`)."""
+    from skinkit.errors import SkinkitError
+
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-m", "skinkit", *args], capture_output=True,
+                              text=True)
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            tail = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+            raise SkinkitError(f"bench cli: skinkit {' '.join(args)} failed ({tail})")
+        best = min(best, wall)
+    return best
+
+
+def robot_realtime_factor(seconds: float = 2.0, skin: str = "kelvin-voigt") -> dict[str, Any]:
+    """Simulated seconds per wall second of the ``sim`` driver over a ``seconds``-long normal
+    indentation (homing not counted). Returns the factor, the device and wall seconds and the
+    samples, or ``{"skipped": reason}`` without the driver plugin."""
+    from skinkit import registry
+    from skinkit.acquisition import make_protocol
+
+    if "sim" not in registry.names("skinkit.drivers"):
+        return {"skipped": "needs the driver plugin skinkit.drivers:sim (skinkit-hardware)"}
+    driver = registry.create("skinkit.drivers", "sim")
+    driver.connect(skin=skin)
+    try:
+        driver.home()
+        proto = make_protocol("normal_indentation", frequency=1.0 / seconds, periods=1)
+        samples, device_s = 0, 0.0
+        t0 = time.perf_counter()
+        for block in driver.run(proto):
+            samples += block.n_samples
+            device_s = float(block.time_s[-1])
+        wall = time.perf_counter() - t0
+    finally:
+        driver.disconnect()
+    return {"factor": device_s / wall, "device_s": device_s, "wall_s": wall, "samples": samples,
+            "skin": skin}
+
+
+def run(repeat: int = 3, robot_seconds: float = 2.0) -> dict[str, Any]:
+    """All figures as a JSON-ready dict (see the module docstring)."""
+    plugins_s = command_wall_s(["plugins"], repeat)
+    protocols_s = command_wall_s(["robot", "protocols"], repeat)
+    version_s = command_wall_s(["--version"], repeat)
+    robot = robot_realtime_factor(robot_seconds)
+    rtf = robot.get("factor")
+    return {
+        "plugins_s": plugins_s,
+        "robot_protocols_s": protocols_s,
+        "version_s": version_s,
+        "plugins_target_s": PLUGINS_TARGET_S,
+        "robot_realtime_factor": rtf,
+        "robot_realtime_target": REALTIME_TARGET,
+        "robot": robot,
+        "meets_targets": {"plugins": plugins_s < PLUGINS_TARGET_S,
+                          "robot": None if rtf is None else rtf >= REALTIME_TARGET},
+        "repeat": repeat,
+        "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+        "cpu_count": os.cpu_count(),
+        "bytecode_cache": not sys.dont_write_bytecode,
+    }
+
+
+@click.command("cli")
+@click.option("--repeat", default=3, show_default=True, type=click.IntRange(1),
+              help="runs per command; the best is reported")
+@click.option("--robot-seconds", default=2.0, show_default=True, type=click.FloatRange(0.1),
+              help="simulated length of the robot run [s]")
+@click.option("--json", "as_json", is_flag=True)
+def bench_cli(repeat: int, robot_seconds: float, as_json: bool) -> None:
+    """Wall time of `skinkit plugins` and `skinkit robot protocols` (fresh interpreter, best
+    of --repeat) and the simulated robot's real-time factor; targets < 1 s and >= 1."""
+    res = run(repeat, robot_seconds)
+    if as_json:
+        click.echo(json.dumps(res, indent=1))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    def mark(ok: bool | None) -> str:
+        return "-" if ok is None else ("[green]yes[/green]" if ok else "[red]no[/red]")
+
+    t = Table(title="command-line speed")
+    for col in ("figure", "measured", "target", "met"):
+        t.add_column(col)
+    t.add_row("skinkit plugins", f"{res['plugins_s']:.2f} s", f"< {PLUGINS_TARGET_S:g} s",
+              mark(res["meets_targets"]["plugins"]))
+    t.add_row("skinkit robot protocols", f"{res['robot_protocols_s']:.2f} s", "", "")
+    t.add_row("skinkit --version (start-up)", f"{res['version_s']:.2f} s", "", "")
+    rtf = res["robot_realtime_factor"]
+    t.add_row("sim robot real-time factor", "-" if rtf is None else f"{rtf:.2f}",
+              f">= {REALTIME_TARGET:g}", mark(res["meets_targets"]["robot"]))
+    con = Console()
+    con.print(t)
+    load = res["load_average_1min"]
+    cache = "on" if res["bytecode_cache"] else "off (every start-up compiles what it imports)"
+    con.print(("" if load is None else f"load average {load:.1f} on {res['cpu_count']} CPUs; ")
+              + f"bytecode cache {cache}")
+    if "skipped" in res["robot"]:
+        con.print(f"robot: skipped ({res['robot']['skipped']})")
