@@ -20,6 +20,7 @@ _BENCHES: dict[str, str] = {
     "fit": "skinkit.bench.fit:bench_fit",
     "fit-invivo": "skinkit.bench.fit_invivo:bench_fit_invivo",
     "coverage": "skinkit.bench.coverage:bench_coverage",
+    "cli": "skinkit.bench.cli:bench_cli",
 }
 
 
