@@ -199,11 +199,13 @@ def _withhold(out: dict[str, Any]) -> set[str]:
 
 def _duration(seconds: float | None) -> tuple[str, str]:
     """A time as (value, unit), in ms below a second and in s above."""
+    from skinkit.cli.render import number
+
     if seconds is None:
         return "-", "s"
     if abs(seconds) < 1.0:
-        return f"{seconds * 1e3:.4g}", "ms"
-    return f"{seconds:.4g}", "s"
+        return number(seconds * 1e3), "ms"
+    return number(seconds), "s"
 
 
 def _incremental(rec: Any, record: Path, axis: str, memory_s: float | None, robot: Any,
@@ -276,13 +278,15 @@ def _table(out: dict[str, Any], model: str) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from skinkit.cli.render import number, text
+
     def fmt(v: Any, scale: float = 1.0, digits: int = 4) -> str:
-        return "-" if v is None else f"{v * scale:.{digits}g}"
+        return "-" if v is None else number(v * scale, digits)
 
     def skin(key: str, scale: float = 1.0) -> str:
         return "[bold red]error[/]" if key[0] in out.get("withheld", ()) else fmt(out[key], scale)
 
-    t = Table(title=f"sysid {model}: {out['record']} ({out['protocol']})")
+    t = Table(title=f"sysid {model}: {text(out['record'])} ({text(out['protocol'])})")
     t.add_column("quantity")
     t.add_column("value", justify="right")
     t.add_column("unit")
