@@ -69,8 +69,8 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     if effects is not None and not wanted:
         raise SkinkitError("--effects: no effect named")
     report = diagnose(model_file, session, effects=wanted, holdout=split_names(holdout),
-                      free=split_names(free) or None, max_effects=max_effects, candidates=candidates,
-                      workers=workers, progress=progress)
+                      free=None if free is None else split_names(free), max_effects=max_effects,
+                      candidates=candidates, workers=workers, progress=progress)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:
