@@ -82,6 +82,8 @@ class Cell:
 class GapLocation:
     """The whole residual against the noise, and every cell of every axis.
 
+    ``significant``: there is a gap — the whole residual's test or any cell's, all members of
+    one Holm family at ``alpha`` (so on pure noise it is True in at most ``alpha`` of sessions).
     ``point_map``: protocol -> ``(P,)`` χ²/dof per tracked point (NaN where unobserved).
     ``whiteness`` / ``cross_correlation``: ``"<protocol>/<channel>"`` -> test figures.
     ``input_band``: protocol -> ``(f_lo, f_hi)`` [Hz] holding 95 % of the drive's power.
@@ -551,7 +553,10 @@ def holm(p: np.ndarray, alpha: float) -> np.ndarray:
     return out
 
 
-def _cells(table: _Table, n_params: int, alpha: float) -> list[Cell]:
+def _cells(table: _Table, n_params: int, alpha: float,
+           whole: tuple[float, float, float]) -> tuple[list[Cell], bool]:
+    """Every cell, tested; and whether the whole residual's test ``whole`` = (χ², dof, p) is
+    rejected, as one more member of the same Holm family."""
     cells, pfs = [], []
     for part in table.partitions():
         n = part.nmat.sum(axis=1)
@@ -572,11 +577,10 @@ def _cells(table: _Table, n_params: int, alpha: float) -> list[Cell]:
                               float(chi2[j] / dof[j]) if dof[j] > 0 else float("nan"), float(p[j]), False,
                               float(share[j]), int(round(n[j])), part.name, float(ndof[j])))
         pfs.append(pf)
-    if cells:
-        sig = holm(np.concatenate(pfs), alpha)
-        for c, s in zip(cells, sig, strict=True):
-            c.significant = bool(s) and c.chi2 > c.dof
-    return cells
+    sig = holm(np.concatenate([[whole[2]], *pfs]), alpha)
+    for c, s in zip(cells, sig[1:], strict=True):
+        c.significant = bool(s) and c.chi2 > c.dof
+    return cells, bool(sig[0]) and whole[0] > whole[1]
 
 
 def _ljung_box(full: np.ndarray, mask: np.ndarray, ax: int, h: int) -> tuple[float, float]:
@@ -719,13 +723,13 @@ def _locate(observations: Observations, prediction: Prediction, n_params: int, a
     scale, ndof = _noise_dof_of(table, nall, 6.0 * nall)
     p, pf = _p_values(np.array([chi2]), np.array([dof]), scale, ndof)
     white, cross = _series_tests(ss, alpha)
-    bands = {}
-    for s in ss:
-        if s.drive is not None:
-            bands[s.protocol] = s.drive.band
-    return GapLocation(chi2, dof, chi2 / dof, float(p[0]), bool(pf[0] <= alpha and chi2 > dof),
-                       _cells(table, n_params, alpha), _point_map(ss, n_params, table.N), white, cross,
-                       float(ndof[0]), bands)
+    bands = {s.protocol: s.drive.band for s in ss if s.drive is not None}
+    cells, whole = _cells(table, n_params, alpha, (chi2, dof, float(pf[0])))
+    # a gap: the whole residual or any cell, one Holm family, so that pure noise raises at most
+    # alpha false alarms whichever the reader looks at
+    gap = whole or any(c.significant for c in cells)
+    return GapLocation(chi2, dof, chi2 / dof, float(p[0]), gap, cells, _point_map(ss, n_params, table.N),
+                       white, cross, float(ndof[0]), bands)
 
 
 def cell_chi2(observations: Observations, prediction: Prediction, cells: Sequence[tuple[str, str]],
