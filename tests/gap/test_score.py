@@ -184,3 +184,32 @@ def test_collect_on_a_lumped_model():
     assert sens.columns["force-offset"].sides.tolist() == [0.0]
     tests = score_all(sens)
     assert tests[0].effect == "viscoelastic" and corrected(tests, 0.05)["viscoelastic"]
+
+
+@pytest.mark.needs_plugins
+def test_separating_protocol_ranks_the_library():
+    """A force offset and a force drift overlap on one sinusoid (|cos| ≈ 0.7); each library protocol
+    is predicted once, the session augmented with it, and the ranking is by the |cos| left; the best
+    protocol separates them better than the session alone."""
+    from skinkit.forward import load
+    from skinkit.gap.score import cosine, separating_protocol
+    from skinkit.inverse import fit
+    from skinkit.inverse.coverage import LabSessions
+    from skinkit.inverse.design import default_candidates
+
+    truth = copy.deepcopy(SPEC)
+    truth["effects"] = [{"name": "force-offset", "z": 0.01}]
+    obs = LabSessions(truth)(0)
+    model = load(SPEC)
+    r = fit(model, obs)
+    vals = r.parameters.values()
+    sens = collect(SPEC, obs, vals, r.parameters.free_names, ["force-offset", "force-drift"], load=load)
+    tests = score_all(sens)
+    by = {t.effect: t for t in tests}
+    before = cosine(by["force-offset"].signature, by["force-drift"].signature)
+    best = separating_protocol(SPEC, obs, vals, r.parameters.free_names, sens, tests,
+                               ("force-offset", "force-drift"), load=load)
+    cos = [row["cosine"] for row in best["ranking"]]
+    assert cos == sorted(cos) and best["cosine"] == cos[0] < before
+    assert {row["protocol"] for row in best["ranking"]} <= set(default_candidates(model))
+    assert len(cos) >= len(default_candidates(model)) - 1      # the session's own protocol is skipped
