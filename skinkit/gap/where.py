@@ -182,11 +182,16 @@ def make_drive(ch: Channel, rel_threshold: float = 0.25) -> Drive | None:
     """
     from scipy.ndimage import uniform_filter1d
 
-    ok = np.all(ch.valid, axis=1)
+    # components never recorded (a one-axis record's y and z) do not void every sample
+    used = np.any(ch.valid, axis=0)
+    if not used.any():
+        return None
+    ok = np.all(ch.valid[:, used], axis=1)
     if ok.sum() < 16:
         return None
     t = ch.time_s[ok]
-    d = ch.values[ok] - ch.values[ok][0]
+    v = ch.values[ok][:, used]
+    d = v - v[0]
     lam, vec = np.linalg.eigh(d.T @ d)
     s = d @ vec[:, -1]
     if s[np.argmax(np.abs(s))] < 0:
