@@ -199,20 +199,24 @@ def collect(spec: Mapping[str, Any], observations: Observations, values: Mapping
                 good.append(e)
             except SkinkitError as exc1:
                 skipped[e] = str(exc1)
-        try:
-            if good:
-                model, pred, names = run(good)
+        # a refusal at prediction time (e.g. robot compliance under a displacement drive):
+        # halve the group until the refused effect stands alone, so one bad candidate costs
+        # about log2(K) extra predictions, not K
+        pending = [good] if good else []
+        while pending:
+            group = pending.pop(0)
+            if len(group) == 1:
+                say(f"score step: {group[0]} alone")
+            try:
+                model, pred, names = run(group)
                 n_forward += 1
-                results.append((good, model, pred, names))
-        except SkinkitError:
-            for e in good:
-                say(f"score step: {e} alone")
-                try:
-                    model, pred, names = run([e])
-                    n_forward += 1
-                    results.append(([e], model, pred, names))
-                except SkinkitError as exc2:
-                    skipped[e] = str(exc2)
+                results.append((group, model, pred, names))
+            except SkinkitError as exc2:
+                if len(group) == 1:
+                    skipped[group[0]] = str(exc2)
+                else:
+                    half = len(group) // 2
+                    pending[:0] = [group[:half], group[half:]]
     if not results:
         # nothing could be added: the calibrated model alone, for z and J_θ
         model, pred, names = run([])
