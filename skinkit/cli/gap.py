@@ -108,3 +108,35 @@ def _print(d: dict, written: list) -> None:
         click.echo(f"stored as /gaps/{d['stored_as']} in {d['session']}")
     for p in written:
         click.echo(f"wrote {p}")
+
+
+
+def _add_lazy(name: str, target: str, summary: str) -> None:
+    """Register ``target`` ("module:command") under ``name``, imported only when it runs."""
+
+    class _Lazy(click.Command):
+        def _real(self) -> click.Command:
+            import importlib
+
+            module, attr = target.split(":")
+            return getattr(importlib.import_module(module), attr)
+
+        def invoke(self, ctx: click.Context) -> object:
+            return self._real().invoke(ctx)
+
+        def get_params(self, ctx: click.Context) -> list:
+            return self._real().get_params(ctx)
+
+        def get_help(self, ctx: click.Context) -> str:
+            return self._real().get_help(ctx)
+
+        def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+            return self._real().parse_args(ctx, args)
+
+    gap.add_command(_Lazy(name, help=summary, short_help=summary), name)
+
+
+_add_lazy("thesis-case", "skinkit.gap.thesis_case:thesis_case",
+          "The thesis's case: pre-stress withheld from a GOH + QLV forearm model.")
+_add_lazy("benchmark", "skinkit.gap.benchmark:benchmark",
+          "The withheld-effect benchmark of the diagnosis (skinkit.gap.benchmark).")
