@@ -33,10 +33,12 @@ def gap() -> None:
               help="name of the report stored in an experiment-file SESSION (default: gap-<model name>)")
 @click.option("--overwrite", is_flag=True, help="replace a report of that name already stored in SESSION")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes (FE models)")
+@click.option("--until", "until_s", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="diagnose only the session's first seconds [s] (e.g. the imaged part of a record)")
 @click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,
                  candidates: int, free: str | None, out_dir: str | None, gap_name: str | None,
-                 overwrite: bool, workers: int | None, as_json: bool) -> None:
+                 overwrite: bool, workers: int | None, until_s: float | None, as_json: bool) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
     then refits of the best), and how far the gap shrinks with it.
@@ -70,7 +72,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
         raise SkinkitError("--effects: no effect named")
     report = diagnose(model_file, session, effects=wanted, holdout=split_names(holdout),
                       free=None if free is None else split_names(free), max_effects=max_effects,
-                      candidates=candidates, workers=workers, progress=progress)
+                      candidates=candidates, workers=workers, until=until_s, progress=progress)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:

@@ -265,7 +265,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              observations: Observations | str | os.PathLike[str], *,
              effects: Sequence[str] | None = None, holdout: Sequence[str] = (),
              free: Sequence[str] | None = None, max_effects: int = 2, candidates: int = 3,
-             alpha: float = 0.05, workers: int | None = None,
+             alpha: float = 0.05, workers: int | None = None, until: float | None = None,
              progress: Callable[[str], None] | None = None) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
@@ -274,7 +274,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     lacks); ``holdout``: protocols kept out of the fit and predicted; ``free``: the parameters to
     calibrate (default the model file's free ones); ``max_effects``: rounds of naming;
     ``candidates``: refits per round; ``alpha``: the level of every test; ``workers``: worker
-    processes of a finite-element model; ``progress(line)``: what is being done.
+    processes of a finite-element model; ``until`` [s]: only the session's first seconds (e.g. the
+    imaged part of a record); ``progress(line)``: what is being done.
     """
     from skinkit.forward import load, model_kind, read_description
     from skinkit.gap.where import cell_chi2, locate
@@ -305,6 +306,10 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
             source = observations.source
             if holdout:
                 observations = observations.with_held_out(list(holdout))
+        if until is not None:
+            if not until > 0:
+                raise GapError(f"until must be > 0 s, got {until!r}")
+            observations = observations.until(float(until))
         theta = free_set(base.parameters(), list(free) if free is not None else None).free_names
         if not theta:
             raise GapError(f"model {name!r} has no free parameter: nothing to calibrate before diagnosing "

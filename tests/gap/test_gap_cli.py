@@ -119,6 +119,23 @@ def test_plain_verdict(files):
     assert "calibrating gap-cli" in r.stderr          # progress goes to stderr
 
 
+def test_until_keeps_the_first_seconds(files):
+    """--until diagnoses only the session's first seconds: the first protocol (the 15 s hold of a
+    ramp-and-hold, recorded at 1 kHz) cut at 5 s keeps about a third of its samples, and the
+    degrees of freedom of the protocol cell say so."""
+    d = files
+    base = ["gap", "diagnose", str(d / "m.toml"), str(d / "s.h5"), "--effects", "viscoelastic",
+            "--max-effects", "0", "--json"]
+    full = json.loads(CliRunner().invoke(main, [*base, "--name", "u1"]).stdout)
+    cut = json.loads(CliRunner().invoke(main, [*base, "--name", "u2", "--until", "5"]).stdout)
+    n = {c["label"]: c for c in full["gap"]["cells"] if c["axis"] == "protocol"}
+    m = {c["label"]: c for c in cut["gap"]["cells"] if c["axis"] == "protocol"}
+    assert set(m) <= set(n) and "preconditioning" in m
+    assert m["preconditioning"]["n"] < 0.5 * n["preconditioning"]["n"]
+    r = CliRunner().invoke(main, [*base, "--until", "0"])
+    assert r.exit_code == 2 and "--until" in r.stderr
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--effects", "prestress"], "'prestress': does not apply to a 'lumped' model"),
     (["--effects", "no-such-effect"], "'no-such-effect': no such effect is installed"),
