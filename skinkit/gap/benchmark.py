@@ -190,11 +190,12 @@ class _Base:
     """The model without effects at the truth: its noiseless prediction and noise-normalised
     sensitivities to the free parameters (one sensitivity pass), and their projector."""
 
-    def __init__(self, spec: Mapping[str, Any], free: Sequence[str] | None) -> None:
+    def __init__(self, spec: Mapping[str, Any], free: Sequence[str] | None,
+                 workers: int | None = None) -> None:
         from skinkit.forward import load
 
         self.lab = _lab(spec)
-        self.model = load(self.lab.model_spec)
+        self.model = load(self.lab.model_spec, workers=workers)
         params = self.model.parameters()
         self.free = list(free) if free is not None else list(params.free_names)
         self.obs = _noiseless(self.lab)
@@ -239,10 +240,10 @@ class _Base:
         return {"raw": float(z @ z), "projected": float(zp @ zp), "cells": _occupied(loc.cells)}
 
 
-def _base(spec: Mapping[str, Any], free: Sequence[str] | None) -> _Base:
+def _base(spec: Mapping[str, Any], free: Sequence[str] | None, workers: int | None = None) -> _Base:
     k = _key([spec, free])
     if k not in _BASES:
-        _BASES[k] = _Base(spec, free)
+        _BASES[k] = _Base(spec, free, workers)
     return _BASES[k]
 
 
@@ -307,7 +308,7 @@ def calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
     is left out (``skipped``)."""
     name = payload["effect"]
     t0 = time.perf_counter()
-    base = _base(payload["spec"], payload["free"])
+    base = _base(payload["spec"], payload["free"], payload.get("workers"))
     crit = base.critical_excess
     out: dict[str, Any] = {"effect": name, "critical_excess": crit, "dof": base.dof, "magnitudes": {}}
 
@@ -364,12 +365,13 @@ def _diagnose(spec: Mapping[str, Any], obs: Any, free: Sequence[str] | None,
     return diagnose(spec, obs, free=None if free is None else list(free), workers=workers).to_dict()
 
 
-def _oracle(lab: Any, obs: Any, free: Sequence[str], effects: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+def _oracle(lab: Any, obs: Any, free: Sequence[str], effects: Sequence[Mapping[str, Any]],
+            workers: int | None) -> dict[str, Any]:
     """The model with the truth's structure fitted from the truth: χ², dof, estimates and se."""
     from skinkit.forward import load
     from skinkit.inverse.fit import fit
 
-    model = load(lab.model_spec)
+    model = load(lab.model_spec, workers=workers)
     try:
         names = list(free) + [f"{e['name']}.{k}" for e in effects for k in e if k != "name"]
         r = fit(model, obs, names)
@@ -403,7 +405,7 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
     rec["truth"] = [e["name"] for e in effects]
     rec["truth_parameters"] = {f"{e['name']}.{k}": v for e in effects for k, v in e.items() if k != "name"}
     try:
-        base = _base(payload["spec"], payload["free"])
+        base = _base(payload["spec"], payload["free"], payload.get("workers"))
         lab = _lab(_with_effects(payload["spec"], effects))
         obs = lab(int(payload["seed"]))
         if effects:
@@ -416,7 +418,7 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
         rec["diagnose_s"] = time.perf_counter() - td
         rec["report"] = _slim(rep)
         if effects:
-            rec["oracle"] = _oracle(lab, obs, base.free, effects)
+            rec["oracle"] = _oracle(lab, obs, base.free, effects, payload.get("workers"))
             rec["n_samples"] = base.n
     except SkinkitError as exc:
         rec["error"] = str(exc)
@@ -741,7 +743,8 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     model, the default; ``"lumped"``), a model file or a description. ``effects``: restrict the
     truths to these. ``scheduler``: a Dask scheduler address (one task per case);
     ``parallel``: worker processes otherwise (default 2; 1 runs in this process); ``workers``:
-    each diagnosis's FE worker processes. ``progress(line)``: one line per calibrated effect
+    worker processes of each FE prediction (default 1 when cases run in parallel, else
+    one per protocol up to the CPU count). ``progress(line)``: one line per calibrated effect
     and per case. Keys: ``top1_accuracy``, ``null_false_alarm_rate``, ``localisation_accuracy``,
     ``magnitude_error_median``, ``shrinkage_error_median``, ``confusion``, ``cases`` (the
     records), ``wall_s``, and the details of :func:`score`, ``calibration``, ``skipped``.
@@ -769,10 +772,13 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     seeds = (1 if quick else 3) if seeds is None else int(seeds)
     nulls = (QUICK_NULLS if quick else FULL_NULLS) if nulls is None else int(nulls)
     pairs = (0 if quick else FULL_PAIRS) if pairs is None else int(pairs)
-    pool = _Pool(2 if parallel is None else int(parallel), scheduler)
+    parallel = 2 if parallel is None else int(parallel)
+    if workers is None and (parallel > 1 or scheduler):
+        workers = 1          # the cases are the parallel unit: one process per FE prediction
+    pool = _Pool(parallel, scheduler)
     try:
-        tasks = [{"spec": spec, "free": free, "effect": n, "magnitudes": {m: MAGNITUDES[m] for m in mags}}
-                 for n in names]
+        tasks = [{"spec": spec, "free": free, "effect": n, "magnitudes": {m: MAGNITUDES[m] for m in mags},
+                  "workers": workers} for n in names]
 
         def cal_line(c: Mapping[str, Any]) -> None:
             if "skipped" in c:
