@@ -240,6 +240,31 @@ class _Base:
         return {"raw": float(z @ z), "projected": float(zp @ zp), "cells": _occupied(loc.cells)}
 
 
+_IN_POOL = [False]
+
+
+def _mark_worker() -> None:
+    _IN_POOL[0] = True
+
+
+def _task_done(payload: Mapping[str, Any]) -> None:
+    """In a pool worker, a cached FE model with its own worker processes is closed after each
+    task: a nested pool left open keeps the worker from exiting when the benchmark's pool shuts
+    down (measured: the run hung after its last case)."""
+    if _IN_POOL[0] and payload.get("workers") != 1:
+        release()
+
+
+def release() -> None:
+    """Close the cached base models (an FE model with worker processes keeps a pool: a worker
+    of the benchmark's own pool that still holds one does not exit at shutdown) and clear the caches."""
+    for b in _BASES.values():
+        if hasattr(b.model, "close"):
+            b.model.close()
+    _BASES.clear()
+    _LABS.clear()
+
+
 def _base(spec: Mapping[str, Any], free: Sequence[str] | None, workers: int | None = None) -> _Base:
     k = _key([spec, free])
     if k not in _BASES:
@@ -303,9 +328,16 @@ def _max_scale(name: str, limit: float = 20.0) -> float:
 
 def calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
     """One effect's magnitudes (a task: ``payload`` has ``spec``, ``free``, ``effect``,
-    ``magnitudes`` {label: multiple of the detection threshold}). Returns per magnitude the
-    scale, the ``[[effects]]`` table, the projected signature and its cells, or why the effect
-    is left out (``skipped``)."""
+    ``magnitudes`` {label: multiple of the detection threshold}, ``workers``). Returns per
+    magnitude the scale, the ``[[effects]]`` table, the projected signature and its cells, or
+    why the effect is left out (``skipped``)."""
+    try:
+        return _calibrate(payload)
+    finally:
+        _task_done(payload)
+
+
+def _calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
     name = payload["effect"]
     t0 = time.perf_counter()
     base = _base(payload["spec"], payload["free"], payload.get("workers"))
@@ -359,10 +391,11 @@ def calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
 
 # -- one case -----------------------------------------------------------------------------------
 def _diagnose(spec: Mapping[str, Any], obs: Any, free: Sequence[str] | None,
-              workers: int | None) -> dict[str, Any]:
+              workers: int | None, options: Mapping[str, Any]) -> dict[str, Any]:
     from skinkit.gap.diagnose import diagnose
 
-    return diagnose(spec, obs, free=None if free is None else list(free), workers=workers).to_dict()
+    return diagnose(spec, obs, free=None if free is None else list(free), workers=workers,
+                    **dict(options)).to_dict()
 
 
 def _oracle(lab: Any, obs: Any, free: Sequence[str], effects: Sequence[Mapping[str, Any]],
@@ -414,7 +447,8 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
                                 "multiple": s["projected"] / base.critical_excess}
             rec["true_cells"] = s["cells"]
         td = time.perf_counter()
-        rep = _diagnose(base.lab.model_spec, obs, base.free, payload.get("workers"))
+        rep = _diagnose(base.lab.model_spec, obs, base.free, payload.get("workers"),
+                        payload.get("diagnose", {}))
         rec["diagnose_s"] = time.perf_counter() - td
         rec["report"] = _slim(rep)
         if effects:
@@ -423,6 +457,7 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
     except SkinkitError as exc:
         rec["error"] = str(exc)
     rec["wall_s"] = time.perf_counter() - t0
+    _task_done(payload)
     return rec
 
 
@@ -694,7 +729,8 @@ class _Pool:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
-            self.executor = ProcessPoolExecutor(parallel, mp_context=multiprocessing.get_context("spawn"))
+            self.executor = ProcessPoolExecutor(parallel, mp_context=multiprocessing.get_context("spawn"),
+                                                initializer=_mark_worker)
 
     def map(self, fn: Callable[[Any], Any], items: Sequence[Any], done: Callable[[Any], None]) -> list[Any]:
         """``fn`` over ``items`` (results in the items' order); ``done(result)`` as each finishes."""
@@ -733,7 +769,8 @@ class _Pool:
 def run(quick: bool, scheduler: str | None = None, workers: int | None = None, seeds: int | None = None,
         progress: Callable[[str], None] | None = None, *, model: str | Mapping[str, Any] | None = None,
         effects: Sequence[str] | None = None, nulls: int | None = None, pairs: int | None = None,
-        magnitudes: Sequence[str] | None = None, parallel: int | None = None) -> dict[str, Any]:
+        magnitudes: Sequence[str] | None = None, parallel: int | None = None,
+        max_effects: int | None = None, candidates: int = 3) -> dict[str, Any]:
     """Run the benchmark and score it (JSON-ready).
 
     ``quick``: the quick run (:data:`QUICK_EFFECTS` that apply and are visible, moderate
@@ -745,7 +782,9 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     ``parallel``: worker processes otherwise (default 2; 1 runs in this process); ``workers``:
     worker processes of each FE prediction (default 1 when cases run in parallel, else
     one per protocol up to the CPU count). ``progress(line)``: one line per calibrated effect
-    and per case. Keys: ``top1_accuracy``, ``null_false_alarm_rate``, ``localisation_accuracy``,
+    and per case. ``max_effects`` (default 1 quick, 2 full) and ``candidates`` go to each
+    :func:`~skinkit.gap.diagnose.diagnose`. Keys: ``top1_accuracy``, ``null_false_alarm_rate``,
+    ``localisation_accuracy``,
     ``magnitude_error_median``, ``shrinkage_error_median``, ``confusion``, ``cases`` (the
     records), ``wall_s``, and the details of :func:`score`, ``calibration``, ``skipped``.
     """
@@ -792,7 +831,9 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         cases = plan(cals, magnitudes=mags, seeds=seeds, nulls=nulls, pairs=pairs)
         if not any(c["kind"] != "null" for c in cases) and names:
             say("no effect is visible on these protocols: only null sessions run")
-        payloads = [dict(c, spec=spec, free=free, workers=workers) for c in cases]
+        opts = {"max_effects": (1 if quick else 2) if max_effects is None else int(max_effects),
+                "candidates": int(candidates)}
+        payloads = [dict(c, spec=spec, free=free, workers=workers, diagnose=opts) for c in cases]
         n_done = [0]
 
         def case_line(r: Mapping[str, Any]) -> None:
@@ -806,10 +847,11 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         records = pool.map(run_case, payloads, case_line)
     finally:
         pool.close()
+        release()
     out = score(records)
     out.update({"model": spec.get("model", {}).get("name"), "kind": kind, "quick": bool(quick),
                 "free": free, "effects": names, "magnitudes": {m: MAGNITUDES[m] for m in mags},
-                "occupied_share": OCCUPIED_SHARE, "alpha": ALPHA,
+                "occupied_share": OCCUPIED_SHARE, "alpha": ALPHA, "diagnose_options": opts,
                 "calibration": {c["effect"]: c for c in cals},
                 "skipped": {c["effect"]: c["skipped"] for c in cals if "skipped" in c},
                 "cases": records, "wall_s": time.perf_counter() - t0})
@@ -885,4 +927,5 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
 
 
 __all__ = ["ALPHA", "MAGNITUDES", "BenchmarkError", "assess", "benchmark", "calibrate", "clopper_pearson",
-           "effect_at", "lumped_spec", "model_spec", "plan", "quick_spec", "run", "run_case", "score"]
+           "effect_at", "lumped_spec", "model_spec", "plan", "quick_spec", "release", "run", "run_case",
+           "score"]
