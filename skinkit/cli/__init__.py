@@ -2,8 +2,9 @@
 
 Commands are imported lazily (``_COMMANDS`` maps a name to ``module:attribute``) so that
 ``skinkit --help`` stays fast and a broken optional part cannot stop the rest.
-Every :class:`skinkit.errors.SkinkitError` ends the command with a one-line message on
-stderr and exit status 2.
+Every :class:`skinkit.errors.SkinkitError` and every usage error ends the command with a
+one-line message on stderr and exit status 2; any other exception is a bug and ends it with
+one line and exit status 3 (``--debug`` or ``SKINKIT_DEBUG=1`` shows the traceback).
 """
 
 from __future__ import annotations
@@ -78,14 +79,59 @@ class _LazyGroup(click.Group):
         try:
             return super().invoke(ctx)
         except SkinkitError as exc:
-            click.echo(f"error: {exc}", err=True)
-            ctx.exit(2)
+            _fail(ctx, str(exc), 2)
+        except click.exceptions.NoArgsIsHelpError:
+            raise  # the help text, as click shows it
+        except click.UsageError as exc:
+            # one line, naming the option, instead of click's usage block
+            where = exc.ctx.command_path if exc.ctx is not None else "skinkit"
+            _fail(ctx, f"{exc.format_message()} (see '{where} --help')", exc.exit_code)
+        except (click.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except KeyboardInterrupt:
+            _fail(ctx, "interrupted", EXIT_INTERRUPTED)
+        except OSError as exc:
+            if exc.filename is None or _debug(ctx):
+                _internal(ctx, exc)
+            # a path the user gave that cannot be read or written is bad input, not a bug
+            _fail(ctx, f"{exc.filename}: {exc.strerror or exc}", 2)
+        except Exception as exc:
+            _internal(ctx, exc)
+
+
+#: exit status of an unexpected exception (a bug), distinct from 2 (bad input)
+EXIT_INTERNAL = 3
+#: exit status after Ctrl-C (128 + SIGINT, as a shell reports it)
+EXIT_INTERRUPTED = 130
+
+
+def _debug(ctx: click.Context) -> bool:
+    return bool(ctx.find_root().params.get("debug"))
+
+
+def _fail(ctx: click.Context, message: str, status: int) -> None:
+    click.echo(f"error: {' '.join(message.split())}", err=True)
+    ctx.exit(status)
+
+
+def _internal(ctx: click.Context, exc: BaseException) -> None:
+    """An exception no check anticipated: one line and exit 3, or the traceback with --debug."""
+    if _debug(ctx):
+        raise exc
+    _fail(ctx, f"internal error in skinkit: {type(exc).__name__}: {exc} — please report it; run "
+          "with --debug (or SKINKIT_DEBUG=1) for the traceback", EXIT_INTERNAL)
 
 
 @click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="skinkit")
-def cli() -> None:
-    """skinkit: measurements of living skin to mechanical models, and the sim-to-real gap."""
+@click.option("--debug", is_flag=True, envvar="SKINKIT_DEBUG",
+              help="show the Python traceback of an internal error (env SKINKIT_DEBUG=1)")
+def cli(debug: bool) -> None:
+    """skinkit: measurements of living skin to mechanical models, and the sim-to-real gap.
+
+    Exit status: 0 success, 2 bad input (one line on stderr naming what is wrong),
+    3 internal error (a bug: please report it), 130 interrupted.
+    """
 
 
 def main(argv: list[str] | None = None) -> None:
