@@ -45,6 +45,7 @@ _COMMANDS: dict[str, str] = {
     "design": "skinkit.cli.design:design",
     "lab": "skinkit.cli.lab:lab",
     "gap": "skinkit.cli.gap:gap",
+    "report": "skinkit.cli.report:report",
 }
 
 
