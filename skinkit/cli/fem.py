@@ -8,6 +8,16 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._paths import check_out_dir, staged_dir
+from skinkit.errors import SkinkitError
+
+
+def _model_path(model_file: str) -> Path:
+    p = Path(model_file)
+    if p.suffix.lower() != ".toml":
+        raise SkinkitError(f"MODEL_FILE {model_file}: expected a TOML model file ending in .toml")
+    return p
+
 
 def _progress(total: float, label: str):
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -26,14 +36,16 @@ def solve(model_file: str, out_dir: str | None, as_json: bool, no_vtu: bool) -> 
     """Solve MODEL_FILE (TOML); write result.h5, summary.json and a VTU series."""
     from skinkit.fem.model import load_model
     from skinkit.fem.run import solve_model, write_outputs
-    model = load_model(model_file)
-    out = Path(out_dir) if out_dir else Path(model_file).with_suffix("")
+    out = check_out_dir(Path(out_dir) if out_dir else _model_path(model_file).with_suffix(""), "--out")
+    model = load_model(_model_path(model_file))
     times = model.load.times
     prog = _progress(float(times[-1]), f"solving {model.name} ({model.mesh.n_dof} dofs)")
     with prog:
         task = prog.add_task("solve", total=float(times[-1]))
         sol, info = solve_model(model, progress=lambda t: prog.update(task, completed=t))
-    info["files"] = write_outputs(model, sol, info, out, vtu=not no_vtu)
+    with staged_dir(out) as tmp:  # nothing appears at --out unless every file is written
+        files = write_outputs(model, sol, info, tmp, vtu=not no_vtu)
+        info["files"] = {k: str(out / Path(v).relative_to(tmp)) for k, v in files.items()}
     if as_json:
         click.echo(json.dumps(info, indent=2))
         return
@@ -82,18 +94,24 @@ def _refined(spec: dict, level: int) -> dict:
 
 @click.command("convergence")
 @click.argument("model_file", type=click.Path(dir_okay=False))
-@click.option("--levels", default=3, show_default=True, help="refinement levels (1 = as given)")
+@click.option("--levels", type=click.IntRange(1, 8), default=3, show_default=True,
+              help="refinement levels (1 = as given)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="directory for convergence.json and convergence.png")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 def convergence(model_file: str, levels: int, out_dir: str | None, as_json: bool) -> None:
     """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count."""
-    from skinkit.fem.model import build_model, read_model
+    from skinkit.fem.model import build_model, check_size, layer_table, read_model
     from skinkit.fem.run import solve_model
-    spec = read_model(model_file)
+    path = _model_path(model_file)
+    out = check_out_dir(Path(out_dir) if out_dir else path.with_name(path.stem + "_convergence"), "--out")
+    spec = read_model(path)
+    first = build_model(spec)  # validates every entry before any refinement
+    finest = _refined(spec, levels)
+    check_size(finest, layer_table(finest))  # refuse now, not after solving the coarse levels
     rows = []
     for lev in range(1, levels + 1):
-        model = build_model(_refined(spec, lev))
+        model = first if lev == 1 else build_model(_refined(spec, lev))
         _, info = solve_model(model)
         last = info["steps"][-1]
         f = last["tip_force_N"]
@@ -110,9 +128,15 @@ def convergence(model_file: str, levels: int, out_dir: str | None, as_json: bool
         if r[key] is not None and finest is not None:
             r["change_vs_finest"] = abs(r[key][2] - finest[2]) / max(abs(finest[2]), 1e-300)
     res = {"model": spec.get("model", {}).get("name", "model"), "quantity": key, "levels": rows}
-    out = Path(out_dir) if out_dir else Path(model_file).with_suffix("").with_name(
-        Path(model_file).stem + "_convergence")
-    out.mkdir(parents=True, exist_ok=True)
+    with staged_dir(out) as tmp:
+        _write_convergence(res, rows, key, tmp)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+    else:
+        click.echo(f"wrote {out / 'convergence.json'} and {out / 'convergence.png'}")
+
+
+def _write_convergence(res: dict, rows: list[dict], key: str, out: Path) -> None:
     (out / "convergence.json").write_text(json.dumps(res, indent=2))
     import matplotlib
     matplotlib.use("Agg")
@@ -126,7 +150,3 @@ def convergence(model_file: str, levels: int, out_dir: str | None, as_json: bool
     fig.tight_layout()
     fig.savefig(out / "convergence.png", dpi=120)
     plt.close(fig)
-    if as_json:
-        click.echo(json.dumps(res, indent=2))
-    else:
-        click.echo(f"wrote {out / 'convergence.json'} and {out / 'convergence.png'}")

@@ -8,7 +8,9 @@ Quantities are numbers in SI units or strings ``"<number> <unit>"`` (``"1.5 mm"`
 from __future__ import annotations
 
 import copy
+import difflib
 import math
+import os
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -42,7 +44,7 @@ def quantity(value: Any, unit: str, entry: str) -> float:
     if isinstance(value, bool):
         raise ModelError(entry, f"expected a quantity in {unit}, got {value!r}")
     if isinstance(value, (int, float)):
-        return float(value)
+        return _finite(float(value), unit, entry)
     if isinstance(value, str):
         parts = value.strip().split(None, 1)
         try:
@@ -53,10 +55,57 @@ def quantity(value: Any, unit: str, entry: str) -> float:
         if not is_known(u):
             raise ModelError(entry, f"unknown unit {u!r} in {value!r}")
         try:
-            return float(to_si(x, u, unit, entry))
+            return _finite(float(to_si(x, u, unit, entry)), unit, entry)
         except UnitError:
             raise ModelError(entry, f"inconsistent units: {u!r} is not a unit of {si_unit(unit)!r}") from None
     raise ModelError(entry, f"expected a quantity in {unit}, got {value!r}")
+
+
+def _finite(x: float, unit: str, entry: str) -> float:
+    if not math.isfinite(x):
+        raise ModelError(entry, f"must be a finite quantity in {unit}, got {x}")
+    return x
+
+
+def bounded(value: Any, unit: str, entry: str, lo: float, hi: float, *, lo_open: bool = True) -> float:
+    """A quantity in SI ``unit`` that must lie in ``(lo, hi]`` (``[lo, hi]`` if not ``lo_open``);
+    the error names the entry and the accepted range."""
+    x = quantity(value, unit, entry)
+    if (x <= lo if lo_open else x < lo) or x > hi:
+        raise ModelError(entry, f"must be in {'(' if lo_open else '['}{lo:g}, {hi:g}] {unit}, got {x:g}")
+    return x
+
+
+def integer(value: Any, entry: str, lo: int, hi: int) -> int:
+    """A whole number in ``[lo, hi]`` (a float with an integral value is accepted)."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ModelError(entry, f"expected a whole number in [{lo}, {hi}], got {value!r}")
+    if not lo <= value <= hi:
+        raise ModelError(entry, f"must be a whole number in [{lo}, {hi}], got {value}")
+    return value
+
+
+def flag(value: Any, entry: str) -> bool:
+    """A TOML boolean (``true`` / ``false``)."""
+    if not isinstance(value, bool):
+        raise ModelError(entry, f"expected true or false, got {value!r}")
+    return value
+
+
+def table(value: Any, entry: str) -> dict[str, Any]:
+    """A TOML table (mapping), copied."""
+    if not isinstance(value, Mapping):
+        raise ModelError(entry, f"expected a table, got {value!r}")
+    return dict(value)
+
+
+def text(value: Any, entry: str) -> str:
+    """A non-empty string."""
+    if not isinstance(value, str) or not value.strip():
+        raise ModelError(entry, f"expected a non-empty string, got {value!r}")
+    return value
 
 
 def vector(value: Any, unit: str, entry: str, n: int = 3) -> np.ndarray:
@@ -74,10 +123,17 @@ def _get(d: Mapping[str, Any], key: str, entry: str, default: Any = ...):
     return default
 
 
-def _check_keys(d: Mapping[str, Any], allowed: set[str], entry: str) -> None:
-    extra = sorted(set(d) - allowed)
+def _check_keys(d: Any, allowed: set[str], entry: str) -> None:
+    """Refuse a non-table and a key not in ``allowed``, naming the nearest valid key."""
+    if not isinstance(d, Mapping):
+        raise ModelError(entry, f"expected a table, got {d!r}")
+    extra = sorted(set(d) - allowed, key=str)
     if extra:
-        raise ModelError(entry, f"unknown key(s) {extra}; allowed are {sorted(allowed)}")
+        key = str(extra[0])
+        near = difflib.get_close_matches(key, sorted(allowed), n=1, cutoff=0.6)
+        hint = f" (did you mean {near[0]!r}?)" if near else ""
+        where = key if entry == "model file" else f"{entry}.{key}"
+        raise ModelError(where, f"unknown key{hint}; allowed are {sorted(allowed)}")
 
 
 @dataclass
@@ -115,8 +171,16 @@ def read_model(path: str | Path) -> dict[str, Any]:
     if not p.is_file():
         raise ModelError(str(p), "no such model file")
     try:
-        with p.open("rb") as f:
-            return tomllib.load(f)
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise ModelError(str(p), f"cannot read the model file ({exc.strerror})") from None
+    try:
+        body = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ModelError(str(p), f"not a UTF-8 text file (byte 0x{raw[exc.start]:02x} at offset "
+                         f"{exc.start}); a model file is TOML, which is UTF-8") from None
+    try:
+        return tomllib.loads(body)
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(str(p), f"not valid TOML: {exc}") from None
 
@@ -128,14 +192,14 @@ def load_model(path: str | Path) -> Model:
 
 
 def _law(layer: Mapping[str, Any], entry: str):
-    name = _get(layer, "law", entry)
-    opts = dict(layer.get("options", {}))
+    name = text(_get(layer, "law", entry), f"{entry}.law")
+    opts = table(layer.get("options", {}), f"{entry}.options")
     try:
         return registry.create("skinkit.laws", name, **opts)
     except PluginError as exc:
         raise ModelError(f"{entry}.law", str(exc)) from None
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{entry}.options", f"law {name!r}: {exc}") from None
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        raise ModelError(f"{entry}.options", f"law {name!r}: {type(exc).__name__}: {exc}") from None
 
 
 def _params(law: Any, given: Mapping[str, Any], entry: str) -> dict[str, float]:
@@ -155,46 +219,143 @@ def _params(law: Any, given: Mapping[str, Any], entry: str) -> dict[str, float]:
 def _prestress(d: Mapping[str, Any] | None, entry: str):
     """``(F0, None)`` for a general initial deformation gradient, ``(None, (l1, l2, angle))``
     for an in-plane pre-stretch (whose stretches are then differentiable), or ``(None, None)``."""
-    if not d:
+    if d is None:
         return None, None
     _check_keys(d, {"stretch", "angle", "F0"}, entry)
+    if not d:
+        return None, None
+    lo, hi = PRESTRETCH_RANGE
     if "F0" in d:
         try:
             F0 = np.asarray(d["F0"], dtype=float)
         except (TypeError, ValueError):
             raise ModelError(f"{entry}.F0", "must be a 3x3 matrix of numbers") from None
-        if F0.shape != (3, 3) or np.linalg.det(F0) <= 0:
-            raise ModelError(f"{entry}.F0", "must be a 3x3 matrix with positive determinant")
+        if F0.shape != (3, 3) or not np.all(np.isfinite(F0)) or np.linalg.det(F0) <= 0:
+            raise ModelError(f"{entry}.F0",
+                             "must be a 3x3 matrix of finite numbers with positive determinant")
+        sv = np.linalg.svd(F0, compute_uv=False)
+        if sv.min() < lo or sv.max() > hi:
+            raise ModelError(f"{entry}.F0", f"principal stretches {sv.min():.3g}..{sv.max():.3g} are outside "
+                             f"the plausible range [{lo:g}, {hi:g}] for tissue")
         return F0, None
     st = _get(d, "stretch", entry)
     if not isinstance(st, list) or len(st) != 2:
         raise ModelError(f"{entry}.stretch", f"expected [l1, l2], got {st!r}")
-    l1, l2 = float(st[0]), float(st[1])
-    if l1 <= 0 or l2 <= 0:
-        raise ModelError(f"{entry}.stretch", f"stretches must be positive, got {st!r}")
+    l1, l2 = (bounded(v, "1", f"{entry}.stretch[{i}]", lo, hi, lo_open=False) for i, v in enumerate(st))
     ang = quantity(d.get("angle", 0.0), "rad", f"{entry}.angle")
     return None, (l1, l2, ang)
 
 
-def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tuple[FEMesh, float | None]:
-    g = dict(_get(spec, "geometry", ""))
+#: accepted range of element counts per direction (geometry ``n_*``, ``n``, layer ``elements``)
+MAX_ELEMENTS_PER_DIRECTION = 200
+#: accepted range of lengths (diameters, sizes, thicknesses) [m]
+LENGTH_RANGE = (0.0, 1.0)
+#: accepted range of in-plane pre-stretches and principal stretches of ``F0`` (tissue)
+PRESTRETCH_RANGE = (0.5, 2.0)
+#: accepted ``[solver] intorder`` (quadrature degree; 4 = 3x3x3 Gauss points)
+INTORDER_RANGE = (2, 12)
+#: largest force an indenter may be asked to apply [N] (skin tests stay far below)
+MAX_FORCE_N = 1000.0
+#: default largest number of unknowns a model may have (override: ``[solver] max_unknowns``
+#: or the environment variable ``SKINKIT_MAX_UNKNOWNS``)
+MAX_UNKNOWNS = 300_000
+#: stored non-zeros per unknown of the 27-node hexahedral stiffness matrix (about 4^3 coupled
+#: nodes x 3 components each) and bytes per non-zero (value + column index)
+_NNZ_PER_UNKNOWN, _BYTES_PER_NNZ = 192, 12
+
+
+def _geometry(spec: Mapping[str, Any]) -> dict[str, Any]:
+    g = table(_get(spec, "geometry", ""), "geometry")
+    kind = g.get("kind", "disc")
+    if kind not in ("disc", "block", "twopad"):
+        raise ModelError("geometry.kind", f"must be 'disc', 'block' or 'twopad', got {kind!r}")
+    return g
+
+
+def _count(g: Mapping[str, Any], key: str, default: int) -> int:
+    return integer(g.get(key, default), f"geometry.{key}", 1, MAX_ELEMENTS_PER_DIRECTION)
+
+
+def _block_n(g: Mapping[str, Any]) -> tuple[int, int]:
+    n = g.get("n", [4, 4])
+    if not isinstance(n, list) or len(n) != 2:
+        raise ModelError("geometry.n", f"expected [nx, ny] element counts, got {n!r}")
+    return tuple(integer(v, f"geometry.n[{i}]", 1, MAX_ELEMENTS_PER_DIRECTION) for i, v in enumerate(n))
+
+
+def estimate_size(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> dict[str, float]:
+    """Elements, nodes, unknowns and stiffness-matrix memory [bytes] of the model's mesh,
+    counted from the geometry table without building it (27-node hexahedra)."""
+    g = _geometry(spec)
+    nz = sum(k for _, _, k in layers)
     kind = g.get("kind", "disc")
     if kind == "disc":
+        nx = ny = _count(g, "n_inner", 3) + 2 * _count(g, "n_ring", 3)
+    elif kind == "block":
+        nx, ny = _block_n(g)
+    else:
+        pad = _count(g, "n_pad", 2)
+        nx = 2 * pad + _count(g, "n_gap", 6) + 2 * _count(g, "n_outer", 3)
+        ny = pad + 2 * _count(g, "n_side", 3)
+    nodes = (2 * nx + 1) * (2 * ny + 1) * (2 * nz + 1)
+    unknowns = 3 * nodes
+    return {"elements": nx * ny * nz, "nodes": nodes, "unknowns": unknowns,
+            "matrix_bytes": float(unknowns) * _NNZ_PER_UNKNOWN * _BYTES_PER_NNZ}
+
+
+def max_unknowns(spec: Mapping[str, Any] | None = None) -> int:
+    """The size limit: ``[solver] max_unknowns``, else ``SKINKIT_MAX_UNKNOWNS``, else
+    :data:`MAX_UNKNOWNS`."""
+    sol = (spec or {}).get("solver", {})
+    if isinstance(sol, Mapping) and "max_unknowns" in sol:
+        return integer(sol["max_unknowns"], "solver.max_unknowns", 1, 10**12)
+    env = os.environ.get("SKINKIT_MAX_UNKNOWNS")
+    if env:
+        try:
+            return integer(int(env), "SKINKIT_MAX_UNKNOWNS", 1, 10**12)
+        except ValueError:
+            raise ModelError("SKINKIT_MAX_UNKNOWNS", f"expected a whole number, got {env!r}") from None
+    return MAX_UNKNOWNS
+
+
+def check_size(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> None:
+    """Refuse a mesh larger than :func:`max_unknowns`, before it is built, with the estimate."""
+    est = estimate_size(spec, layers)
+    limit = max_unknowns(spec)
+    if est["unknowns"] > limit:
+        raise ModelError("geometry", f"the mesh would have {est['elements']:,} elements and "
+                         f"{est['unknowns']:,} unknowns (stiffness matrix about "
+                         f"{est['matrix_bytes'] / 1e9:.2g} GB before factorisation), over the limit of "
+                         f"{limit:,}; coarsen the mesh, or raise the limit with [solver] max_unknowns "
+                         "or SKINKIT_MAX_UNKNOWNS")
+
+
+def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tuple[FEMesh, float | None]:
+    g = _geometry(spec)
+    kind = g.get("kind", "disc")
+    lo, hi = LENGTH_RANGE
+    if kind == "disc":
         _check_keys(g, {"kind", "diameter", "indenter_diameter", "n_inner", "n_ring", "grading"}, "geometry")
-        mesh = disc_mesh(quantity(g.get("diameter", 0.040), "m", "geometry.diameter"),
-                         quantity(g.get("indenter_diameter", 0.004), "m", "geometry.indenter_diameter"),
-                         layers, int(g.get("n_inner", 3)), int(g.get("n_ring", 3)),
-                         float(g.get("grading", 1.6)))
+        D = bounded(g.get("diameter", 0.040), "m", "geometry.diameter", lo, hi)
+        d = bounded(g.get("indenter_diameter", 0.004), "m", "geometry.indenter_diameter", lo, hi)
+        if d >= D:
+            raise ModelError("geometry.indenter_diameter", f"must be smaller than the disc's diameter "
+                             f"{D:g} m, got {d:g} m")
+        grading = bounded(g.get("grading", 1.6), "1", "geometry.grading", 1.0, 10.0, lo_open=False)
+        mesh = disc_mesh(D, d, layers, _count(g, "n_inner", 3), _count(g, "n_ring", 3), grading)
         return mesh, None
     if kind == "block":
         _check_keys(g, {"kind", "size", "n", "indenter_diameter"}, "geometry")
         size = vector(_get(g, "size", "geometry"), "m", "geometry.size", 2)
-        n = g.get("n", [4, 4])
+        for i, v in enumerate(size):
+            if not lo < v <= hi:
+                raise ModelError(f"geometry.size[{i}]", f"must be in ({lo:g}, {hi:g}] m, got {v:g}")
+        n = _block_n(g)
         H = sum(t for _, t, _ in layers)
-        mesh = block_mesh((size[0], size[1], H), (int(n[0]), int(n[1]), 1), layers)
+        mesh = block_mesh((size[0], size[1], H), (n[0], n[1], 1), layers)
         d = g.get("indenter_diameter")
         if d is not None:
-            r = 0.5 * quantity(d, "m", "geometry.indenter_diameter")
+            r = 0.5 * bounded(d, "m", "geometry.indenter_diameter", 0.0, float(min(size)))
             x = mesh.nodes
             c = np.array([size[0] / 2, size[1] / 2])
             top = np.zeros(mesh.n_nodes, bool)
@@ -204,23 +365,39 @@ def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tupl
                 raise ModelError("geometry.indenter_diameter", "no top node lies under the indenter")
             mesh.node_sets["indenter"] = np.flatnonzero(ind)
         return mesh, None
-    if kind == "twopad":
-        from skinkit.fem.twopad import twopad_from_spec
-        return twopad_from_spec(g, layers), None
-    raise ModelError("geometry.kind", f"must be 'disc', 'block' or 'twopad', got {kind!r}")
+    from skinkit.fem.twopad import twopad_from_spec
+    return twopad_from_spec(g, layers), None
 
 
-def _load(spec: Mapping[str, Any], unit: str) -> LoadProgramme:
-    d = dict(_get(spec, "load", ""))
+#: accepted number of load steps of a programme
+MAX_STEPS = 100_000
+#: accepted programme durations and periods [s]
+DURATION_RANGE = (0.0, 1e6)
+#: accepted sinusoid frequencies [Hz]
+FREQUENCY_RANGE = (1e-6, 1e4)
+
+
+def _plausible(v: np.ndarray, unit: str, entry: str, extent: float) -> None:
+    """A displacement no larger than the model (``extent`` [m]) or a force up to
+    :data:`MAX_FORCE_N`."""
+    mag = float(np.linalg.norm(v))
+    limit = MAX_FORCE_N if unit == "N" else extent
+    if mag > limit:
+        raise ModelError(entry, f"magnitude {mag:g} {unit} is outside the plausible range "
+                         f"[0, {limit:g}] {unit}"
+                         + ("" if unit == "N" else " (the model's largest dimension)"))
+
+
+def _load(spec: Mapping[str, Any], unit: str, extent: float = math.inf) -> LoadProgramme:
+    d = table(_get(spec, "load", ""), "load")
     kind = d.get("kind", "ramp")
     if kind == "ramp":
         _check_keys(d, {"kind", "value", "steps", "duration"}, "load")
         v = vector(_get(d, "value", "load"), unit, "load.value")
-        n = int(d.get("steps", 10))
-        if n < 1:
-            raise ModelError("load.steps", f"must be at least 1, got {n}")
+        _plausible(v, unit, "load.value", extent)
+        n = integer(d.get("steps", 10), "load.steps", 1, MAX_STEPS)
         if "duration" in d:
-            T = quantity(d["duration"], "s", "load.duration")
+            T = bounded(d["duration"], "s", "load.duration", *DURATION_RANGE)
             return LoadProgramme(np.linspace(T / n, T, n), True, lambda t: min(t / T, 1.0) * v,
                                  f"ramp to {v} over {T} s")
         return LoadProgramme(np.linspace(1 / n, 1, n), False, lambda t: t * v, f"static ramp to {v}")
@@ -228,30 +405,48 @@ def _load(spec: Mapping[str, Any], unit: str) -> LoadProgramme:
         _check_keys(d, {"kind", "peak_to_peak", "frequency", "periods", "steps_per_period",
                         "direction"}, "load")
         pp = quantity(_get(d, "peak_to_peak", "load"), unit, "load.peak_to_peak")
-        f = quantity(_get(d, "frequency", "load"), "Hz", "load.frequency")
-        if f <= 0:
-            raise ModelError("load.frequency", f"must be positive, got {f}")
-        periods = float(d.get("periods", 3))
-        spp = int(d.get("steps_per_period", 20))
-        direc = np.asarray(d.get("direction", [0.0, 0.0, -1.0]), dtype=float)
-        if direc.shape != (3,) or np.linalg.norm(direc) == 0:
-            raise ModelError("load.direction", f"expected a non-zero 3-vector, got {d.get('direction')!r}")
+        _plausible(np.array([pp]), unit, "load.peak_to_peak", extent)
+        f = bounded(_get(d, "frequency", "load"), "Hz", "load.frequency", *FREQUENCY_RANGE, lo_open=False)
+        periods = bounded(d.get("periods", 3), "1", "load.periods", 0.0, float(MAX_STEPS))
+        spp = integer(d.get("steps_per_period", 20), "load.steps_per_period", 1, MAX_STEPS)
+        n = periods * spp
+        if abs(n - round(n)) > 1e-9 * max(n, 1.0):
+            raise ModelError("load.periods", f"periods x steps_per_period must be a whole number of "
+                             f"steps, got {periods:g} x {spp} = {n:g}")
+        n = int(round(n))
+        if n > MAX_STEPS:
+            raise ModelError("load.periods", f"periods x steps_per_period = {n} steps, over the limit of "
+                             f"{MAX_STEPS}")
+        raw = d.get("direction", [0.0, 0.0, -1.0])
+        try:
+            direc = np.asarray(raw, dtype=float)
+        except (TypeError, ValueError):
+            direc = np.zeros(0)
+        if direc.shape != (3,) or not np.all(np.isfinite(direc)) or np.linalg.norm(direc) == 0:
+            raise ModelError("load.direction", f"expected a non-zero 3-vector of numbers, got {raw!r}")
         direc = direc / np.linalg.norm(direc)
-        n = max(1, int(round(periods * spp)))
         T = periods / f
         return LoadProgramme(np.linspace(T / n, T, n), True,
                              lambda t: 0.5 * pp * (1 - math.cos(2 * math.pi * f * t)) * direc,
                              f"sinusoid {pp} peak to peak at {f} Hz, {periods} periods")
     if kind == "table":
         _check_keys(d, {"kind", "times", "values", "viscous"}, "load")
-        t = np.array([quantity(x, "s", f"load.times[{i}]") for i, x in enumerate(_get(d, "times", "load"))])
-        vals = _get(d, "values", "load")
-        if len(vals) != t.size or t.size < 1 or np.any(np.diff(t) <= 0) or t[0] <= 0:
-            raise ModelError("load", "times must be positive, increasing, one per value")
+        times, vals = _get(d, "times", "load"), _get(d, "values", "load")
+        for key, x in (("times", times), ("values", vals)):
+            if not isinstance(x, list) or not 1 <= len(x) <= MAX_STEPS:
+                raise ModelError(f"load.{key}", f"expected a list of 1 to {MAX_STEPS} entries, got {x!r}")
+        t = np.array([quantity(x, "s", f"load.times[{i}]") for i, x in enumerate(times)])
+        if len(vals) != t.size:
+            raise ModelError("load.values",
+                             f"expected one value per time: {t.size} times, {len(vals)} values")
+        if np.any(np.diff(t) <= 0) or t[0] <= 0:
+            raise ModelError("load.times", "times must be positive and increasing")
         V = np.array([vector(v, unit, f"load.values[{i}]") for i, v in enumerate(vals)])
+        for i, v in enumerate(V):
+            _plausible(v, unit, f"load.values[{i}]", extent)
         tt = np.concatenate([[0.0], t])
         VV = np.vstack([np.zeros(3), V])
-        return LoadProgramme(t, bool(d.get("viscous", True)),
+        return LoadProgramme(t, flag(d.get("viscous", True), "load.viscous"),
                              lambda x: np.array([np.interp(x, tt, VV[:, c]) for c in range(3)]),
                              f"table of {t.size} values")
     raise ModelError("load.kind", f"must be 'ramp', 'sinusoid' or 'table', got {kind!r}")
@@ -266,7 +461,8 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
     """
     spec = copy.deepcopy(dict(spec))
     _check_keys(spec, TOP_KEYS, "model file")
-    name = str(spec.get("model", {}).get("name", "model"))
+    meta = table(spec.get("model", {}), "model")
+    name = str(meta.get("name", "model"))
     layers_spec = _get(spec, "layers", "")
     if not isinstance(layers_spec, list) or not layers_spec:
         raise ModelError("layers", "needs at least one [[layers]] table")
@@ -274,32 +470,39 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
     for i, L in enumerate(layers_spec):
         entry = f"layers[{i}]"
         _check_keys(L, {"name", "thickness", "elements", "law", "options", "parameters", "prestress"}, entry)
-        lname = str(_get(L, "name", entry))
-        th = quantity(_get(L, "thickness", entry), "m", f"{entry}.thickness")
-        if th <= 0:
-            raise ModelError(f"{entry}.thickness", f"must be positive, got {th}")
-        layers.append((lname, th, int(L.get("elements", 2))))
+        lname = text(_get(L, "name", entry), f"{entry}.name")
+        th = bounded(_get(L, "thickness", entry), "m", f"{entry}.thickness", *LENGTH_RANGE)
+        layers.append((lname, th, integer(L.get("elements", 2), f"{entry}.elements", 1,
+                                          MAX_ELEMENTS_PER_DIRECTION)))
         law = _law(L, entry)
         F0, pre = _prestress(L.get("prestress"), f"{entry}.prestress")
-        mats.append(Material(lname, law, _params(law, dict(L.get("parameters", {})), entry),
-                             F0=F0, prestress=pre))
+        params = table(L.get("parameters", {}), f"{entry}.parameters")
+        mats.append(Material(lname, law, _params(law, params, entry), F0=F0, prestress=pre))
     if len({n for n, _, _ in layers}) != len(layers):
         raise ModelError("layers", "layer names must be unique")
+    sol = table(spec.get("solver", {}), "solver")
+    _check_keys(sol, {"linear", "rtol", "atol", "max_iter", "max_cuts", "line_search", "intorder",
+                      "max_unknowns"}, "solver")
+    intorder = integer(sol.pop("intorder", 4), "solver.intorder", *INTORDER_RANGE)
+    sol.pop("max_unknowns", None)
+    options = _solver_options(sol)
     if mesh is None:
+        check_size(spec, layers)  # before building: a huge mesh is refused, not attempted
         mesh, _ = _mesh(spec, layers)
+    elif 3 * mesh.n_nodes > max_unknowns(spec):
+        raise ModelError("geometry", f"the mesh has {3 * mesh.n_nodes:,} unknowns, over the limit of "
+                         f"{max_unknowns(spec):,} ([solver] max_unknowns or SKINKIT_MAX_UNKNOWNS)")
     from skinkit.fem.fields import read_fields
     fields = read_fields(spec.get("fields"), [n for n, _, _ in layers], quantity)
-    sol = dict(spec.get("solver", {}))
-    _check_keys(sol, {"linear", "rtol", "atol", "max_iter", "max_cuts", "line_search", "intorder"}, "solver")
-    intorder = int(sol.pop("intorder", 4))
-    try:
-        options = SolverOptions(**sol)
-    except TypeError as exc:
-        raise ModelError("solver", str(exc)) from None
     problem = Problem(mesh, mats, intorder=intorder, fields=fields)
-    bd = dict(spec.get("boundary", {}))
+    bd = table(spec.get("boundary", {}), "boundary")
     _check_keys(bd, {"fixed", "compliance"}, "boundary")
-    fixed = list(bd.get("fixed", ["outer", "bottom"] if "outer" in mesh.node_sets else ["bottom"]))
+    fixed = bd.get("fixed", ["outer", "bottom"] if "outer" in mesh.node_sets else ["bottom"])
+    if isinstance(fixed, str):
+        fixed = [fixed]
+    if not isinstance(fixed, list) or not all(isinstance(s, str) for s in fixed):
+        raise ModelError("boundary.fixed", f"expected a list of node-set names, got {fixed!r}")
+    fixed = list(fixed)
     bc = BoundaryConditions(mesh.n_dof)
     fixed = _elastic_supports(bd.get("compliance"), mesh, fixed, bc)
     for s in fixed:
@@ -308,20 +511,28 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         bc.fix(mesh.node_sets[s])
     ind = spec.get("indenter")
     unit = "m"
+    extent = float(np.ptp(mesh.nodes, axis=0).max())
     if ind is not None:
         _check_keys(ind, {"mode", "components"}, "indenter")
         mode = ind.get("mode", "displacement")
+        if mode not in ("displacement", "force"):
+            raise ModelError("indenter.mode", f"must be 'displacement' or 'force', got {mode!r}")
         unit = "N" if mode == "force" else "m"
+        comps = ind.get("components", [0, 1, 2])
+        if (not isinstance(comps, list) or not comps or len(set(map(repr, comps))) != len(comps)
+                or any(isinstance(c, bool) or c not in (0, 1, 2) for c in comps)):
+            raise ModelError("indenter.components", f"expected a list of distinct components from "
+                             f"0, 1, 2 (x, y, z), got {comps!r}")
         if "indenter" not in mesh.node_sets:
             raise ModelError("indenter", "the geometry has no indenter region (set indenter_diameter)")
         nodes = mesh.node_sets["indenter"]
         fixed_nodes = np.concatenate([mesh.node_sets[s] for s in fixed]) if fixed else np.zeros(0, int)
         nodes = np.setdiff1d(nodes, fixed_nodes)
-        load = _load(spec, unit) if (require_load or "load" in spec) else _no_load()
-        bc.rigid = Rigid(nodes, mode, load.value, tuple(ind.get("components", (0, 1, 2))))
+        load = _load(spec, unit, extent) if (require_load or "load" in spec) else _no_load()
+        bc.rigid = Rigid(nodes, mode, load.value, tuple(int(c) for c in comps))
     else:
-        load = _load(spec, unit) if (require_load or "load" in spec) else _no_load()
-    outp = dict(spec.get("output", {}))
+        load = _load(spec, unit, extent) if (require_load or "load" in spec) else _no_load()
+    outp = table(spec.get("output", {}), "output")
     _check_keys(outp, {"points", "point_depth", "sensitivities"}, "output")
     points = None
     if "points" in outp:
@@ -329,9 +540,34 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         if not isinstance(raw, list) or not raw:
             raise ModelError("output.points", "expected a list of [x, y, z] points")
         points = np.array([vector(p, "m", f"output.points[{i}]") for i, p in enumerate(raw)])
-    depth = quantity(outp.get("point_depth", 0.0), "m", "output.point_depth")
+    depth = bounded(outp.get("point_depth", 0.0), "m", "output.point_depth", 0.0, extent, lo_open=False)
     return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed, points, depth,
-                 bool(outp.get("sensitivities", False)), fields)
+                 flag(outp.get("sensitivities", False), "output.sensitivities"), fields)
+
+
+#: accepted ``[solver]`` relative and absolute tolerances, Newton iterations and step cuts
+RTOL_RANGE, ATOL_RANGE = (0.0, 0.1), (0.0, 1e3)
+MAX_ITER_RANGE, MAX_CUTS_RANGE = (1, 1000), (0, 60)
+
+
+def _solver_options(sol: Mapping[str, Any]) -> SolverOptions:
+    """``[solver]`` entries (``intorder`` and ``max_unknowns`` removed), checked."""
+    kw: dict[str, Any] = {}
+    if "rtol" in sol:
+        kw["rtol"] = bounded(sol["rtol"], "1", "solver.rtol", *RTOL_RANGE)
+    if "atol" in sol:
+        kw["atol"] = bounded(sol["atol"], "N", "solver.atol", *ATOL_RANGE, lo_open=False)
+    if "max_iter" in sol:
+        kw["max_iter"] = integer(sol["max_iter"], "solver.max_iter", *MAX_ITER_RANGE)
+    if "max_cuts" in sol:
+        kw["max_cuts"] = integer(sol["max_cuts"], "solver.max_cuts", *MAX_CUTS_RANGE)
+    if "line_search" in sol:
+        kw["line_search"] = flag(sol["line_search"], "solver.line_search")
+    if "linear" in sol:
+        from skinkit.fem.linsolve import resolve
+        kw["linear"] = text(sol["linear"], "solver.linear")
+        resolve(kw["linear"])  # an unknown or missing solver is refused before any work
+    return SolverOptions(**kw)
 
 
 def _elastic_supports(d: Any, mesh: FEMesh, fixed: list[str], bc: BoundaryConditions) -> list[str]:

@@ -1,0 +1,113 @@
+"""Output paths of CLI commands: checked before work starts, written under a temporary name
+and renamed into place on success, so a refused or failed command leaves nothing behind and
+never changes an existing file (issue 15)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from skinkit.errors import SkinkitError
+
+
+def _existing_ancestor_problem(path: Path) -> str | None:
+    for parent in path.parents:
+        if parent.exists() or parent.is_symlink():
+            if not parent.is_dir():
+                return f"{parent} is not a directory"
+            if not os.access(parent, os.W_OK | os.X_OK):
+                return f"{parent} is not writable"
+            return None
+    return None
+
+
+def check_out_dir(path: str | os.PathLike, option: str) -> Path:
+    """An output directory that can be created or replaced: not a file, not a symbolic link,
+    not under a file. Raises a one-line :class:`SkinkitError` naming ``option``."""
+    p = Path(path)
+    if p.is_symlink():
+        raise SkinkitError(f"{option} {p}: is a symbolic link; give the directory it points to")
+    if p.exists() and not p.is_dir():
+        raise SkinkitError(f"{option} {p}: is a file, not a directory")
+    problem = _existing_ancestor_problem(p)
+    if problem:
+        raise SkinkitError(f"{option} {p}: cannot create it ({problem})")
+    return p
+
+
+def check_out_file(path: str | os.PathLike, option: str, *, parents: bool = False) -> Path:
+    """An output file path whose directory exists (or, with ``parents``, can be created) and
+    which is not a directory or a symbolic link."""
+    p = Path(path)
+    if p.is_symlink():
+        raise SkinkitError(f"{option} {p}: is a symbolic link; give the file it points to")
+    if p.is_dir():
+        raise SkinkitError(f"{option} {p}: is a directory, not a file")
+    if not parents and not p.parent.is_dir():
+        what = "is not a directory" if p.parent.exists() else "does not exist"
+        raise SkinkitError(f"{option} {p}: its folder {p.parent} {what}")
+    problem = _existing_ancestor_problem(p)
+    if problem:
+        raise SkinkitError(f"{option} {p}: cannot create it ({problem})")
+    return p
+
+
+def check_name(name: str, option: str) -> str:
+    """A record, protocol or image-set name: non-empty, no path separator, no ``..``."""
+    if not name or not name.strip():
+        raise SkinkitError(f"{option}: must not be empty")
+    if "/" in name or "\\" in name or "\0" in name or ".." in name:
+        raise SkinkitError(f"{option} {name!r}: a name must not contain '/', '\\', '..' or NUL")
+    return name
+
+
+@contextlib.contextmanager
+def staged_dir(out: Path) -> Iterator[Path]:
+    """Yield a fresh temporary directory beside ``out``; on success it replaces ``out`` (an
+    existing ``out`` is removed only then), on failure it is deleted."""
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=_anchor(out)))
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    out.parent.mkdir(parents=True, exist_ok=True)  # only now: a failure creates no folder
+    old = None
+    if out.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+        os.replace(out, old / "x")
+    os.replace(tmp, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def staged_file(out: Path) -> Iterator[Path]:
+    """Yield a temporary file path beside ``out`` (a copy of ``out`` if it exists, for an
+    append); on success it replaces ``out``, on failure it is deleted."""
+    fd, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=_anchor(out))
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        if out.exists():
+            shutil.copy2(out, tmp)
+        else:
+            tmp.unlink()
+        yield tmp
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    out.parent.mkdir(parents=True, exist_ok=True)
+    os.replace(tmp, out)
+
+
+def _anchor(out: Path) -> Path:
+    """The nearest existing folder of ``out`` (same file system, so the rename is atomic)."""
+    for parent in Path(os.path.abspath(out)).parents:
+        if parent.is_dir():
+            return parent
+    return Path.cwd()
