@@ -26,9 +26,6 @@ from skinkit.report.common import (
 from skinkit.schemas import CameraRig
 from skinkit.store.experiment import Experiment
 
-#: longest value text shown in a calibration's table (long arrays are cut, the file has them whole)
-MAX_VALUE_CHARS = 160
-
 
 def _centres(rig: CameraRig) -> tuple[np.ndarray, np.ndarray]:
     """Camera centres ``(C, 3)`` [m] and optical axes ``(C, 3)`` (unit) in the world frame."""
@@ -117,10 +114,7 @@ def _reprojection(cals: dict[str, dict[str, Any]], rig: CameraRig | None) -> str
 def _calibration(name: str, d: dict[str, Any]) -> str:
     rows = []
     for key, v in _flatten(d):
-        s = value_text(v)
-        if len(s) > MAX_VALUE_CHARS:
-            s = s[:MAX_VALUE_CHARS] + " …"
-        rows.append([t(key, key), t(s)])
+        rows.append([t(key, key), t(value_text(v))])
     body = table(["quantity", "value"], rows, sortable=False) if rows else note("(empty)")
     return f'<div class="item" id="calibration-{slug(name)}"><h4>{e(name)}</h4>{body}</div>'
 

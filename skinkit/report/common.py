@@ -27,13 +27,16 @@ from skinkit.gap.html import _png_uri as png_uri
 from skinkit.gap.html import _t as t
 from skinkit.gap.html import _table as table
 
-__all__ = ["CSS", "JS", "Section", "array_uri", "decimate", "e", "f", "figure", "img", "kv_table", "mpl",
-           "note", "num", "p", "pct", "plural", "png_uri", "slug", "t", "table", "value_text", "warn_list"]
+__all__ = ["CSS", "JS", "MAX_PLOT_POINTS", "MAX_PLOT_SAMPLES", "MAX_VALUE_CHARS", "Section", "array_uri",
+           "decimate", "e", "f", "figure", "img", "kv_table", "mpl", "note", "num", "p", "pct", "plural",
+           "png_uri", "slug", "t", "table", "value_text", "warn_list"]
 
 #: at most this many samples of a signal are drawn (more add nothing at a figure's resolution)
 MAX_PLOT_SAMPLES = 20_000
 #: at most this many points of a cloud are drawn
 MAX_PLOT_POINTS = 20_000
+#: longest value text shown in a table cell (long arrays are cut, the file has them whole)
+MAX_VALUE_CHARS = 160
 
 
 @dataclass
@@ -76,9 +79,14 @@ def kv_table(rows: Iterable[tuple[str, Any]]) -> str:
                  sortable=False)
 
 
-def value_text(v: Any, digits: int = 4) -> str:
+def value_text(v: Any, digits: int = 4, limit: int = MAX_VALUE_CHARS) -> str:
     """Any JSON value as short plain text: numbers rounded, lists of numbers rounded each,
-    other containers as compact JSON."""
+    other containers as compact JSON; cut at ``limit`` characters (the file has it whole)."""
+    s = _value_text(v, digits)
+    return s if len(s) <= limit else s[:limit] + " …"
+
+
+def _value_text(v: Any, digits: int) -> str:
     import json
 
     if isinstance(v, bool) or v is None:

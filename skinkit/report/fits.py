@@ -71,13 +71,13 @@ def _correlation_figure(names: list[str], corr: np.ndarray) -> str:
     size = max(3.2, 0.55 * n + 1.8)
     fig = figure(size + 0.9, size)
     ax = fig.add_subplot(1, 1, 1)
-    im = ax.imshow(corr, cmap="RdBu_r", vmin=-1, vmax=1)
+    im = ax.imshow(corr, cmap="RdBu_r", vmin=-1, vmax=1, aspect="auto")   # "equal" cuts labels
     ax.set_xticks(range(n), [mpl(x) for x in names], rotation=60, ha="right", fontsize=7)
     ax.set_yticks(range(n), [mpl(x) for x in names], fontsize=7)
     if n <= 14:
         for i in range(n):
             for j in range(n):
-                v = corr[i, j]
+                v = round(float(corr[i, j]), 2) + 0.0   # no "-0.00"
                 ax.text(j, i, f"{v:+.2f}", ha="center", va="center", fontsize=6 if n > 8 else 7,
                         color="white" if abs(v) > 0.6 else "black",
                         weight="bold" if abs(v) >= STRONG_CORRELATION and i != j else "normal")

@@ -35,7 +35,7 @@ def _vafs(fit: FitResult) -> list[tuple[str, float]]:
     out = []
     for k, v in fit.extra.items():
         if str(k).lower().startswith("vaf"):
-            label = str(k).removesuffix("_pct").replace("_", " ")
+            label = "VAF" + str(k)[3:].removesuffix("_pct").replace("_", " ")
             out.append((label, f(v)))
     return out
 
