@@ -33,7 +33,7 @@ def _contents(parts: list[Section]) -> str:
     items = []
     for s in parts:
         if s.html is None:
-            items.append(f'<li class="omitted">{e(s.title)}: {e(s.summary)}</li>')
+            items.append(f'<li class="omitted">{e(s.title)} — {e(s.summary)}</li>')
         else:
             items.append(f'<li><a href="#{e(s.id)}">{e(s.title)}</a>: {e(s.summary)}</li>')
     return '<nav id="contents"><h2>Contents</h2><ol class="contents">' + "".join(items) + "</ol></nav>"
