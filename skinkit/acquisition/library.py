@@ -20,6 +20,7 @@ Sources (reference text):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -327,6 +328,10 @@ def make_protocol(name: str, **parameters: Any) -> Protocol:
     )
 
 
+#: most setpoints a programme may have (10^7: about 28 h at 100 Hz, 0.2 GB of setpoints)
+MAX_SETPOINTS = 10_000_000
+
+
 def programme(protocol: Protocol) -> Programme:
     """The setpoints of ``protocol`` (a built-in name with any parameter values)."""
     entry = _CATALOGUE.get(protocol.name)
@@ -338,6 +343,18 @@ def programme(protocol: Protocol) -> Programme:
             raise ProtocolError(
                 f"protocol {protocol.name!r}: parameter {key!r} must be > 0, got {params[key]}"
             )
+    for key, value in params.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ProtocolError(f"protocol {protocol.name!r}: parameter {key!r} must be finite, got {value}")
+    try:
+        n = entry.length(params)
+    except (ValueError, ZeroDivisionError, OverflowError) as exc:
+        raise ProtocolError(f"protocol {protocol.name!r}: cannot build its programme ({exc})") from None
+    if n > MAX_SETPOINTS:  # refuse from the count, before allocating the setpoints
+        raise ProtocolError(
+            f"protocol {protocol.name!r}: {n:,} setpoints (duration x setpoint_rate), over the "
+            f"limit of {MAX_SETPOINTS:,}; lower setpoint_rate or shorten the protocol"
+        )
     try:
         return entry.build(params)
     except (ValueError, ZeroDivisionError) as exc:

@@ -135,7 +135,8 @@ def run(n: int = 7, linear: str = "auto") -> dict:
 
 
 @click.command("fem")
-@click.option("--n", default=7, show_default=True, help="elements per side (7 -> 10,125 dofs)")
+@click.option("--n", type=click.IntRange(1, 30), default=7, show_default=True,
+              help="elements per side (7 -> 10,125 dofs)")
 @click.option("--linear", default="auto", show_default=True, help="linear solver: auto, pardiso, splu")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 def bench_fem(n: int, linear: str, as_json: bool) -> None:

@@ -130,7 +130,8 @@ def run(seed: int = 0) -> dict[str, Any]:
 
 @click.command("fit")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
-@click.option("--seed", type=int, default=0, show_default=True, help="noise seed of the virtual session")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
+              help="noise seed of the virtual session")
 def bench_fit(as_json: bool, seed: int) -> None:
     """Analytic-Jacobian fit vs finite differences vs derivative-free, same problem and start."""
     res = run(seed)

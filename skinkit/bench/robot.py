@@ -113,7 +113,8 @@ def measure(link: str, rate_param: int, stream_hz: float, duration_s: float) -> 
 
 
 @click.command("robot")
-@click.option("--duration", default=3.0, show_default=True, help="device seconds per configuration")
+@click.option("--duration", type=click.FloatRange(0.1, 600.0), default=3.0, show_default=True,
+              help="device seconds per configuration")
 @click.option("--json", "as_json", is_flag=True)
 def bench_robot(duration: float, as_json: bool) -> None:
     """Sustained sample rate over serial (115200, 921600 baud) and CAN (500k, 1M bit/s); one

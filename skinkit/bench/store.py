@@ -66,8 +66,10 @@ def run(n_blocks: int = 200, block: int = 1000, repeats: int = 3) -> dict[str, f
 
 
 @click.command("store")
-@click.option("--blocks", default=200, show_default=True, help="Number of blocks.")
-@click.option("--block", default=1000, show_default=True, help="Samples per block.")
+@click.option("--blocks", type=click.IntRange(1, 100_000), default=200, show_default=True,
+              help="Number of blocks.")
+@click.option("--block", type=click.IntRange(1, 1_000_000), default=1000, show_default=True,
+              help="Samples per block.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 def bench_store(blocks: int, block: int, as_json: bool) -> None:
     """Crash-safe record appending (skinkit) against plain h5py appending, same blocks."""

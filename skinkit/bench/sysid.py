@@ -66,7 +66,7 @@ def run(repeat: int = 3, seed: int = 0, duration_s: float = 5.0,
 @click.command()
 @click.option("--repeat", type=click.IntRange(1, 20), default=3, show_default=True,
               help="Runs per timing (the fastest is reported).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True)
 @click.option("--threads", type=click.IntRange(0, 256), default=1, show_default=True,
               help="BLAS threads for both sides (0: library default; 1 avoids "
               "oversubscription on a shared machine).")

@@ -117,9 +117,11 @@ def compare(n_trials: int = 100, subset_px: int = 64, seed: int = 0,
 
 
 @click.command("vision")
-@click.option("--trials", default=100, show_default=True, help="number of subsets")
-@click.option("--subset", "subset_px", default=64, show_default=True, help="subset side [px]")
-@click.option("--seed", default=0, show_default=True)
+@click.option("--trials", type=click.IntRange(1, 100_000), default=100, show_default=True,
+              help="number of subsets")
+@click.option("--subset", "subset_px", type=click.IntRange(8, 1024), default=64, show_default=True,
+              help="subset side [px]")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True)
 def bench_vision(trials: int, subset_px: int, seed: int) -> None:
     """Subpixel error (bias, noise) and subsets/s: pcc and gn vs OpenCV and scikit-image."""
     from rich.console import Console

@@ -91,6 +91,8 @@ class _LazyGroup(click.Group):
             raise
         except KeyboardInterrupt:
             _fail(ctx, "interrupted", EXIT_INTERRUPTED)
+        except BrokenPipeError:  # the reader went away (``skinkit ... | head``): stop quietly
+            ctx.exit(1)
         except OSError as exc:
             if exc.filename is None or _debug(ctx):
                 _internal(ctx, exc)

@@ -96,6 +96,32 @@ def _parse_kv(items: tuple[str, ...], what: str) -> dict[str, Any]:
     return out
 
 
+#: driver connect options the CLI checks before connecting: (type, lowest, highest)
+_OPTION_RANGES: dict[str, tuple[type, float, float]] = {
+    "seed": (int, 0, 2**32 - 1),
+    "decimation": (int, 1, 1000),
+    "baudrate": (int, 300, 12_000_000),
+    "baud": (int, 300, 12_000_000),
+    "bitrate": (int, 10_000, 8_000_000),
+    "block_s": (float, 1e-4, 10.0),
+}
+
+
+def _check_options(opts: dict[str, Any]) -> None:
+    """Type and range of the driver options the CLI knows; the driver checks the rest."""
+    for key, (kind, lo, hi) in _OPTION_RANGES.items():
+        if key not in opts:
+            continue
+        v = opts[key]
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and lo <= v <= hi
+        if kind is int:
+            ok = ok and float(v).is_integer()
+        if not ok:
+            what = "a whole number" if kind is int else "a number"
+            raise SkinkitError(f"--option {key}={v}: must be {what} in [{kind(lo)}, {kind(hi)}]")
+        opts[key] = kind(v)
+
+
 @robot.command("run")
 @click.argument("protocol_name", metavar="PROTOCOL")
 @click.option(
@@ -108,7 +134,8 @@ def _parse_kv(items: tuple[str, ...], what: str) -> dict[str, Any]:
 @click.option("--port", default=None, help="serial port, or INTERFACE:CHANNEL for can")
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="protocol parameter (SI units)")
 @click.option("--option", "options", multiple=True, metavar="KEY=VALUE", help="driver connect option")
-@click.option("--contact-force", default=0.01, show_default=True, type=float, help="homing contact force [N]")
+@click.option("--contact-force", default=0.01, show_default=True,
+              type=click.FloatRange(0.0, 5.0, min_open=True), help="homing contact force [N]")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="experiment file (HDF5)")
 @click.option("--json", "as_json", is_flag=True, help="print the run summary as JSON")
 def run(
@@ -124,25 +151,89 @@ def run(
     """Home the robot and run PROTOCOL, streaming its samples into --out."""
     from skinkit import registry
     from skinkit.acquisition import make_protocol, run_protocol
+    from skinkit.cli._paths import check_out_file
     from skinkit.store import create_experiment, open_experiment
 
+    path = check_out_file(out, "--out")
     protocol = make_protocol(protocol_name, **_parse_kv(params, "--param"))
-    driver = registry.create("skinkit.drivers", driver_name)
     opts = _parse_kv(options, "--option")
+    _check_options(opts)
     if port:
         opts["port"] = port
-    path = Path(out)
+    if path.exists():  # a record of this name would be refused after homing: refuse now
+        with open_experiment(path) as exp:
+            if protocol.name in exp.record_names():
+                raise SkinkitError(f"--out {path}: already holds a record {protocol.name!r}")
+    driver = registry.create("skinkit.drivers", driver_name)
+    created = not path.exists()
     try:
-        driver.connect(**opts)
+        try:
+            driver.connect(**opts)
+        except (TypeError, ValueError) as exc:
+            raise SkinkitError(f"--option: driver {driver_name!r} refused its options: {exc}") from None
         driver.home(contact_force)
-        exp = open_experiment(path, mode="a") if path.exists() else create_experiment(path)
-        with exp:
+        exp = _LazyExperiment(path, open_experiment, create_experiment)
+        try:
             summary = run_protocol(driver, protocol, exp, progress=not as_json)
+        finally:
+            exp.close()
+    except BaseException:
+        if created:
+            _drop_if_empty(path)
+        raise
     finally:
         try:
             driver.disconnect()
         except SkinkitError:
             pass
+    _report(summary, protocol, path, as_json)
+
+
+class _LazyExperiment:
+    """The experiment file, opened (or created) only when the run starts its record: a
+    protocol the driver refuses before motion leaves an existing file untouched."""
+
+    def __init__(self, path: Path, open_experiment: Any, create_experiment: Any) -> None:
+        self.path = path
+        self._open_fn, self._create_fn = open_experiment, create_experiment
+        self._exp: Any = None
+
+    def _get(self) -> Any:
+        if self._exp is None:
+            self._exp = (self._open_fn(self.path, mode="a") if self.path.exists()
+                         else self._create_fn(self.path))
+        return self._exp
+
+    def record_writer(self, *args: Any, **kwargs: Any) -> Any:
+        return self._get().record_writer(*args, **kwargs)
+
+    def set_record_attrs(self, *args: Any, **kwargs: Any) -> Any:
+        if self._exp is not None:  # no record was started: nothing to account for
+            return self._exp.set_record_attrs(*args, **kwargs)
+        return None
+
+    def close(self) -> None:
+        if self._exp is not None:
+            self._exp.close()
+
+
+def _drop_if_empty(path: Path) -> None:
+    """Remove an experiment file this run created if it holds no sample (a refused run);
+    a run that faulted after recording keeps its samples."""
+    from skinkit.store import open_experiment
+
+    if not path.exists():
+        return
+    try:
+        with open_experiment(path) as exp:
+            empty = all(r["samples"] == 0 for r in exp.summary()["records"])
+    except SkinkitError:
+        empty = True  # not even a readable file: nothing worth keeping
+    if empty:
+        path.unlink()
+
+
+def _report(summary: Any, protocol: Any, path: Path, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(summary.to_dict(), indent=1))
     else:

@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 
@@ -53,16 +54,18 @@ def _clean(obj: Any) -> Any:
 @click.argument("record", type=click.Path(path_type=Path, dir_okay=False))
 @click.option("--model", type=click.Choice(["linear", "wiener", "hammerstein"]),
               default="linear", show_default=True, help="Model to identify.")
-@click.option("--memory", "memory_s", type=float, default=None,
+@click.option("--memory", "memory_s", type=FiniteFloat(0.0, 60.0, min_open=True), default=None,
               help="IRF memory in seconds (default: from the IRF's decay).")
 @click.option("--protocol", default=None, help="Record name inside an experiment file.")
 @click.option("--axis", type=click.Choice(["x", "y", "z"]), default="z", show_default=True,
               help="Tip axis to identify along (z: normal indentation).")
-@click.option("--robot-mass", "robot_mass", type=float, default=0.0, show_default=True,
+@click.option("--robot-mass", "robot_mass", type=FiniteFloat(0.0, 100.0), default=0.0, show_default=True,
               help="Robot moving mass to remove [kg].")
-@click.option("--robot-damping", "robot_damping", type=float, default=0.0, show_default=True,
+@click.option("--robot-damping", "robot_damping", type=FiniteFloat(0.0, 1e6), default=0.0,
+              show_default=True,
               help="Robot damping to remove [N s/m].")
-@click.option("--robot-stiffness", "robot_stiffness", type=float, default=0.0, show_default=True,
+@click.option("--robot-stiffness", "robot_stiffness", type=FiniteFloat(0.0, 1e9), default=0.0,
+              show_default=True,
               help="Robot stiffness to remove [N/m].")
 @click.option("--hold", type=click.Choice(["foh", "zoh", "impulse"]), default="foh",
               show_default=True, help="Force between samples: linear (foh, a measured force), "
@@ -79,7 +82,8 @@ def _clean(obj: Any) -> Any:
 @click.option("--incremental", is_flag=True,
               help="Incremental protocol: find the stochastic steps and identify K, B, I in "
               "each (ascending and descending).")
-@click.option("--probe-radius", "probe_radius_mm", type=float, default=None,
+@click.option("--probe-radius", "probe_radius_mm", type=FiniteFloat(0.0, 100.0, min_open=True),
+              default=None,
               help="Probe radius [mm]; with --incremental adds E = (1 - nu^2) K / (2 Rp).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @click.option("--plot", "plot_dir", type=click.Path(path_type=Path, file_okay=False),
