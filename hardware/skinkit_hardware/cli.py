@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from skinkit.cli._types import FiniteFloat
+
 
 @click.command("emulate")
 @click.option(
@@ -16,7 +18,7 @@ import click
               help="CAN bit rate (0: unlimited)")
 @click.option("--port", type=click.IntRange(0, 65535), default=0,
               help="CAN bridge TCP port on 127.0.0.1 (0: any free)")
-@click.option("--speed", type=click.FloatRange(0.0, 1000.0), default=1.0, show_default=True,
+@click.option("--speed", type=FiniteFloat(0.0, 1000.0), default=1.0, show_default=True,
               help="real-time factor (0: as fast as drained)")
 @click.option("--skin", type=click.Choice(["kelvin-voigt", "wiener", "none", "spring"]),
               default="kelvin-voigt", show_default=True, help="skin load behind the tip")

@@ -23,6 +23,8 @@ from typing import Any
 
 import click
 
+from skinkit.cli._types import FiniteFloat
+
 #: targets of issue 16
 PLUGINS_TARGET_S = 1.0
 REALTIME_TARGET = 1.0
@@ -99,7 +101,7 @@ def run(repeat: int = 3, robot_seconds: float = 2.0) -> dict[str, Any]:
 @click.command("cli")
 @click.option("--repeat", default=3, show_default=True, type=click.IntRange(1),
               help="runs per command; the best is reported")
-@click.option("--robot-seconds", default=2.0, show_default=True, type=click.FloatRange(0.1),
+@click.option("--robot-seconds", default=2.0, show_default=True, type=FiniteFloat(0.1),
               help="simulated length of the robot run [s]")
 @click.option("--json", "as_json", is_flag=True)
 def bench_cli(repeat: int, robot_seconds: float, as_json: bool) -> None:

@@ -26,6 +26,7 @@ from typing import Any
 
 import click
 
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 SERIAL_SAMPLE_BYTES = 30 + 16 / 32
@@ -113,7 +114,7 @@ def measure(link: str, rate_param: int, stream_hz: float, duration_s: float) -> 
 
 
 @click.command("robot")
-@click.option("--duration", type=click.FloatRange(0.1, 600.0), default=3.0, show_default=True,
+@click.option("--duration", type=FiniteFloat(0.1, 600.0), default=3.0, show_default=True,
               help="device seconds per configuration")
 @click.option("--json", "as_json", is_flag=True)
 def bench_robot(duration: float, as_json: bool) -> None:

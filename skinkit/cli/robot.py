@@ -13,6 +13,7 @@ from typing import Any
 
 import click
 
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 #: entry-point group for ``skinkit robot`` subcommands contributed by other distributions
@@ -135,7 +136,7 @@ def _check_options(opts: dict[str, Any]) -> None:
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="protocol parameter (SI units)")
 @click.option("--option", "options", multiple=True, metavar="KEY=VALUE", help="driver connect option")
 @click.option("--contact-force", default=0.01, show_default=True,
-              type=click.FloatRange(0.0, 5.0, min_open=True), help="homing contact force [N]")
+              type=FiniteFloat(0.0, 5.0, min_open=True), help="homing contact force [N]")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="experiment file (HDF5)")
 @click.option("--json", "as_json", is_flag=True, help="print the run summary as JSON")
 def run(
