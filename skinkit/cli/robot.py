@@ -6,6 +6,7 @@ Other distributions add subcommands through the entry-point group ``skinkit.comm
 
 from __future__ import annotations
 
+import inspect
 import json
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -168,9 +169,13 @@ def run(
     driver = registry.create("skinkit.drivers", driver_name)
     created = not path.exists()
     try:
+        try:  # an unknown option: checked against connect's signature, not by calling it
+            inspect.signature(driver.connect).bind(**opts)
+        except TypeError as exc:
+            raise SkinkitError(f"--option: driver {driver_name!r} refused its options: {exc}") from None
         try:
             driver.connect(**opts)
-        except (TypeError, ValueError) as exc:
+        except ValueError as exc:  # how a driver refuses an option's value; other errors are bugs
             raise SkinkitError(f"--option: driver {driver_name!r} refused its options: {exc}") from None
         driver.home(contact_force)
         exp = _LazyExperiment(path, open_experiment, create_experiment)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import inspect
 import math
 import os
 import sys
@@ -51,7 +52,15 @@ def quantity(value: Any, unit: str, entry: str) -> float:
             x = float(parts[0])
         except (ValueError, IndexError):
             raise ModelError(entry, f"expected '<number> <unit>', got {value!r}") from None
-        u = parts[1].strip() if len(parts) > 1 else unit
+        if len(parts) < 2:
+            if unit == "1":
+                return _finite(x, unit, entry)
+            # a number in quotes without a unit is a unit left out, not a request for SI: 1.5 m
+            # where "1.5 mm" was meant is a silent factor of 1000
+            si = si_unit(unit) if is_known(unit) else unit
+            raise ModelError(entry, f"{value!r} has no unit; write '{value.strip()} <unit>' with a unit "
+                             f"of {si!r}, or a bare number (no quotes) for SI {si}")
+        u = parts[1].strip()
         if not is_known(u):
             raise ModelError(entry, f"unknown unit {u!r} in {value!r}")
         try:
@@ -195,11 +204,19 @@ def _law(layer: Mapping[str, Any], entry: str):
     name = text(_get(layer, "law", entry), f"{entry}.law")
     opts = table(layer.get("options", {}), f"{entry}.options")
     try:
-        return registry.create("skinkit.laws", name, **opts)
+        law = registry.load("skinkit.laws", name)
     except PluginError as exc:
         raise ModelError(f"{entry}.law", str(exc)) from None
-    except (TypeError, ValueError, KeyError, AttributeError) as exc:
-        raise ModelError(f"{entry}.options", f"law {name!r}: {type(exc).__name__}: {exc}") from None
+    if not isinstance(law, type):
+        return law
+    try:  # an unknown or missing option: checked against the signature, not by calling
+        inspect.signature(law).bind(**opts)
+    except TypeError as exc:
+        raise ModelError(f"{entry}.options", f"law {name!r}: {exc}") from None
+    try:
+        return law(**opts)
+    except ValueError as exc:  # how a law refuses an option's value; any other error is a bug
+        raise ModelError(f"{entry}.options", f"law {name!r}: {exc}") from None
 
 
 def _params(law: Any, given: Mapping[str, Any], entry: str) -> dict[str, float]:
@@ -213,6 +230,10 @@ def _params(law: Any, given: Mapping[str, Any], entry: str) -> dict[str, float]:
         raise ModelError(f"{entry}.parameters", f"missing parameter(s) {missing} for law {law.name!r} "
                          f"({lawkit.bounds_text(law)})")
     out = {n: quantity(given[n], declared[n].unit, f"{entry}.parameters.{n}") for n in declared}
+    for n, v in out.items():
+        if declared[n].unit == "Pa" and abs(v) > MAX_MODULUS_PA:
+            raise ModelError(f"{entry}.parameters.{n}", f"magnitude {abs(v):g} Pa is outside the plausible "
+                             f"range [0, {MAX_MODULUS_PA:g}] Pa (stiffer than diamond)")
     return lawkit.check_parameters(law, out, f"{entry}.parameters")
 
 
@@ -246,6 +267,9 @@ def _prestress(d: Mapping[str, Any] | None, entry: str):
     return None, (l1, l2, ang)
 
 
+#: largest magnitude of a law parameter in Pa (diamond's moduli are about 1e12 Pa; tissue
+#: and gels are below 1e9 Pa): beyond it the stress overflows long before anything is learnt
+MAX_MODULUS_PA = 1e12
 #: accepted range of element counts per direction (geometry ``n_*``, ``n``, layer ``elements``)
 MAX_ELEMENTS_PER_DIRECTION = 200
 #: accepted range of lengths (diameters, sizes, thicknesses) [m]
@@ -621,10 +645,15 @@ def _no_load() -> LoadProgramme:
 def layer_table(spec: Mapping[str, Any]) -> list[tuple[str, float, int]]:
     """``(name, thickness [m], element layers)`` of every ``[[layers]]`` table, top down."""
     out = []
-    for i, L in enumerate(_get(spec, "layers", "")):
-        out.append((str(_get(L, "name", f"layers[{i}]")),
-                    quantity(_get(L, "thickness", f"layers[{i}]"), "m", f"layers[{i}].thickness"),
-                    int(L.get("elements", 2))))
+    layers = _get(spec, "layers", "")
+    if not isinstance(layers, list) or not layers:
+        raise ModelError("layers", "needs at least one [[layers]] table")
+    for i, L in enumerate(layers):
+        entry = f"layers[{i}]"
+        L = table(L, entry)
+        out.append((str(_get(L, "name", entry)),
+                    bounded(_get(L, "thickness", entry), "m", f"{entry}.thickness", *LENGTH_RANGE),
+                    integer(L.get("elements", 2), f"{entry}.elements", 1, MAX_ELEMENTS_PER_DIRECTION)))
     return out
 
 

@@ -114,12 +114,9 @@ def apply_all(spec: Mapping[str, Any], effects: list[AppliedEffect],
                 key = f"{eff.name}.{local}"
                 if key in values:
                     p[local] = check_value(eff.name, eff.declared[local], float(values[key]), key)
-        try:
-            out = dict(eff.plugin.apply(out, p))
-        except EffectError:
-            raise
-        except (KeyError, TypeError, ValueError) as exc:
-            raise EffectError(f"effects.{eff.name}", f"cannot be applied to this model: {exc}") from None
+        # an effect refuses a model with EffectError (docs/plugin-authors.md); anything else it
+        # raises is a bug in the effect and propagates with its traceback
+        out = dict(eff.plugin.apply(out, p))
     return out
 
 

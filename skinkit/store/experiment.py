@@ -37,6 +37,30 @@ def _one_line(exc: BaseException) -> str:
 _F = TypeVar("_F", bound=Callable[..., Any])
 
 
+def _int_pair(value: Any) -> tuple[int, int]:
+    """Two integers from an attribute value (``ValueError``/``TypeError`` otherwise)."""
+    arr = np.asarray(value)
+    if arr.shape != (2,) or arr.dtype.kind not in "iu":
+        raise ValueError("not two integers")
+    return int(arr[0]), int(arr[1])
+
+
+def _flag(value: Any) -> bool:
+    """A boolean attribute (HDF5 stores it as a numpy bool or a 0/1 integer)."""
+    if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, np.integer)) and value in (0, 1)):
+        return bool(value)
+    raise ValueError("not a boolean")
+
+
+def _text(value: Any) -> str:
+    """A string attribute (h5py returns ``str``; bytes from other writers are decoded)."""
+    if isinstance(value, bytes):
+        return value.decode()
+    if not isinstance(value, str):
+        raise TypeError("not a string")
+    return value
+
+
 #: modules whose exceptions, raised while reading, come from the file's content
 _FILE_MODULES = ("h5py", "json")
 
@@ -251,13 +275,40 @@ class Experiment:
             raise self._err(where, f"unit {d.attrs.get('unit')!r} where {unit!r} is required")
         return d
 
-    def _json_attr(self, obj: h5py.HLObject, key: str) -> Any:
+    def _json_attr(self, obj: h5py.HLObject, key: str, kind: type | None = None) -> Any:
+        """Attribute ``key`` of ``obj`` parsed as JSON (and of type ``kind`` when given)."""
         if key not in obj.attrs:
             raise self._err(obj.name, f"attribute {key!r} is missing")
         try:
-            return json.loads(obj.attrs[key])
+            value = json.loads(obj.attrs[key])
         except (TypeError, ValueError) as exc:
             raise self._err(obj.name, f"attribute {key!r} is not valid JSON ({exc})") from None
+        if kind is not None and not isinstance(value, kind):
+            want = {dict: "an object", list: "a list"}.get(kind, kind.__name__)
+            raise self._err(f"{obj.name}@{key}", f"is a JSON {type(value).__name__}, expected {want}")
+        return value
+
+    def _attr(self, obj: h5py.HLObject, key: str, convert: Callable[[Any], Any], default: Any,
+              what: str) -> Any:
+        """Attribute ``key`` of ``obj`` through ``convert`` (``default`` when absent); a value
+        that does not convert is a damaged file, named as such (not a bug in skinkit)."""
+        if key not in obj.attrs:
+            return default
+        value = obj.attrs[key]
+        try:
+            return convert(value)
+        except (TypeError, ValueError, OverflowError):
+            raise self._err(f"{obj.name}@{key}", f"is {value!r}, expected {what}") from None
+
+    def _count(self, g: h5py.Group, rows: int) -> int:
+        """The ``committed`` sample count of ``g``: one integer in ``0..rows``."""
+        d = self._dataset(g, "committed", 1)
+        if d.shape[0] < 1 or d.dtype.kind not in "iu":
+            raise self._err(d.name, f"holds {d.shape[0]} {d.dtype} value(s), expected one integer")
+        n = int(d[0])
+        if n < 0 or n > rows:
+            raise self._err(d.name, f"{n} is outside 0..{rows}")
+        return n
 
     # -- session metadata ---------------------------------------------------------------------
     def set_metadata(self, **items: str | float | int) -> None:
@@ -329,13 +380,13 @@ class Experiment:
     def record_info(self, name: str) -> dict[str, Any]:
         """What a record holds, without reading its samples (see ``skinkit inspect``)."""
         g = self._group(f"{L.RECORDS}/{name}")
-        channels = self._json_attr(g, "channels")
+        channels = self._json_attr(g, "channels", list)
         n = self._committed(g)
-        rate = float(g.attrs.get("rate_hz", np.nan))
+        rate = self._attr(g, "rate_hz", float, np.nan, "a rate in Hz")
         if np.isnan(rate) and n >= 2:
             t = g["time_s"][: min(n, 1001)]
             rate = float(1.0 / np.median(np.diff(t)))
-        protocol = self._json_attr(g, "protocol")
+        protocol = self._json_attr(g, "protocol", dict)
         return {
             "protocol": name,
             "kind": protocol.get("kind"),
@@ -344,8 +395,8 @@ class Experiment:
             "duration_s": float(g["time_s"][n - 1] - g["time_s"][0]) if n >= 1 else 0.0,
             "channels": channels,
             "units": {c: RobotRecord.CHANNELS[c] for c in channels if c in RobotRecord.CHANNELS},
-            "complete": bool(g.attrs.get("complete", False)),
-            "extra": self._json_attr(g, "extra") if "extra" in g.attrs else {},
+            "complete": self._attr(g, "complete", _flag, False, "true or false"),
+            "extra": self._json_attr(g, "extra", dict) if "extra" in g.attrs else {},
         }
 
     def set_record_attrs(self, name: str, **items: Any) -> None:
@@ -360,7 +411,7 @@ class Experiment:
         if path not in f:
             raise self._err(path, "missing")
         g = f[path]
-        extra = json.loads(g.attrs["extra"]) if "extra" in g.attrs else {}
+        extra = self._json_attr(g, "extra", dict) if "extra" in g.attrs else {}
         extra.update(items)
         try:
             g.attrs["extra"] = json.dumps(extra, allow_nan=True)
@@ -369,19 +420,14 @@ class Experiment:
         f.flush()
 
     def _committed(self, g: h5py.Group) -> int:
-        d = self._dataset(g, "committed", 1)
-        rows = self._dataset(g, "time_s", 1, unit="s").shape[0]
-        n = int(d[0])
-        if n < 0 or n > rows:
-            raise self._err(f"{g.name}/committed", f"{n} is outside 0..{rows}")
-        return n
+        return self._count(g, self._dataset(g, "time_s", 1, unit="s").shape[0])
 
     @_reading
     def read_record(self, name: str) -> RobotRecord:
         """The committed samples of record ``name``, validated."""
         g = self._group(f"{L.RECORDS}/{name}")
         try:
-            protocol = Protocol.from_dict(self._json_attr(g, "protocol"))
+            protocol = Protocol.from_dict(self._json_attr(g, "protocol", dict))
         except SchemaError as exc:
             raise self._err(f"{g.name}@protocol", str(exc)) from None
         channels = self._json_attr(g, "channels")
@@ -425,7 +471,7 @@ class Experiment:
         if L.RIG not in self._f:
             return []
         g = self._f[L.RIG]
-        return sorted(g, key=lambda n: int(g[n].attrs.get("index", 0)))
+        return sorted(g, key=lambda n: self._attr(g[n], "index", int, 0, "an integer"))
 
     @_reading
     def read_rig(self) -> CameraRig:
@@ -441,7 +487,7 @@ class Experiment:
                     distortion=self._dataset(c, "distortion", 1)[()],
                     R=self._dataset(c, "R", 2)[()],
                     t=self._dataset(c, "t", 1, unit="m")[()],
-                    image_size=tuple(c.attrs["image_size"]) if "image_size" in c.attrs else (0, 0)))
+                    image_size=self._attr(c, "image_size", _int_pair, (0, 0), "two integers")))
             except SchemaError as exc:
                 raise self._err(c.name, str(exc)) from None
         return CameraRig(tuple(cams))
@@ -504,18 +550,21 @@ class Experiment:
     def image_info(self, name: str) -> dict[str, Any]:
         g = self._group(f"{L.IMAGES}/{name}")
         frames = self._dataset(g, "frames", 4)
-        return {"name": name, "frames": int(g["committed"][0]) if "committed" in g else frames.shape[0],
-                "cameras": self._json_attr(g, "camera_names"),
+        return {"name": name,
+                "frames": self._count(g, frames.shape[0]) if "committed" in g else frames.shape[0],
+                "cameras": self._json_attr(g, "camera_names", list),
                 "image_size": [int(frames.shape[3]), int(frames.shape[2])],
-                "dtype": str(frames.dtype), "complete": bool(g.attrs.get("complete", False))}
+                "dtype": str(frames.dtype),
+                "complete": self._attr(g, "complete", _flag, False, "true or false")}
 
     @_reading
     def read_images(self, name: str) -> ImageSequence:
         g = self._group(f"{L.IMAGES}/{name}")
-        n = int(g["committed"][0]) if "committed" in g else g["frames"].shape[0]
+        frames = self._dataset(g, "frames", 4)
+        n = self._count(g, frames.shape[0]) if "committed" in g else frames.shape[0]
         try:
-            return ImageSequence(name=name, frames=self._dataset(g, "frames", 4)[:n],
-                                 camera_names=tuple(self._json_attr(g, "camera_names")),
+            return ImageSequence(name=name, frames=frames[:n],
+                                 camera_names=tuple(self._json_attr(g, "camera_names", list)),
                                  time_s=self._dataset(g, "time_s", 1)[:n])
         except SchemaError as exc:
             raise self._err(g.name, str(exc)) from None
@@ -548,7 +597,7 @@ class Experiment:
                 points=self._dataset(g, "points", 2, last=3, unit="m")[()],
                 quality=self._dataset(g, "quality", 1)[()],
                 uncertainty_px=g["uncertainty_px"][()] if "uncertainty_px" in g else None,
-                quality_name=str(g.attrs.get("quality_name", "peak_correlation")))
+                quality_name=self._attr(g, "quality_name", _text, "peak_correlation", "a name"))
         except SchemaError as exc:
             raise self._err(g.name, str(exc)) from None
 
@@ -574,7 +623,7 @@ class Experiment:
     def track_attrs(self, name: str) -> dict[str, Any]:
         """The facts attached to track ``name`` by :meth:`set_track_attrs` (empty if none)."""
         g = self._group(f"{L.TRACKS}/{name}")
-        return self._json_attr(g, "extra") if "extra" in g.attrs else {}
+        return self._json_attr(g, "extra", dict) if "extra" in g.attrs else {}
 
     @_reading
     def read_track(self, name: str) -> SurfaceTrack:
@@ -605,7 +654,7 @@ class Experiment:
     def read_fit(self, name: str) -> FitResult:
         g = self._group(f"{L.FITS}/{name}")
         try:
-            return FitResult.from_dict(self._json_attr(g, "json"))
+            return FitResult.from_dict(self._json_attr(g, "json", dict))
         except (SchemaError, TypeError, KeyError) as exc:
             raise self._err(g.name, f"malformed fit result ({_one_line(exc)})") from None
 
@@ -619,7 +668,7 @@ class Experiment:
     @_reading
     def read_gap(self, name: str) -> dict[str, Any]:
         """The gap report ``name`` as its JSON dict."""
-        return self._json_attr(self._group(f"{L.GAPS}/{name}"), "json")
+        return self._json_attr(self._group(f"{L.GAPS}/{name}"), "json", dict)
 
     def write_calibration(self, name: str, payload: dict[str, Any]) -> None:
         """Store (replace) a device calibration ``name`` (e.g. ``"robot"``) as JSON."""
@@ -632,9 +681,12 @@ class Experiment:
     @_reading
     def read_calibration(self, name: str) -> dict[str, Any]:
         """The calibration ``name`` as its JSON dict."""
-        return self._json_attr(self._group(f"{L.CALIBRATIONS}/{name}"), "json")
+        return self._json_attr(self._group(f"{L.CALIBRATIONS}/{name}"), "json", dict)
 
     # -- summary -------------------------------------------------------------------------
+    def _points(self, base: str, name: str, ndim: int) -> h5py.Dataset:
+        return self._dataset(self._group(f"{base}/{name}"), "points", ndim, last=3, unit="m")
+
     @_reading
     def summary(self) -> dict[str, Any]:
         """Everything ``skinkit inspect`` shows, JSON-ready."""
@@ -654,10 +706,10 @@ class Experiment:
             "records": [self.record_info(n) for n in self.record_names()],
             "cameras": cams,
             "images": [self.image_info(n) for n in self.image_names()],
-            "profiles": [{"name": n, "points": int(self._f[f"{L.PROFILES}/{n}/points"].shape[0])}
+            "profiles": [{"name": n, "points": self._points(L.PROFILES, n, 2).shape[0]}
                          for n in self.profile_names()],
-            "tracks": [{"name": n, "points": int(self._f[f"{L.TRACKS}/{n}/points"].shape[0]),
-                        "frames": int(self._f[f"{L.TRACKS}/{n}/points"].shape[1])}
+            "tracks": [{"name": n, "points": self._points(L.TRACKS, n, 3).shape[0],
+                        "frames": self._points(L.TRACKS, n, 3).shape[1]}
                        for n in self.track_names()],
             "calibrations": self.calibration_names(),
             "fits": self.fit_names(),
@@ -692,7 +744,7 @@ def recover(path: str | os.PathLike[str], out: str | os.PathLike[str]) -> Path:
             src._f.copy(src._f[name], dst, name=name)
         for rec in src.record_names():
             g = dst[f"{L.RECORDS}/{rec}"]
-            n = int(g["committed"][0])
+            n = src._committed(src._group(f"{L.RECORDS}/{rec}"))
             for ds in g.values():
                 if isinstance(ds, h5py.Dataset) and ds.name.rsplit("/", 1)[-1] != "committed":
                     if ds.maxshape[0] is None:
