@@ -29,7 +29,35 @@ def test_example_models_build(path):
         assert len(load(spec).parameters()) >= 2
         return
     m = build_model(spec, require_load="load" in spec)
-    assert m.mesh.n_dof > 0 and len(m.load.times) > 0
+    assert m.mesh.n_dof == 3 * _quadratic_hex_nodes(m.mesh)
+    assert len(m.load.times) > 0
+
+
+def test_block_mesh_dof_count_closed_form():
+    """A block of nx x ny x nz quadratic hexahedra has (2nx+1)(2ny+1)(2nz+1) nodes, 3 DOFs each."""
+    from skinkit.fem.mesh import block_mesh
+
+    for n in [(1, 1, 1), (2, 3, 1), (3, 2, 4)]:
+        mesh = block_mesh((1e-2, 2e-2, 3e-3), n)
+        nodes = (2 * n[0] + 1) * (2 * n[1] + 1) * (2 * n[2] + 1)
+        assert mesh.n_nodes == nodes == _quadratic_hex_nodes(mesh)
+        assert mesh.n_dof == 3 * nodes
+
+
+def _quadratic_hex_nodes(mesh) -> int:
+    """Nodes of a conforming 27-node hexahedral mesh, counted from its corner topology: one per
+    vertex, one per edge and one per face (each shared by the elements around it), and one
+    inside each element. Checks on the way that every node belongs to an element and that an
+    element's first 8 nodes are its corners."""
+    from skfem import MeshHex
+
+    t = mesh.t
+    assert np.array_equal(mesh.elements[:, :8].T, t)
+    assert np.array_equal(np.unique(mesh.elements), np.arange(mesh.n_nodes))  # no orphan node
+    lin = MeshHex(mesh.nodes.T, t, validate=False)   # edges and faces of the corner mesh
+    vertices, edges, faces, cells = np.unique(t).size, lin.edges.shape[1], lin.facets.shape[1], t.shape[1]
+    assert cells == mesh.n_elements and mesh.elements.shape[1] == 27
+    return vertices + edges + faces + cells
 
 
 def test_invivo_model_has_about_10000_dofs():
