@@ -19,6 +19,20 @@ def _model_path(model_file: str) -> Path:
     return p
 
 
+def _fe_spec(path: Path) -> dict:
+    """The model file's description, ready for the engine: a lumped model is refused (it has no
+    mesh to solve), and ``[[effects]]`` are applied, as the forward models do — solving without
+    them would be a silent answer for another model."""
+    from skinkit.fem.model import read_model
+    from skinkit.forward import model_kind
+    from skinkit.forward.effects import apply_all, resolve
+    spec = read_model(path)
+    if model_kind(spec) != "fe":
+        raise SkinkitError(f"{path}: model.kind = 'lumped' is a lumped model, which has no mesh to "
+                           "solve; predict a record with it (skinkit predict MODEL_FILE RECORD)")
+    return apply_all(spec, resolve(spec.get("effects"), "fe"))
+
+
 def _progress(total: float, label: str):
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
     prog = Progress(TextColumn(label), BarColumn(), TextColumn("t = {task.completed:.4g} / {task.total:.4g}"),
@@ -34,10 +48,10 @@ def _progress(total: float, label: str):
 @click.option("--no-vtu", is_flag=True, help="skip the VTU series")
 def solve(model_file: str, out_dir: str | None, as_json: bool, no_vtu: bool) -> None:
     """Solve MODEL_FILE (TOML); write result.h5, summary.json and a VTU series."""
-    from skinkit.fem.model import load_model
+    from skinkit.fem.model import build_model
     from skinkit.fem.run import solve_model, write_outputs
     out = check_out_dir(Path(out_dir) if out_dir else _model_path(model_file).with_suffix(""), "--out")
-    model = load_model(_model_path(model_file))
+    model = build_model(_fe_spec(_model_path(model_file)))
     times = model.load.times
     prog = _progress(float(times[-1]), f"solving {model.name} ({model.mesh.n_dof} dofs)")
     with prog:
@@ -101,11 +115,11 @@ def _refined(spec: dict, level: int) -> dict:
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 def convergence(model_file: str, levels: int, out_dir: str | None, as_json: bool) -> None:
     """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count."""
-    from skinkit.fem.model import build_model, check_size, layer_table, read_model
+    from skinkit.fem.model import build_model, check_size, layer_table
     from skinkit.fem.run import solve_model
     path = _model_path(model_file)
     out = check_out_dir(Path(out_dir) if out_dir else path.with_name(path.stem + "_convergence"), "--out")
-    spec = read_model(path)
+    spec = _fe_spec(path)
     first = build_model(spec)  # validates every entry before any refinement
     finest = _refined(spec, levels)
     check_size(finest, layer_table(finest))  # refuse now, not after solving the coarse levels

@@ -15,7 +15,13 @@ may declare, all used only when present:
 
 * ``complex_safe: bool`` — ``energy``/``stress`` accept complex ``C`` and complex parameters
   and are complex-analytic (no ``abs``, no branches on complex values);
-* ``prony(p) -> (g, tau)`` — the law is quasi-linear viscoelastic (see :mod:`.viscoelastic`).
+* ``prony(p) -> (g, tau)`` — the law is quasi-linear viscoelastic (see :mod:`.viscoelastic`);
+* ``inadmissible(p) -> list[(name, reason)]`` — the physical conditions on the parameters that
+  bounds alone cannot express (a positive shear modulus from several terms, a non-zero
+  exponent, Prony moduli summing below 1): one ``(parameter name, one-line reason)`` per
+  violated condition, ``""`` as the name for a joint condition; empty when ``p`` is admissible.
+  :func:`check_parameters` refuses a violation with an error naming the entry, and the
+  conformance kit (:mod:`.conformance`) checks that what the law admits responds physically.
 """
 
 from __future__ import annotations
@@ -54,7 +60,8 @@ def check_parameters(law: Any, p: Mapping[str, Any], where: str = "law") -> dict
     """Validate ``p`` against the law's declared parameters; returns a complete mapping.
 
     Missing parameters take their defaults only when ``p`` is None; an unknown name, a
-    missing name or a value outside its admissible bounds raise :class:`ModelError` naming it.
+    missing name, a value outside its admissible bounds or a violation of the law's own
+    conditions (:func:`inadmissible`) raise :class:`ModelError` naming the parameter.
     """
     declared = {q.name: q for q in law.parameters()}
     unknown = sorted(set(p) - set(declared))
@@ -67,14 +74,58 @@ def check_parameters(law: Any, p: Mapping[str, Any], where: str = "law") -> dict
     out: dict[str, Any] = {}
     for name, q in declared.items():
         v = p[name]
-        arr = np.asarray(v, dtype=float)
+        try:
+            arr = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            raise ModelError(f"{where}.{name}", f"expected a number in {q.unit}, got {v!r}") from None
         if not np.all(np.isfinite(arr)):
             raise ModelError(f"{where}.{name}", f"must be finite, got {v!r}")
-        if np.any(arr < q.lower) or np.any(arr > q.upper):
-            raise ModelError(f"{where}.{name}", f"value {v!r} {q.unit} is outside its admissible "
-                             f"range [{q.lower:g}, {q.upper:g}]")
         out[name] = v
+    for name, q in declared.items():
+        arr = np.asarray(out[name], dtype=float)
+        if np.any(arr < q.lower) or np.any(arr > q.upper):
+            # the law's own reason, when it has one for this parameter, says more than the range
+            why = dict(inadmissible(law, out, where)).get(name)
+            raise ModelError(f"{where}.{name}", f"value {_show(arr)} {q.unit} is outside its admissible "
+                             f"range [{q.lower:g}, {q.upper:g}]" + (f": {why}" if why else ""))
+    problems = inadmissible(law, out, where)
+    if problems:
+        name, why = problems[0]
+        raise ModelError(f"{where}.{name}" if name else where, why)
     return out
+
+
+def inadmissible(law: Any, p: Mapping[str, Any], where: str = "law") -> list[tuple[str, str]]:
+    """The law's own physical conditions violated by ``p`` (``law.inadmissible(p)``, see the
+    module docstring): ``[(parameter name or "", reason), ...]``, empty when admissible or when
+    the law declares none. A law whose check itself fails is refused naming ``where``."""
+    fn = getattr(law, "inadmissible", None)
+    if not callable(fn):
+        return []
+    try:
+        with np.errstate(all="ignore"):
+            found = fn(p)
+        out = [(str(n), str(why)) for n, why in (found or [])]
+    except (ArithmeticError, LookupError, TypeError, ValueError) as exc:
+        raise ModelError(where, f"law {getattr(law, 'name', law)!r} cannot check its parameters: "
+                         f"{type(exc).__name__}: {exc}") from None
+    return out
+
+
+def require_positive(p: Mapping[str, Any], names: Sequence[str], what: str) -> list[tuple[str, str]]:
+    """``[(name, reason)]`` for each of ``names`` whose value (any element of it) is not > 0;
+    ``what`` says why it must be ("the small-strain shear modulus")."""
+    out = []
+    for n in names:
+        v = np.real(np.asarray(p[n]))
+        if np.any(~(v > 0)):
+            out.append((n, f"must be positive ({what}), got {_show(v)}"))
+    return out
+
+
+def _show(v: Any) -> str:
+    a = np.asarray(v)
+    return f"{float(a):g}" if a.ndim == 0 else np.array2string(a, precision=4, threshold=6)
 
 
 def _energy_gradient(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:

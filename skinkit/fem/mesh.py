@@ -93,9 +93,14 @@ def _near(a: np.ndarray, b: float, scale: float) -> np.ndarray:
 def _layer_coords(thicknesses: Sequence[float], n_layers: Sequence[int]) -> np.ndarray:
     """z coordinates of element boundaries, top (z = 0) down, returned ascending."""
     zs = [0.0]
-    for t, n in zip(thicknesses, n_layers, strict=True):
-        if t <= 0 or n < 1:
-            raise ModelError("mesh.layers", f"thickness {t} m and element count {n} must be positive")
+    if not len(thicknesses):
+        raise ModelError("layers", "needs at least one [[layers]] table")
+    # entries are named as in a model file (layers[i].thickness), where these values come from
+    for i, (t, n) in enumerate(zip(thicknesses, n_layers, strict=True)):
+        if not t > 0:
+            raise ModelError(f"layers[{i}].thickness", f"must be positive, got {t} m")
+        if int(n) != n or n < 1:
+            raise ModelError(f"layers[{i}].elements", f"must be a whole number at least 1, got {n}")
         zs.extend(list(zs[-1] - t * np.arange(1, n + 1) / n))
     return np.array(sorted(zs))
 
@@ -109,12 +114,16 @@ def block_mesh(size: Sequence[float] = (1.0, 1.0, 1.0), n: Sequence[int] = (2, 2
     Node sets: ``top``, ``bottom``, ``xmin``, ``xmax``, ``ymin``, ``ymax``, ``sides``.
     """
     Lx, Ly, Lz = (float(v) for v in size)
-    if min(Lx, Ly, Lz) <= 0 or min(n) < 1:
-        raise ModelError("mesh", f"size {size} must be positive and n {n} at least 1")
+    if min(Lx, Ly) <= 0:
+        raise ModelError("geometry.size", f"must be positive, got {list(size[:2])} m")
+    if Lz <= 0:
+        raise ModelError("layers", f"the thicknesses must add up to a positive height, got {Lz} m")
+    if min(n) < 1:
+        raise ModelError("geometry.n", f"element counts must be at least 1, got {list(n)}")
     if layers:
         tot = sum(t for _, t, _ in layers)
         if abs(tot - Lz) > 1e-9 * Lz:
-            raise ModelError("mesh.layers", f"layer thicknesses sum to {tot} m, not the height {Lz} m")
+            raise ModelError("layers", f"layer thicknesses sum to {tot} m, not the block's height {Lz} m")
         z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
         names = [nm for nm, _, _ in layers]
     else:
@@ -154,12 +163,16 @@ def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
     """
     R = 0.5 * float(diameter)
     a = 0.5 * float(indenter_diameter)
-    if R <= 0 or not 0 < a < R:
-        raise ModelError("mesh", f"need 0 < indenter diameter {indenter_diameter} < diameter {diameter}")
+    if R <= 0:
+        raise ModelError("geometry.diameter", f"must be positive, got {diameter} m")
+    if not 0 < a < R:
+        raise ModelError("geometry.indenter_diameter", f"must be in (0, {diameter}) m (the disc's "
+                         f"diameter), got {indenter_diameter} m")
     if grading < 1:
-        raise ModelError("mesh.grading", f"must be at least 1 (1 is uniform), got {grading}")
-    if n_inner < 1 or n_ring < 1:
-        raise ModelError("mesh", f"n_inner {n_inner} and n_ring {n_ring} must be at least 1")
+        raise ModelError("geometry.grading", f"must be at least 1 (1 is uniform), got {grading}")
+    for key, v in (("n_inner", n_inner), ("n_ring", n_ring)):
+        if int(v) != v or v < 1:
+            raise ModelError(f"geometry.{key}", f"must be a whole number at least 1, got {v}")
     z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
     n = n_inner + 2 * n_ring
     s = np.linspace(-1.0, 1.0, n + 1)

@@ -143,7 +143,8 @@ class NewtonSolver:
         tol = max(o.rtol * ref, o.atol)
         for it in range(o.max_iter + 1):
             if not np.isfinite(norm):
-                raise SolverError(f"residual is not finite at t = {t:g}")
+                raise SolverError(f"residual is not finite at t = {t:g} (a layer's stress overflowed or "
+                                  "divided by zero: check its law parameters)")
             if norm <= tol:
                 return u, it, norm
             if it == o.max_iter:
@@ -294,7 +295,17 @@ class NewtonSolver:
         the results are in ``solution.extra["sensitivities"]``, one per output time.
         ``extrapolate``: start each increment from a quadratic extrapolation of the last
         converged states (falls back to the tangent predictor after a failure).
+
+        Floating-point warnings (overflow, division by zero, invalid values in a law's stress)
+        are silenced here: the solver checks every residual and increment itself, cuts the
+        step on a non-finite one and, failing, raises one :class:`SolverError` saying where.
         """
+        with np.errstate(all="ignore"):
+            return self._run(times, u0, viscous_time, progress, sensitivities, extrapolate)
+
+    def _run(self, times: Sequence[float], u0: np.ndarray | None, viscous_time: bool,
+             progress: Callable[[float], None] | None, sensitivities: bool | Sequence[str],
+             extrapolate: bool) -> Solution:
         from skinkit.fem import sensitivity as sens_mod
         only = None if isinstance(sensitivities, bool) else list(sensitivities)
         want_sens = bool(sensitivities) if isinstance(sensitivities, bool) else True

@@ -90,7 +90,7 @@ def twopad_mesh(size: Sequence[float] = (0.100, 0.050), pad_size: float = 0.008,
         if int(n) != n or n < 1:
             raise ModelError(f"geometry.{key}", f"must be a whole number at least 1, got {n}")
     if not layers:
-        raise ModelError("mesh.layers", "needs at least one layer")
+        raise ModelError("layers", "needs at least one [[layers]] table")
     h, e = 0.5 * g, 0.5 * g + a
     xs = _axis([-0.5 * Lx, -e, -h, h, e, 0.5 * Lx], [n_outer, n_pad, n_gap, n_pad, n_outer],
                ["b", "none", "both", "none", "a"], grading)

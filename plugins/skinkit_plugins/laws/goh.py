@@ -31,6 +31,7 @@ from skinkit.fem.hyper import (
     volumetric_stress,
     volumetric_tangent,
 )
+from skinkit.fem.lawkit import require_positive
 from skinkit.fem.tensors import I3, outer
 from skinkit.schemas import Parameter
 
@@ -64,6 +65,14 @@ class GOH:
                 Parameter("kappa", 0.1, "1", 0.0, 1.0 / 3.0),
                 Parameter("gamma", 0.0, "rad", -np.pi / 2, np.pi / 2),
                 Parameter("k", 5e5, "Pa", 0.0, np.inf)]
+
+    def inadmissible(self, p: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """c > 0 and k > 0: in the reference state every fibre family is inactive (FEBio's switch:
+        Ī4 = 1 is not > 1; Macaulay: Ē = 0), so the ground matrix alone carries the small-strain
+        shear (modulus c) and the volumetric term the bulk response (modulus k)."""
+        return (require_positive(p, ["c"], "the small-strain shear modulus: fibres carry no load "
+                                 "in the reference state")
+                + require_positive(p, ["k"], "the small-strain bulk modulus"))
 
     def fibres(self, gamma: Any) -> list[np.ndarray]:
         """Reference unit fibre directions, each ``(..., 3)`` (batched over ``gamma``)."""

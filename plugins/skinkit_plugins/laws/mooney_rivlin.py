@@ -15,6 +15,7 @@ from skinkit.fem.hyper import (
     volumetric_energy,
     volumetric_stress,
 )
+from skinkit.fem.lawkit import require_positive
 from skinkit.schemas import Parameter
 
 
@@ -36,6 +37,15 @@ class MooneyRivlin:
         return [Parameter("c1", 4e3, "Pa", 0.0, np.inf),
                 Parameter("c2", 1e3, "Pa", 0.0, np.inf),
                 Parameter("K", 2.5e5, "Pa", 0.0, np.inf)]
+
+    def inadmissible(self, p: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """c1 + c2 > 0 (the small-strain shear modulus is 2 (c1 + c2)) and K > 0."""
+        out = []
+        mu = np.real(np.asarray(p["c1"]) + np.asarray(p["c2"]))
+        if np.any(~(mu > 0)):
+            out.append(("", f"c1 + c2 must be positive (half the small-strain shear modulus), got "
+                            f"{np.min(mu):g} Pa"))
+        return out + require_positive(p, ["K"], "the small-strain bulk modulus")
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
         Cinv, J, I1 = kinematics(C)

@@ -21,6 +21,7 @@ from skinkit.fem.hyper import (
     volumetric_energy,
     volumetric_stress,
 )
+from skinkit.fem.lawkit import require_positive
 from skinkit.fem.tensors import I3, outer, sym_product
 from skinkit.schemas import Parameter
 
@@ -40,6 +41,11 @@ class NeoHookean:
     def parameters(self) -> list[Parameter]:
         return [Parameter("mu", 1e4, "Pa", 0.0, np.inf),
                 Parameter("lam", 4e4, "Pa", 0.0, np.inf)]
+
+    def inadmissible(self, p: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """μ > 0: the small-strain shear modulus (the bulk modulus λ + 2μ/3 is then positive
+        too, λ being bounded below by 0)."""
+        return require_positive(p, ["mu"], "the small-strain shear modulus")
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
         _, J, I1 = kinematics(C)
@@ -78,6 +84,11 @@ class NeoHookeanNI:
 
     def _mu_K(self, p: Mapping[str, Any]) -> tuple[Any, Any]:
         return p["mu"], p["K"]
+
+    def inadmissible(self, p: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """μ > 0 and K > 0: the small-strain shear and bulk moduli."""
+        return (require_positive(p, ["mu"], "the small-strain shear modulus")
+                + require_positive(p, ["K"], "the small-strain bulk modulus"))
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
         mu, K = self._mu_K(p)
@@ -130,6 +141,10 @@ class NeoHookeanEnu(NeoHookeanNI):
         # ν < 0.5 strictly: K = E / (3 (1 - 2ν)) is infinite at 0.5
         return [Parameter("E", 3e4, "Pa", 0.0, np.inf),
                 Parameter("nu", 0.48, "1", -0.99, 0.4999)]
+
+    def inadmissible(self, p: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """E > 0 (with ν in its bounds (-1, 1/2), shear and bulk moduli are then positive)."""
+        return require_positive(p, ["E"], "Young's modulus; the shear modulus is E / (2 (1 + nu))")
 
     def _mu_K(self, p: Mapping[str, Any]) -> tuple[Any, Any]:
         E, nu = p["E"], p["nu"]

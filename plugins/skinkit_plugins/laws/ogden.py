@@ -12,7 +12,11 @@ from typing import Any
 import numpy as np
 
 from skinkit.fem.hyper import check_volumetric, volumetric_energy
+from skinkit.fem.lawkit import require_positive
 from skinkit.schemas import Parameter
+
+#: smallest admissible |αᵢ|: the energy 2μ/α² (λ̄^α - 1) is singular at α = 0
+ALPHA_MIN = 0.01
 
 
 def _principal(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -41,12 +45,33 @@ class Ogden:
     def parameters(self) -> list[Parameter]:
         out = []
         for i in range(1, self.terms + 1):
-            out.append(Parameter(f"mu{i}", 1e4 / self.terms, "Pa", -np.inf, np.inf))
+            # μᵢ > 0 is Ogden's condition μᵢαᵢ > 0 in this form (see inadmissible)
+            out.append(Parameter(f"mu{i}", 1e4 / self.terms, "Pa", 0.0, np.inf))
             # α = 0 makes the energy singular; admissible are α in [-30, -0.01] U [0.01, 30],
-            # which bounds alone cannot express: the stress checks μα > 0 below
+            # which bounds alone cannot express: inadmissible refuses |α| < ALPHA_MIN
             out.append(Parameter(f"alpha{i}", 8.0 if i == 1 else -2.0, "1", -30.0, 30.0))
         out.append(Parameter("K", 2.5e5, "Pa", 0.0, np.inf))
         return out
+
+    def inadmissible(self, p: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """Ogden's conditions, per term: αᵢ ≠ 0 and μᵢαᵢ > 0 in the classic form
+        W = Σ μᵢᶜ/αᵢ (λ̄₁^αᵢ + λ̄₂^αᵢ + λ̄₃^αᵢ - 3), whose small-strain shear modulus is
+        Σ μᵢᶜαᵢ/2. This law's (Abaqus) form has μᵢᶜ = 2μᵢ/αᵢ, so the condition reads μᵢ > 0 and
+        the shear modulus Σ μᵢ (> 0 then too); and K > 0, the bulk modulus."""
+        out = []
+        for i, (mu, al) in enumerate(self._terms(p), start=1):
+            al = np.real(np.asarray(al))
+            mu = np.real(np.asarray(mu))
+            if np.any(~(np.abs(al) >= ALPHA_MIN)):
+                out.append((f"alpha{i}", f"must be non-zero (|alpha{i}| >= {ALPHA_MIN:g}: the energy "
+                            f"2 mu/alpha^2 (lambda^alpha - 1) is singular at alpha = 0), got "
+                            f"{np.min(np.abs(al)):g}"))
+            elif np.any(~(mu > 0)):
+                out.append((f"mu{i}", f"must be positive: Ogden's condition mu_i alpha_i > 0 (classic "
+                            f"form) is mu_i > 0 in this law's form 2 mu_i/alpha_i^2 (...), whose "
+                            f"small-strain shear modulus is sum mu_i; got mu{i} = {np.min(mu):g} Pa "
+                            f"with alpha{i} = {np.max(al):g}"))
+        return out + require_positive(p, ["K"], "the small-strain bulk modulus")
 
     def _terms(self, p: Mapping[str, Any]):
         return [(p[f"mu{i}"], p[f"alpha{i}"]) for i in range(1, self.terms + 1)]

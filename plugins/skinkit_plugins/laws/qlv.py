@@ -47,6 +47,17 @@ class QLV:
             out.append(Parameter(f"tau{i}", 10.0 ** (i - 1), "s", 1e-6, 1e6))
         return out
 
+    def inadmissible(self, p: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """The elastic law's conditions, and Σ gᵢ < 1: the relaxed modulus g∞ = 1 - Σ gᵢ of
+        the reduced relaxation function must stay positive."""
+        out = lawkit.inadmissible(self.elastic, self._elastic_p(p))
+        g = sum(np.real(np.asarray(p[f"g{i}"])) for i in range(1, self.terms + 1))
+        if np.any(~(g < 1.0)):
+            names = " + ".join(f"g{i}" for i in range(1, self.terms + 1))
+            out.append(("", f"the Prony moduli {names} = {np.max(g):g} must sum below 1 (the "
+                            f"relaxed modulus g_inf = 1 - sum g must stay positive)"))
+        return out
+
     def _elastic_p(self, p: Mapping[str, Any]) -> dict[str, Any]:
         names = lawkit.parameter_names(self.elastic)
         return {n: p[n] for n in names}
