@@ -39,6 +39,11 @@ class EnergyOnlyNH:
     def parameters(self):
         return [Parameter("mu", 1e4, "Pa", 0, np.inf), Parameter("K", 2.5e5, "Pa", 0, np.inf)]
 
+    def inadmissible(self, p):
+        # the bounds admit 0, where the law has no shear or bulk stiffness (the conformance
+        # kit's "admissible ranges" check finds that)
+        return lawkit.require_positive(p, ["mu", "K"], "a small-strain modulus")
+
     def energy(self, C, p):
         Cinv, J, I1 = kinematics(C)
         I1b, _ = iso_I1(C, Cinv, J, I1)
