@@ -37,6 +37,15 @@ class StoreError(SkinkitError):
         super().__init__(f"{loc}: {problem}")
 
 
+class RefusedError(SkinkitError):
+    """A request refused before anything was done (no motion, nothing written): a programme
+    over a safety limit, an option a plugin does not take. Nothing is recorded of it."""
+
+
+class OptionError(RefusedError, ValueError):
+    """A plugin (e.g. a robot driver) refused an option: an unknown name or a bad value."""
+
+
 class PluginError(SkinkitError):
     """A plugin could not be found, imported, or does not satisfy its protocol."""
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from skinkit.errors import SkinkitError
+from skinkit.errors import RefusedError, SkinkitError
 
 TRAVEL = 1
 CONTINUOUS_FORCE = 2
@@ -82,7 +82,7 @@ class DeviceFault(SkinkitError):
         super().__init__(message)
 
 
-class LimitRefused(SkinkitError):
+class LimitRefused(RefusedError):
     """A programme would exceed a safety limit; refused before any motion."""
 
     def __init__(self, protocol: str, fault: Fault, setpoint: int | None = None) -> None:

@@ -107,6 +107,11 @@ def _print(con: Any, summary: dict[str, Any], meta: dict[str, Any]) -> None:
         con.print(f"fit {text(f)}")
     for g in summary["gaps"]:
         con.print(f"gap report {text(g)}")
+    for a in summary.get("attempts", []):
+        con.print(f"[red]failed run[/red] {text(a['name'])}: {text(a['protocol'].get('name', '?'))} "
+                  f"({text(a.get('driver', '?'))} driver, at {text(a.get('stage', '?'))}, "
+                  f"{a.get('samples', 0)} samples, {text(a.get('started', '?'))}): "
+                  f"{text(a.get('reason', '?'))}")
 
 
 def _channels(records: list[dict[str, Any]]) -> Any:

@@ -6,6 +6,7 @@ Other distributions add subcommands through the entry-point group ``skinkit.comm
 
 from __future__ import annotations
 
+import datetime as _dt
 import inspect
 import json
 from importlib.metadata import entry_points
@@ -15,7 +16,7 @@ from typing import Any
 import click
 
 from skinkit.cli._types import FiniteFloat
-from skinkit.errors import SkinkitError
+from skinkit.errors import OptionError, RefusedError, SkinkitError
 
 #: entry-point group for ``skinkit robot`` subcommands contributed by other distributions
 ROBOT_COMMANDS_GROUP = "skinkit.commands.robot"
@@ -168,24 +169,38 @@ def run(
                 raise SkinkitError(f"--out {path}: already holds a record {protocol.name!r}")
     driver = registry.create("skinkit.drivers", driver_name)
     created = not path.exists()
+    attempt = {"driver": driver_name, "options": {k: str(v) for k, v in opts.items()},
+               "contact_force_N": contact_force, "stage": "connect",
+               "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+    exp: _LazyExperiment | None = None
     try:
+        refused = f"--option: driver {driver_name!r} refused its options"
         try:  # an unknown option: checked against connect's signature, not by calling it
             inspect.signature(driver.connect).bind(**opts)
         except TypeError as exc:
-            raise SkinkitError(f"--option: driver {driver_name!r} refused its options: {exc}") from None
+            raise OptionError(f"{refused}: {exc}") from None
         try:
             driver.connect(**opts)
-        except ValueError as exc:  # how a driver refuses an option's value; other errors are bugs
-            raise SkinkitError(f"--option: driver {driver_name!r} refused its options: {exc}") from None
+        except ValueError as exc:  # OptionError, or how a driver refuses a value; else a bug
+            raise OptionError(f"{refused}: {exc}") from None
+        attempt["stage"] = "home"
         driver.home(contact_force)
+        attempt["stage"] = "run"
         exp = _LazyExperiment(path, open_experiment, create_experiment)
         try:
             summary = run_protocol(driver, protocol, exp, progress=not as_json)
         finally:
             exp.close()
-    except BaseException:
-        if created:
+    except RefusedError:  # nothing was done: leave no trace (a device-side refusal may have
+        if created:       # opened the record already)
             _drop_if_empty(path)
+        elif exp is not None and exp.opened:
+            with open_experiment(path, mode="a") as exp_:
+                exp_.discard_empty_record(protocol.name)
+        raise
+    except BaseException as exc:
+        # the run was attempted: the file says so, whatever stopped it (issue 13 item 8)
+        _record_attempt(path, protocol, driver, attempt, exc)
         raise
     finally:
         try:
@@ -193,6 +208,27 @@ def run(
         except SkinkitError:
             pass
     _report(summary, protocol, path, as_json)
+
+
+def _record_attempt(path: Path, protocol: Any, driver: Any, attempt: dict[str, Any],
+                    exc: BaseException) -> None:
+    """Write a failed run into ``path`` (created if need be): an empty record is replaced by
+    an ``/attempts`` entry with the stage, the reason and the driver's link accounting, so a
+    retry can still write the record; a record with samples stays beside the entry."""
+    from skinkit.store import create_experiment, open_experiment
+
+    stats = getattr(driver, "last_run", None) if attempt["stage"] == "run" else None
+    facts = {**attempt, "reason": str(exc) or type(exc).__name__, "error": type(exc).__name__,
+             "link": stats.to_dict() if hasattr(stats, "to_dict") else None}
+    try:
+        with (open_experiment(path, mode="a") if path.exists() else create_experiment(path)) as exp:
+            exp.discard_empty_record(protocol.name)
+            kept = protocol.name in exp.record_names()
+            facts["samples"] = exp.record_info(protocol.name)["samples"] if kept else 0
+            facts["record"] = protocol.name if kept else None
+            exp.add_attempt(protocol, **json.loads(json.dumps(facts, default=str)))
+    except (SkinkitError, OSError) as write_exc:  # never hide the run's own error behind this
+        click.echo(f"warning: the failed attempt could not be written to {path}: {write_exc}", err=True)
 
 
 class _LazyExperiment:
@@ -209,6 +245,11 @@ class _LazyExperiment:
             self._exp = (self._open_fn(self.path, mode="a") if self.path.exists()
                          else self._create_fn(self.path))
         return self._exp
+
+    @property
+    def opened(self) -> bool:
+        """Whether the run got as far as opening the file (to start its record)."""
+        return self._exp is not None
 
     def record_writer(self, *args: Any, **kwargs: Any) -> Any:
         return self._get().record_writer(*args, **kwargs)

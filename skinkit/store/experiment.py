@@ -449,6 +449,45 @@ class Experiment:
         except SchemaError as exc:
             raise self._err(g.name, str(exc)) from None
 
+    def discard_empty_record(self, name: str) -> bool:
+        """Delete record ``name`` if it holds no committed sample (its run failed before the
+        first one: see :meth:`add_attempt`), so that a new run can write it; True if deleted."""
+        f = self._writable()
+        path = f"{L.RECORDS}/{name}"
+        if path not in f or self._committed(self._group(path)) > 0:
+            return False
+        del f[path]
+        f.flush()
+        return True
+
+    def add_attempt(self, protocol: Protocol, **facts: Any) -> str:
+        """Record a run of ``protocol`` that failed (e.g. before its first sample, which leaves
+        no record): ``facts`` are JSON-ready (driver, stage, reason, started, samples, ...).
+        Returns the attempt's name under ``/attempts``."""
+        if not isinstance(protocol, Protocol):
+            raise SchemaError("add_attempt.protocol", f"must be a Protocol, got {type(protocol).__name__}")
+        try:
+            payload = json.dumps(facts, allow_nan=True)
+        except TypeError as exc:
+            raise SchemaError("add_attempt.facts", f"not JSON-ready ({exc})") from None
+        g = self._writable().require_group(L.ATTEMPTS)
+        name = f"{len(g) + 1:04d}"
+        a = g.create_group(name)
+        a.attrs["protocol"] = protocol.to_json()
+        a.attrs["json"] = payload
+        self._f.flush()
+        return name
+
+    @_reading
+    def attempts(self) -> list[dict[str, Any]]:
+        """The failed runs recorded by :meth:`add_attempt`, oldest first: each its facts with
+        ``name`` and ``protocol`` (the protocol's dict)."""
+        if L.ATTEMPTS not in self._f:
+            return []
+        g = self._group(L.ATTEMPTS)
+        return [{**self._json_attr(g[n], "json", dict), "name": n,
+                 "protocol": self._json_attr(g[n], "protocol", dict)} for n in sorted(g)]
+
     # -- camera rig ----------------------------------------------------------------------
     def write_rig(self, rig: CameraRig) -> None:
         """Store (replace) the camera rig."""
@@ -714,6 +753,7 @@ class Experiment:
             "calibrations": self.calibration_names(),
             "fits": self.fit_names(),
             "gaps": self.gap_names(),
+            "attempts": self.attempts(),
         }
 
 

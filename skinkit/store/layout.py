@@ -25,6 +25,9 @@
     /calibrations/<name>      attrs json (a device calibration, e.g. "robot")
     /fits/<name>              attrs json (skinkit.schemas.FitResult.to_dict)
     /gaps/<name>              attrs json (skinkit.schemas.GapReport.to_dict)
+    /attempts/<NNNN>          a run that failed before or while recording (numbered from 0001):
+                              attrs protocol (JSON of the Protocol), json (the facts: driver,
+                              stage, reason, started, samples, ...)
 
 Records are appended block by block in HDF5's single-writer/multiple-reader (SWMR) mode,
 which orders metadata writes so that the file stays consistent whatever moment the writer
@@ -46,4 +49,5 @@ TRACKS = "tracks"
 FITS = "fits"
 CALIBRATIONS = "calibrations"
 GAPS = "gaps"
+ATTEMPTS = "attempts"
 SESSION = "session"

@@ -10,6 +10,7 @@ from typing import Any
 import can
 import numpy as np
 
+from skinkit.errors import OptionError
 from skinkit_hardware import faults as F
 from skinkit_hardware.device import Event
 from skinkit_hardware.drivers.link import LinkTransport
@@ -82,7 +83,7 @@ class CanDriver(HostDriver):
         bitrate = int(options.pop("bitrate", 1_000_000))
         hb = bool(options.pop("heartbeat_thread", True))
         if options:
-            raise F.DeviceFault(f"can driver: unknown option(s) {sorted(options)}")
+            raise OptionError(f"can driver: unknown option(s) {sorted(options)}")
         if bus is None:
             if port:
                 interface, _, channel = str(port).partition(":")

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit.errors import OptionError
 from skinkit_hardware import faults as F
 from skinkit_hardware.device import Event
 from skinkit_hardware.drivers.link import LinkTransport
@@ -98,14 +99,14 @@ class SerialDriver(HostDriver):
     def _open(self, **options: Any) -> SerialTransport:
         port = options.pop("port", None)
         if not port:
-            raise F.DeviceFault(
+            raise OptionError(
                 "serial driver: no port given (e.g. --port /dev/ttyUSB0, or the "
                 "port `skinkit robot emulate --serial` prints)"
             )
         baud = int(options.pop("baudrate", 921600))
         hb = bool(options.pop("heartbeat_thread", True))
         if options:
-            raise F.DeviceFault(f"serial driver: unknown option(s) {sorted(options)}")
+            raise OptionError(f"serial driver: unknown option(s) {sorted(options)}")
         t = SerialTransport(port, baud, self.params, heartbeat_thread=hb)
         t.handshake(f"serial: no answer from a device on {port} within 3 s (is the emulator running?)")
         return t

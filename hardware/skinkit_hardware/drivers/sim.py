@@ -58,7 +58,7 @@ class SimDriver(HostDriver):
             )
         block_s = float(options.pop("block_s", 0.05))
         if options:
-            from skinkit.errors import SkinkitError
+            from skinkit.errors import OptionError
 
-            raise SkinkitError(f"sim driver: unknown option(s) {sorted(options)}")
+            raise OptionError(f"sim driver: unknown option(s) {sorted(options)}")
         return SimTransport(device, block_s)
