@@ -10,6 +10,7 @@ resampled (cubic B-spline) at the running estimate until the residual shift vani
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -18,19 +19,25 @@ from scipy.ndimage import map_coordinates, spline_filter
 from skinkit.vision.subsets import IntegerMatch
 from skinkit_plugins.trackers.base import SubsetTracker
 
-_GRIDS: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
-
 
 def _freq_grid(shape: tuple[int, int], omega_max: float) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                                    np.ndarray]:
-    key = (shape[0], shape[1], omega_max)
-    if key not in _GRIDS:
-        ny, nx = shape
-        wy = 2 * np.pi * np.fft.fftfreq(ny)[:, None] * np.ones((1, nx))
-        wx = 2 * np.pi * np.fft.fftfreq(nx)[None, :] * np.ones((ny, 1))
-        use = (wx**2 + wy**2 <= omega_max**2) & ((wx != 0) | (wy != 0))
-        _GRIDS[key] = (use, wx[use], wy[use], np.column_stack([wx[use], wy[use]]))
-    return _GRIDS[key]
+    """Frequencies used by :func:`phase_slope` (mask ``(ny, nx)``, ``wx``, ``wy``, ``(n, 2)``
+    [rad/px]); shared, read-only."""
+    # exact key: the float cut-off by its integer ratio (a hit never depends on rounding)
+    return _grid(int(shape[0]), int(shape[1]), *float(omega_max).as_integer_ratio())
+
+
+@functools.lru_cache(maxsize=16)  # one subset size and cut-off per tracker; a few trackers
+def _grid(ny: int, nx: int, num: int, den: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    omega_max = num / den
+    wy = 2 * np.pi * np.fft.fftfreq(ny)[:, None] * np.ones((1, nx))
+    wx = 2 * np.pi * np.fft.fftfreq(nx)[None, :] * np.ones((ny, 1))
+    use = (wx**2 + wy**2 <= omega_max**2) & ((wx != 0) | (wy != 0))
+    out = (use, wx[use], wy[use], np.column_stack([wx[use], wy[use]]))
+    for a in out:
+        a.setflags(write=False)  # shared by every call: nobody may change it under the others
+    return out
 
 
 def phase_slope(f: np.ndarray, g: np.ndarray, window: np.ndarray, omega_max: float) -> np.ndarray:
