@@ -163,6 +163,11 @@ def check_signals(force_N: Any, position_m: Any, *, rate_hz: float | None = None
                   force_limit_N: float | None = None) -> Signals:
     """Validate a force-to-position record and return uniform, finite signals.
 
+    The caller's arrays are never modified (the signals returned are copies). The steps, in
+    order: :func:`_inputs` (shapes, counts), :func:`_uniform_from_times` (gaps, jitter; only
+    with ``time_s``), :func:`_fill_or_cut_nans`, :func:`_refuse_constant`,
+    :func:`_check_memory`, then the clipping and bandwidth warnings.
+
     Args:
         force_N: ``(N,)`` input force [N].
         position_m: ``(N,)`` output position [m].
@@ -179,7 +184,45 @@ def check_signals(force_N: Any, position_m: Any, *, rate_hz: float | None = None
         GapWarning, NonUniformSamplingWarning, NaNWarning, ClippedForceWarning,
         ClippedPositionWarning, ShortRecordWarning, NarrowbandInputWarning.
     """
-    issues: list[str] = []
+    w = _inputs(force_N, position_m, flags, rate_hz, time_s)
+    if time_s is not None:
+        rate_hz = _uniform_from_times(w, time_s)
+    rate = float(rate_hz)  # type: ignore[arg-type]
+    if not np.isfinite(rate) or rate <= 0:
+        raise SysidError(f"rate_hz must be a positive number, got {rate_hz!r}")
+    _fill_or_cut_nans(w, rate)
+    _refuse_constant(w)
+    _check_memory(w.n, rate, memory_s, w.issues)
+    _check_clipping(w.f, "force", ClippedForceWarning, w.issues, force_limit_N, w.flags)
+    _check_clipping(w.y, "position", ClippedPositionWarning, w.issues)
+    _check_bandwidth(w.f, rate, w.issues)
+    return Signals(force_N=w.f, position_m=w.y, rate_hz=rate, t0_s=w.t0, issues=w.issues)
+
+
+@dataclass
+class _Work:
+    """The record while :func:`check_signals` works on it: force ``f``, position ``y`` and
+    ``flags`` (or None) of ``n`` samples, the first at ``t0`` [s]; warnings so far."""
+
+    f: np.ndarray
+    y: np.ndarray
+    flags: np.ndarray | None
+    t0: float = 0.0
+    issues: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return int(self.f.size)
+
+    def keep(self, a: int, b: int) -> None:
+        """Keep samples ``[a, b)`` only."""
+        self.f, self.y = self.f[a:b], self.y[a:b]
+        self.flags = None if self.flags is None else self.flags[a:b]
+
+
+def _inputs(force_N: Any, position_m: Any, flags: Any, rate_hz: float | None, time_s: Any) -> _Work:
+    """Copies of the inputs as float vectors of one length (>= MIN_SAMPLES), the flags as
+    uint64; exactly one of ``rate_hz`` and ``time_s`` given."""
     f = _vector(force_N, "force_N")
     y = _vector(position_m, "position_m")
     if f.size != y.size:
@@ -192,98 +235,101 @@ def check_signals(force_N: Any, position_m: Any, *, rate_hz: float | None = None
     fl = None if flags is None else np.asarray(flags).astype(np.uint64)
     if fl is not None and fl.shape != (n,):
         raise SysidError(f"flags: expected shape ({n},), got {fl.shape}")
+    return _Work(f, y, fl)
 
-    t0 = 0.0
-    if time_s is not None:
-        t = _vector(time_s, "time_s")
-        if t.size != n:
-            raise SysidError(f"time_s has {t.size} samples but force_N has {n}")
-        if np.isnan(t).any():
-            raise SysidError(f"time_s: NaN at sample {int(np.flatnonzero(np.isnan(t))[0])}")
+
+def _uniform_from_times(w: _Work, time_s: Any) -> float:
+    """Cut ``w`` to its longest segment between gaps of ``time_s`` and resample it onto a
+    uniform grid when the intervals jitter; sets ``w.t0``, returns the rate [Hz]."""
+    n = w.n
+    t = _vector(time_s, "time_s")
+    if t.size != n:
+        raise SysidError(f"time_s has {t.size} samples but force_N has {n}")
+    if np.isnan(t).any():
+        raise SysidError(f"time_s: NaN at sample {int(np.flatnonzero(np.isnan(t))[0])}")
+    dt = np.diff(t)
+    if (dt <= 0).any():
+        i = int(np.flatnonzero(dt <= 0)[0])
+        raise SysidError(f"time_s must increase; sample {i + 1} ({t[i + 1]:.6g} s) does not")
+    med = float(np.median(dt))
+    gaps = np.flatnonzero(dt > GAP_FACTOR * med) + 1
+    if gaps.size:
+        a, b = _longest_segment(gaps, n)
+        warn(GapWarning, f"{gaps.size} gap(s) in time_s (largest {dt.max():.4g} s, median "
+             f"interval {med:.4g} s); using the longest uninterrupted segment "
+             f"{t[a]:.6g}-{t[b - 1]:.6g} s ({b - a} of {n} samples)", w.issues)
+        t = t[a:b]
+        w.keep(a, b)
+        if w.n < MIN_SAMPLES:
+            raise SysidError(f"longest segment between gaps has {w.n} samples; need {MIN_SAMPLES}")
         dt = np.diff(t)
-        if (dt <= 0).any():
-            i = int(np.flatnonzero(dt <= 0)[0])
-            raise SysidError(f"time_s must increase; sample {i + 1} ({t[i + 1]:.6g} s) does not")
         med = float(np.median(dt))
-        gaps = np.flatnonzero(dt > GAP_FACTOR * med) + 1
-        if gaps.size:
-            a, b = _longest_segment(gaps, n)
-            warn(GapWarning, f"{gaps.size} gap(s) in time_s (largest {dt.max():.4g} s, median "
-                 f"interval {med:.4g} s); using the longest uninterrupted segment "
-                 f"{t[a]:.6g}-{t[b - 1]:.6g} s ({b - a} of {n} samples)", issues)
-            t, f, y = t[a:b], f[a:b], y[a:b]
-            fl = None if fl is None else fl[a:b]
-            n = t.size
-            if n < MIN_SAMPLES:
-                raise SysidError(f"longest segment between gaps has {n} samples; need {MIN_SAMPLES}")
-            dt = np.diff(t)
-            med = float(np.median(dt))
-        rate_hz = 1.0 / med
-        t0 = float(t[0])
-        jitter = float(np.max(np.abs(dt - med)) / med)
-        if jitter > JITTER_RTOL:
-            grid = t[0] + med * np.arange(int(np.floor((t[-1] - t[0]) / med)) + 1)
-            warn(NonUniformSamplingWarning, f"sample intervals vary by up to {100 * jitter:.2g} % "
-                 f"of the median {med:.4g} s; resampled linearly onto a uniform {rate_hz:.6g} Hz "
-                 "grid", issues)
-            f = _interp_keep_nan(grid, t, f)
-            y = _interp_keep_nan(grid, t, y)
-            if fl is not None:
-                fl = fl[np.clip(np.searchsorted(t, grid), 0, t.size - 1)]
-            n = grid.size
-    rate = float(rate_hz)  # type: ignore[arg-type]
-    if not np.isfinite(rate) or rate <= 0:
-        raise SysidError(f"rate_hz must be a positive number, got {rate_hz!r}")
+    w.t0 = float(t[0])
+    jitter = float(np.max(np.abs(dt - med)) / med)
+    if jitter > JITTER_RTOL:
+        grid = t[0] + med * np.arange(int(np.floor((t[-1] - t[0]) / med)) + 1)
+        warn(NonUniformSamplingWarning, f"sample intervals vary by up to {100 * jitter:.2g} % "
+             f"of the median {med:.4g} s; resampled linearly onto a uniform {1.0 / med:.6g} Hz "
+             "grid", w.issues)
+        w.f = _interp_keep_nan(grid, t, w.f)
+        w.y = _interp_keep_nan(grid, t, w.y)
+        if w.flags is not None:
+            w.flags = w.flags[np.clip(np.searchsorted(t, grid), 0, t.size - 1)]
+    return 1.0 / med
 
-    bad = np.isnan(f) | np.isnan(y)
-    if bad.any():
-        runs = _runs(bad)
-        short = [(a, b) for a, b in runs if b - a <= MAX_NAN_FILL and a > 0 and b < n]
-        long_ = [(a, b) for a, b in runs if (a, b) not in short]
-        idx = np.arange(n)
-        for a, b in short:
-            for arr in (f, y):
-                arr[a:b] = np.interp(idx[a:b], [a - 1, b], [arr[a - 1], arr[b]])
-        msg = f"{int(bad.sum())} NaN sample(s) in {len(runs)} run(s) (first at sample " \
-              f"{runs[0][0]}); {len(short)} short run(s) interpolated"
-        if long_:
-            keep = np.ones(n, bool)
-            for a, b in long_:
-                keep[a:b] = False
-            seg = max(((a, b) for a, b in _runs(keep)), key=lambda r: r[1] - r[0], default=(0, 0))
-            a, b = seg
-            msg += f"; longer runs cut out, using samples {a}-{b - 1} ({b - a} of {n})"
-            f, y = f[a:b], y[a:b]
-            fl = None if fl is None else fl[a:b]
-            t0 += a / rate
-            n = b - a
-            if n < MIN_SAMPLES:
-                raise SysidError(f"longest NaN-free segment has {n} samples; need {MIN_SAMPLES}")
-        warn(NaNWarning, msg, issues)
 
-    for name, arr in (("force_N", f), ("position_m", y)):
+def _fill_or_cut_nans(w: _Work, rate: float) -> None:
+    """Interpolate NaN runs of at most MAX_NAN_FILL samples inside the record; cut longer
+    runs (and runs at an end) out, keeping the longest NaN-free segment."""
+    n = w.n
+    bad = np.isnan(w.f) | np.isnan(w.y)
+    if not bad.any():
+        return
+    runs = _runs(bad)
+    short = [(a, b) for a, b in runs if b - a <= MAX_NAN_FILL and a > 0 and b < n]
+    long_ = [(a, b) for a, b in runs if (a, b) not in short]
+    idx = np.arange(n)
+    for a, b in short:
+        for arr in (w.f, w.y):  # in place: w holds copies (see _vector), never the caller's
+            arr[a:b] = np.interp(idx[a:b], [a - 1, b], [arr[a - 1], arr[b]])
+    msg = f"{int(bad.sum())} NaN sample(s) in {len(runs)} run(s) (first at sample " \
+          f"{runs[0][0]}); {len(short)} short run(s) interpolated"
+    if long_:
+        keep = np.ones(n, bool)
+        for a, b in long_:
+            keep[a:b] = False
+        a, b = max(((a, b) for a, b in _runs(keep)), key=lambda r: r[1] - r[0], default=(0, 0))
+        msg += f"; longer runs cut out, using samples {a}-{b - 1} ({b - a} of {n})"
+        w.keep(a, b)
+        w.t0 += a / rate
+        if w.n < MIN_SAMPLES:
+            raise SysidError(f"longest NaN-free segment has {w.n} samples; need {MIN_SAMPLES}")
+    warn(NaNWarning, msg, w.issues)
+
+
+def _refuse_constant(w: _Work) -> None:
+    """A constant (or two-valued) force or position carries no dynamics to identify."""
+    for name, arr in (("force_N", w.f), ("position_m", w.y)):
         sd = float(np.std(arr))
         if sd <= 1e-12 * max(1.0, float(np.max(np.abs(arr)))) or np.unique(arr).size < 3:
             raise SysidError(f"{name} is constant (std {sd:.3g}); a stochastic input with an "
                              "output response is needed")
 
-    if memory_s is not None:
-        if not np.isfinite(memory_s) or memory_s <= 0:
-            raise SysidError(f"memory must be a positive time in seconds, got {memory_s!r}")
-        m = int(round(memory_s * rate)) + 1
-        if n < MIN_MEMORIES * m:
-            raise SysidError(f"record of {n / rate:.4g} s ({n} samples) is too short for an IRF "
-                             f"memory of {memory_s:.4g} s: need at least {MIN_MEMORIES} memory "
-                             f"lengths ({MIN_MEMORIES * m} samples)")
-        if n < WARN_MEMORIES * m:
-            warn(ShortRecordWarning, f"record holds only {n / m:.1f} memory lengths of "
-                 f"{memory_s:.4g} s; the IRF will be noisy (>= {WARN_MEMORIES} recommended)",
-                 issues)
 
-    _check_clipping(f, "force", ClippedForceWarning, issues, force_limit_N, fl)
-    _check_clipping(y, "position", ClippedPositionWarning, issues)
-    _check_bandwidth(f, rate, issues)
-    return Signals(force_N=f, position_m=y, rate_hz=rate, t0_s=t0, issues=issues)
+def _check_memory(n: int, rate: float, memory_s: float | None, issues: list[str]) -> None:
+    """Refuse a record shorter than MIN_MEMORIES IRF memories; warn below WARN_MEMORIES."""
+    if memory_s is None:
+        return
+    if not np.isfinite(memory_s) or memory_s <= 0:
+        raise SysidError(f"memory must be a positive time in seconds, got {memory_s!r}")
+    m = int(round(memory_s * rate)) + 1
+    if n < MIN_MEMORIES * m:
+        raise SysidError(f"record of {n / rate:.4g} s ({n} samples) is too short for an IRF "
+                         f"memory of {memory_s:.4g} s: need at least {MIN_MEMORIES} memory "
+                         f"lengths ({MIN_MEMORIES * m} samples)")
+    if n < WARN_MEMORIES * m:
+        warn(ShortRecordWarning, f"record holds only {n / m:.1f} memory lengths of "
+             f"{memory_s:.4g} s; the IRF will be noisy (>= {WARN_MEMORIES} recommended)", issues)
 
 
 def _interp_keep_nan(grid: np.ndarray, t: np.ndarray, v: np.ndarray) -> np.ndarray:
