@@ -23,13 +23,16 @@ def _fe_spec(path: Path) -> dict:
     """The model file's description, ready for the engine: a lumped model is refused (it has no
     mesh to solve), and ``[[effects]]`` are applied, as the forward models do — solving without
     them would be a silent answer for another model."""
-    from skinkit.fem.model import read_model
-    from skinkit.forward import model_kind
+    from skinkit.fem.errors import ModelError
+    from skinkit.fem.model import read_model, table
     from skinkit.forward.effects import apply_all, resolve
     spec = read_model(path)
-    if model_kind(spec) != "fe":
+    kind = table(spec.get("model", {}), "model").get("kind", "fe")
+    if kind == "lumped":
         raise SkinkitError(f"{path}: model.kind = 'lumped' is a lumped model, which has no mesh to "
                            "solve; predict a record with it (skinkit predict MODEL_FILE RECORD)")
+    if kind != "fe":
+        raise ModelError("model.kind", f"must be 'fe' or 'lumped', got {kind!r}")
     return apply_all(spec, resolve(spec.get("effects"), "fe"))
 
 
@@ -53,7 +56,9 @@ def solve(model_file: str, out_dir: str | None, as_json: bool, no_vtu: bool) -> 
     out = check_out_dir(Path(out_dir) if out_dir else _model_path(model_file).with_suffix(""), "--out")
     model = build_model(_fe_spec(_model_path(model_file)))
     times = model.load.times
-    prog = _progress(float(times[-1]), f"solving {model.name} ({model.mesh.n_dof} dofs)")
+    # rich formats the label: braces of the model's name are text, not fields
+    name = model.name.replace("{", "{{").replace("}", "}}")
+    prog = _progress(float(times[-1]), f"solving {name} ({model.mesh.n_dof} dofs)")
     with prog:
         task = prog.add_task("solve", total=float(times[-1]))
         sol, info = solve_model(model, progress=lambda t: prog.update(task, completed=t))

@@ -354,6 +354,25 @@ def check_size(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) ->
                          "or SKINKIT_MAX_UNKNOWNS")
 
 
+#: smallest element edge relative to the model's largest dimension: below it an element is
+#: degenerate in double precision long before it is a useful refinement
+MIN_EDGE_RATIO = 1e-6
+
+
+def check_thinness(mesh: FEMesh) -> None:
+    """Refuse a mesh with an element edge shorter than :data:`MIN_EDGE_RATIO` of the model's
+    size (a length of the geometry or a layer far too small next to the others)."""
+    corners = mesh.nodes[mesh.t.T]                                   # (E, 8, 3)
+    d = np.linalg.norm(corners[:, :, None, :] - corners[:, None, :, :], axis=-1)
+    d[:, np.arange(8), np.arange(8)] = np.inf
+    edge = float(d.min())
+    extent = float(np.ptp(mesh.nodes, axis=0).max())
+    if not edge > MIN_EDGE_RATIO * extent:
+        raise ModelError("geometry", f"the mesh has elements {edge:.3g} m thin in a model {extent:.3g} m "
+                         f"across (less than {MIN_EDGE_RATIO:g} of it): a length of [geometry] or a layer "
+                         "thickness is far too small next to the others")
+
+
 def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tuple[FEMesh, float | None]:
     g = _geometry(spec)
     kind = g.get("kind", "disc")
@@ -404,7 +423,8 @@ FREQUENCY_RANGE = (1e-6, 1e4)
 def _plausible(v: np.ndarray, unit: str, entry: str, extent: float) -> None:
     """A displacement no larger than the model (``extent`` [m]) or a force up to
     :data:`MAX_FORCE_N`."""
-    mag = float(np.linalg.norm(v))
+    with np.errstate(over="ignore"):  # a norm of 1e300 overflows to inf, which is refused below
+        mag = float(np.linalg.norm(v))
     limit = MAX_FORCE_N if unit == "N" else extent
     if mag > limit:
         raise ModelError(entry, f"magnitude {mag:g} {unit} is outside the plausible range "
@@ -486,7 +506,7 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
     spec = copy.deepcopy(dict(spec))
     _check_keys(spec, TOP_KEYS, "model file")
     meta = table(spec.get("model", {}), "model")
-    name = str(meta.get("name", "model"))
+    name = text(meta.get("name", "model"), "model.name")
     layers_spec = _get(spec, "layers", "")
     if not isinstance(layers_spec, list) or not layers_spec:
         raise ModelError("layers", "needs at least one [[layers]] table")
@@ -513,6 +533,7 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
     if mesh is None:
         check_size(spec, layers)  # before building: a huge mesh is refused, not attempted
         mesh, _ = _mesh(spec, layers)
+        check_thinness(mesh)
     elif 3 * mesh.n_nodes > max_unknowns(spec):
         raise ModelError("geometry", f"the mesh has {3 * mesh.n_nodes:,} unknowns, over the limit of "
                          f"{max_unknowns(spec):,} ([solver] max_unknowns or SKINKIT_MAX_UNKNOWNS)")

@@ -127,6 +127,16 @@ CASES = [
     (static_force, lambda s: s["geometry"].update(n_inner=0), "geometry.n_inner", ["[1, 200]"]),
     (static_force, lambda s: s["geometry"].update(indenter_diameter="40 mm"),
      "geometry.indenter_diameter", ["smaller than the disc"]),
+    # found by the property test: a degenerate mesh, a table for a name, a norm that overflows
+    (static_force, lambda s: s["geometry"].update(indenter_diameter=1e-300), "geometry", ["thin"]),
+    (cube, lambda s: s["model"].update(name={"x": 1}), "model.name", ["string"]),
+    (cube, lambda s: s["load"].update(value=[0, 0, -1e300]), "load.value", ["plausible range"]),
+    (static_force, lambda s: s["layers"][0].update(law="qlv", options={
+        "elastic": "neo-hookean-ni", "elastic_options": {"thicknes": 1}}), "layers[0].options",
+     ["thicknes"]),
+    (static_force, lambda s: s["layers"][0].update(law="qlv", options={"terms": [1]}),
+     "layers[0].options", ["terms"]),
+    (static_force, lambda s: s["model"].update(kind="fem"), "model.kind", ["'fe' or 'lumped'"]),
     # parameters far beyond any tissue: refused before the arithmetic overflows
     (cube, lambda s: s["layers"][0]["parameters"].update(mu="1e300 kPa"), "layers[0].parameters.mu",
      ["plausible range"]),

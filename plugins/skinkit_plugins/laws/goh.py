@@ -55,6 +55,9 @@ class GOH:
             raise ValueError(f"families must be 1 or 2, got {families!r}")
         check_volumetric(volumetric)
         self.families = int(families)
+        if isinstance(frame_angle, bool) or not isinstance(frame_angle, (int, float)) \
+                or not np.isfinite(frame_angle):
+            raise ValueError(f"frame_angle must be a finite angle in rad, got {frame_angle!r}")
         self.frame_angle = float(frame_angle)
         self.volumetric = volumetric
 

@@ -36,7 +36,8 @@ class Ogden:
     complex_safe = False
 
     def __init__(self, terms: int = 1, volumetric: str = "quadratic") -> None:
-        if int(terms) != terms or terms < 1:
+        if (isinstance(terms, bool) or not isinstance(terms, (int, float))
+                or not float(terms).is_integer() or terms < 1):
             raise ValueError(f"terms must be a positive integer, got {terms!r}")
         check_volumetric(volumetric)
         self.terms = int(terms)

@@ -7,14 +7,37 @@ static solve the law answers with its instantaneous elastic response.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from skinkit import registry
+from skinkit.errors import SkinkitError
 from skinkit.fem import lawkit
 from skinkit.schemas import Parameter
+
+
+def _elastic_law(name: str, options: Any) -> Any:
+    """The elastic law ``name`` built with ``options``; ValueError (a law's refusal of an
+    option) for an unknown law, options that are not a table or that its constructor lacks."""
+    if options is not None and not isinstance(options, Mapping):
+        raise ValueError(f"elastic_options must be a table, got {options!r}")
+    try:
+        cls = registry.load("skinkit.laws", name)
+    except SkinkitError as exc:
+        raise ValueError(f"elastic = {name!r}: {exc}") from None
+    opts = dict(options or {})
+    if isinstance(cls, type):
+        try:  # checked against the signature, not by calling: a TypeError inside is a bug
+            inspect.signature(cls).bind(**opts)
+        except TypeError as exc:
+            raise ValueError(f"elastic_options for {name!r}: {exc}") from None
+        return cls(**opts)
+    if opts:
+        raise ValueError(f"elastic law {name!r} takes no options, got {sorted(opts)}")
+    return cls
 
 
 class QLV:
@@ -26,11 +49,12 @@ class QLV:
 
     def __init__(self, elastic: Any = "neo-hookean-ni", terms: int = 1,
                  elastic_options: Mapping[str, Any] | None = None) -> None:
-        if int(terms) != terms or terms < 1:
+        if (isinstance(terms, bool) or not isinstance(terms, (int, float))
+                or not float(terms).is_integer() or terms < 1):
             raise ValueError(f"terms must be a positive integer, got {terms!r}")
         self.terms = int(terms)
         if isinstance(elastic, str):
-            elastic = registry.create("skinkit.laws", elastic, **dict(elastic_options or {}))
+            elastic = _elastic_law(elastic, elastic_options)
         if not callable(getattr(elastic, "energy", None)):
             raise ValueError(f"elastic must be a law with an energy, got {elastic!r}")
         self.elastic = elastic
