@@ -148,6 +148,31 @@ def _instrument() -> Any:
     return instrument
 
 
+#: 3-point Gauss rule on [-1, 1]: abscissae and weights
+_GAUSS3 = (np.array([0.0, -math.sqrt(0.6), math.sqrt(0.6)]), np.array([8.0, 5.0, 5.0]) / 9.0)
+
+
+def window_offsets(window_m: float) -> np.ndarray:
+    """``(9, 3)`` [m] in-plane offsets of the 3 x 3 Gauss points of a square window of side
+    ``window_m`` [m] (the centre first): a subset tracker's value is its subset's mean motion,
+    which this rule integrates exactly for fields up to fifth order in each direction."""
+    a = _GAUSS3[0] * window_m / 2
+    X, Y = np.meshgrid(a, a, indexing="ij")
+    return np.column_stack([X.ravel(), Y.ravel(), np.zeros(9)])
+
+
+def window_mean(points: np.ndarray, d_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions ``(n, P, 3)`` of windowed points from their Gauss points' ``(n, 9 P, 3)``: the
+    centre's rest position plus the window's mean displacement; derivatives ``(n, 9 P, 3, p)``
+    likewise (rest positions do not depend on the parameters)."""
+    n = points.shape[0]
+    w = np.outer(_GAUSS3[1], _GAUSS3[1]).ravel() / 4.0
+    q = points.reshape(n, -1, 9, 3)
+    mean_u = np.einsum("q,npqc->npc", w, q - q[:1])
+    dq = d_points.reshape(n, q.shape[1], 9, 3, d_points.shape[-1])
+    return q[:1, :, 0] + mean_u, np.einsum("q,npqcj->npcj", w, dq)
+
+
 def _cubic(t_knots: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Cubic-spline interpolation along axis 0 (not-a-knot; linear with < 4 knots)."""
     from scipy.interpolate import CubicSpline
@@ -361,6 +386,8 @@ class FEForwardModel:
         ref = np.asarray(ch.reference, dtype=float)
         if ref.shape[1] == 2:
             ref = np.column_stack([ref, np.zeros(len(ref))])
+        if ch.window_m is not None:   # each point: its subset's 3 x 3 Gauss points, centre first
+            ref = (ref[:, None, :] + window_offsets(ch.window_m)[None]).reshape(-1, 3)
         # protocols of a session share their points, and a fit asks again and again: locate once
         import hashlib
         key = hashlib.sha1(mesh.nodes.tobytes() + ref.tobytes() + np.float64(depth).tobytes()).hexdigest()
@@ -514,8 +541,11 @@ class FEForwardModel:
                 P = len(el)
                 ch = po.channels[cname]
                 k = ch.values.shape[2]
-                pts = np.moveaxis(_cubic(tk, r["points"][:, start:start + P], ch.time_s), 0, 1)[..., :k]
+                raw = r["points"][:, start:start + P]
                 dp = r["d_points"][:, start:start + P]
+                if ch.window_m is not None:
+                    raw, dp = window_mean(raw, dp)
+                pts = np.moveaxis(_cubic(tk, raw, ch.time_s), 0, 1)[..., :k]
                 d = {nm: np.moveaxis(_cubic(tk, dp[..., j], ch.time_s), 0, 1)[..., :k]
                      for j, nm in enumerate(col_names)}
                 true[cname] = (pts, d)

@@ -164,17 +164,23 @@ def channel_from_track(track: SurfaceTrack, attrs: dict[str, Any], where: str) -
     ref = np.where(track.valid[:, :1, None], track.points[:, :1, :], np.nan)[:, 0, :]
     ref = np.where(np.isfinite(ref), ref, 0.0)
     t = track.time_s
+    window = attrs.get("window_m")
     return Channel("points_2d" if two_d else "points", t, np.where(valid, pts, np.nan), valid, noise, src,
-                   reference=ref, reference_frame=0)
+                   reference=ref, reference_frame=0, window_m=None if window is None else float(window))
 
 
-def _read_experiment(path: Path, held_out: Sequence[str]) -> Observations:
+def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | None = None) -> Observations:
     from skinkit.store import open_experiment
 
     protocols: dict[str, ProtocolObservations] = {}
     with open_experiment(path) as exp:
         tracks = set(exp.track_names())
         names = exp.record_names()
+        if only is not None:
+            missing = sorted(set(only) - set(names))
+            if missing:
+                raise SchemaError("protocols", f"no record(s) {missing} in {path} (it has {names})")
+            names = [n for n in names if n in set(only)]
         # session order: by the time each record was written (its protocol order), else name
         order = []
         for n in names:
@@ -200,7 +206,7 @@ def _read_experiment(path: Path, held_out: Sequence[str]) -> Observations:
 
 
 def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = (), axis: str = "z",
-                      segments: str | None = None) -> Observations:
+                      segments: str | None = None, protocols: Sequence[str] | None = None) -> Observations:
     """The observations of a session file: an experiment file or a CSV record.
 
     ``held_out``: protocol names to mark held out (in addition to those the file marks).
@@ -220,7 +226,7 @@ def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = ()
         obs = Observations({rec.protocol.name: ProtocolObservations(
             rec.protocol, channels_from_record(rec, str(p)), False)}, None, str(p))
     else:
-        obs = _read_experiment(p, ())
+        obs = _read_experiment(p, (), protocols)
     if segments is not None:
         from skinkit.forward.segments import split
 

@@ -163,7 +163,8 @@ def candidate_observations(model: Any, observations: Observations, name: str,
         vals = ch.values[..., :2] if cname == "points_2d" else ch.values
         frame = pts.reference_frame if (ch.is_points and pts is not None) else None
         chans[cname] = Channel(cname, ch.time_s, vals, noise=lay["noise"][cname],
-                               noise_source="session", reference=ch.reference, reference_frame=frame)
+                               noise_source="session", reference=ch.reference, reference_frame=frame,
+                               window_m=pts.window_m if (ch.is_points and pts is not None) else None)
     for need in ("tip_position", "tip_force"):
         if need not in chans and need in po.channels:   # the drive and the prediction need both
             chans[need] = po.channels[need]

@@ -316,12 +316,16 @@ def _predict_group(model: Any, obs: Observations, drive: dict[str, str]) -> dict
 
 def run_truth(truth: Any, planned: Sequence[PlannedProtocol], sensors: SensorModel,
               surface: TopSurface, workers: int | None = None,
-              progress: Progress | None = None) -> tuple[dict[str, dict[str, np.ndarray]], Any]:
+              progress: Progress | None = None, points: np.ndarray | None = None,
+              ) -> tuple[dict[str, dict[str, np.ndarray]], Any]:
     """The noiseless channels ``{protocol: {channel: values (skin frame)}}`` of ``truth`` (a
-    model description, or an already built forward model) and a model for its parameters."""
+    model description, or an already built forward model) and a model for its parameters.
+    ``points`` ``(P, 3)`` [m]: the material points to follow (default: the tracked grid)."""
     is_model = hasattr(truth, "predict")
     kind = str(getattr(truth, "kind", "fe")) if is_model else _kind(truth)
     reference = surface.track_reference() if (kind == "fe" and surface.has_mesh) else None
+    if points is not None and reference is not None:
+        reference = np.asarray(points, dtype=float)
     profile = None
     if surface.curved:
         pts = surface.profile_points()
@@ -382,13 +386,14 @@ def _json_ready(obj: Any) -> Any:
 
 
 def _write_session(path: Path, planned: Sequence[PlannedProtocol], recorded: dict[str, dict[str, Any]],
-                   profile: SurfaceProfile, track_noise: np.ndarray, progress: Progress | None) -> None:
+                   profile: SurfaceProfile | None, track_noise: np.ndarray | None, progress: Progress | None,
+                   operator: str = "skinkit lab") -> None:
     from skinkit.schemas import RobotRecord, SurfaceTrack
     from skinkit.schemas.robot import FLAG_CAMERA_TRIGGER
     from skinkit.store import create_experiment
 
     with create_experiment(path) as exp:
-        exp.set_metadata(subject="virtual", site="forearm (virtual lab)", operator="skinkit lab")
+        exp.set_metadata(subject="virtual", site="forearm (virtual lab)", operator=operator)
         for i, p in enumerate(planned):
             if progress:
                 progress("write session", i / len(planned))
@@ -403,11 +408,19 @@ def _write_session(path: Path, planned: Sequence[PlannedProtocol], recorded: dic
                                          tip_force=rec["tip_force"][a:b], flags=flags[a:b],
                                          protocol=p.protocol))
             exp.set_record_attrs(p.protocol.name, session_index=i)
-            if "points" in rec:
+            if "points" in rec and track_noise is not None:
                 pts = rec["points"]
                 exp.write_track(p.protocol.name, SurfaceTrack(pts, np.ones(pts.shape[:2], bool), p.frames))
                 exp.set_track_attrs(p.protocol.name, noise_m=[float(v) for v in track_noise], dimensions=3)
-        exp.write_profile("undeformed", profile)
+        if profile is not None:
+            exp.write_profile("undeformed", profile)
+
+
+def write_records(vs: VirtualSession, out: str | os.PathLike[str], operator: str,
+                  progress: Progress | None = None) -> None:
+    """Write only the robot records of ``vs`` into a new experiment file ``out`` (no tracks, no
+    profile: a caller that images the session measures those itself)."""
+    _write_session(Path(out), vs.planned, vs.recorded, None, None, progress, operator)
 
 
 @dataclass
@@ -458,8 +471,11 @@ def _record(planned: Sequence[PlannedProtocol], noiseless: Mapping[str, Mapping[
 
 def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
              protocols: str | Sequence[str] | None = None, noise_scale: float = 1.0,
-             progress: Progress | None = None, workers: int | None = None) -> VirtualSession:
-    """Run ``truth`` through the protocols and record it (see :func:`make_session`); nothing is written."""
+             progress: Progress | None = None, workers: int | None = None,
+             points: np.ndarray | None = None) -> VirtualSession:
+    """Run ``truth`` through the protocols and record it (see :func:`make_session`); nothing is
+    written. ``points`` ``(P, 3)`` [m]: material points of the top surface to follow instead of
+    the tracked grid (e.g. a dense grid from which camera views are rendered)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise LabError(f"--seed: expected a non-negative integer, got {seed!r}")
     sensors = SensorModel(check_noise_scale(noise_scale))
@@ -480,7 +496,7 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
     planned = [plan_protocol(n, _protocol_parameters(spec, kind, n)) for n in names]
     surface = top_surface(spec if not is_model else None, kind)
     noiseless, model = run_truth(spec if not is_model else truth, planned, sensors, surface, workers,
-                                 progress)
+                                 progress, points)
     try:
         description = _description(model, spec, kind)
         parameters = model.parameters().to_list()
@@ -601,4 +617,4 @@ def _description(model: Any, spec: Mapping[str, Any], kind: str) -> Any:
 __all__ = ["DEFAULT_FE_PROTOCOLS", "FE_FORCE_PARAMETERS", "LabError", "PlannedProtocol", "SensorModel",
            "TopSurface", "VirtualSession", "check_noise_scale", "check_options", "make_session",
            "parse_protocols", "plan_protocol", "resample", "run_truth", "simulate", "skeleton",
-           "surface_height", "tip_force_from_motors", "top_surface", "write_session"]
+           "surface_height", "tip_force_from_motors", "top_surface", "write_records", "write_session"]

@@ -21,6 +21,7 @@ estimated.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,6 +57,9 @@ class Channel:
             read from a session), or None when the reference is known exactly. A measured
             reference carries that frame's noise into every later frame's residual; see
             :meth:`whiten`.
+        window_m: side [m] of the square of skin a point channel's value averages over (a
+            subset tracker follows the mean motion of its subset, not its centre's), or None
+            for a material point.
     """
 
     name: str
@@ -66,6 +70,7 @@ class Channel:
     noise_source: str = "unknown"
     reference: Any = None
     reference_frame: int | None = None
+    window_m: float | None = None
 
     def __post_init__(self) -> None:
         if self.name not in CHANNELS:
@@ -96,6 +101,11 @@ class Channel:
         if not np.all(np.isfinite(nz)) or np.any(nz <= 0):
             raise SchemaError(f"{f}.noise", f"must be positive and finite, got {nz.tolist()}")
         self.noise = nz
+        if self.window_m is not None:
+            w = float(self.window_m)
+            if not (math.isfinite(w) and w > 0):
+                raise SchemaError(f"{f}.window_m", f"must be positive and finite, got {self.window_m!r}")
+            self.window_m = w
         if self.reference is not None:
             ref = np.asarray(self.reference, dtype=float)
             if lead == 0 or ref.shape != (v.shape[0], 3):
@@ -249,7 +259,7 @@ class Observations:
                     continue
                 sl = (slice(None), slice(0, k)) if c.is_points else (slice(0, k),)
                 chans[c.name] = Channel(c.name, c.time_s[:k], c.values[sl], c.valid[sl], c.noise,
-                                        c.noise_source, c.reference, c.reference_frame)
+                                        c.noise_source, c.reference, c.reference_frame, c.window_m)
             out[p.name] = ProtocolObservations(p.protocol, chans, p.held_out)
         return Observations(out, self.profile, self.source)
 
