@@ -298,7 +298,10 @@ class Device:
             )
 
     # -- the control loop -------------------------------------------------------------
-    def advance(self, n_ticks: int) -> None:
+    # C901: the per-tick control loop (physics, PID, safety trips, streaming) runs in plain Python
+    # at 10 kHz with every parameter hoisted into locals; a call per step per tick would cost more
+    # than the arithmetic. The tests of test_hw_sim.py guard its behaviour.
+    def advance(self, n_ticks: int) -> None:  # noqa: C901
         """Run ``n_ticks`` control periods (physics, control, safety, streaming)."""
         p, lim = self.params, self.limits
         self.check_watchdog()

@@ -63,6 +63,33 @@ def _clean(x: Any) -> Any:
     return x
 
 
+def _parse_span(span: str, fitted: dict[str, Any] | None, around: Any, names: list[str]) -> Any:
+    """``--span``: one or two half-widths (A,B) in the parameters' units, or ``<k>se``: k
+    standard errors of the fit given with ``--at``."""
+    import numpy as np
+
+    from skinkit.inverse.grid import GridError, span_from_se
+    from skinkit.inverse.scaling import Scaling
+
+    text = span.strip().lower()
+    try:
+        if text.endswith("se"):
+            if fitted is None:
+                raise GridError("--span in standard errors needs --at FIT.json")
+            k = float(text[:-2])
+            if not k > 0:
+                raise ValueError
+            sc = Scaling.for_parameters(around, names)
+            return span_from_se(sc, np.array([around[p] for p in names]),
+                                [fitted["se"].get(p) for p in names], k)
+        half = [float(s) for s in text.split(",")]
+        if len(half) not in (1, 2) or not all(h > 0 and math.isfinite(h) for h in half):
+            raise ValueError
+        return half
+    except ValueError:
+        raise GridError(f"--span {span!r}: give a positive number, two (A,B), or '<k>se'") from None
+
+
 @click.command("grid")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.argument("session", type=click.Path(dir_okay=False))
@@ -84,12 +111,9 @@ def _clean(x: Any) -> Any:
 def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at: str | None, weighting: str,
          holdout: str | None, out_dir: str | None, workers: int | None, as_json: bool) -> None:
     """The objective over a grid of two parameters of MODEL_FILE on SESSION, the others fixed (Fig 7-10)."""
-    import numpy as np
-
     from skinkit.inverse import WEIGHTINGS
-    from skinkit.inverse.grid import GridError, attach_covariance, objective_grid, span_from_se
+    from skinkit.inverse.grid import GridError, attach_covariance, objective_grid
     from skinkit.inverse.plots import grid_plot
-    from skinkit.inverse.scaling import Scaling
 
     names = split_names(pair)
     if len(names) != 2:
@@ -110,25 +134,7 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
     around = base
     if fitted is not None:
         around = base.with_values({k: v for k, v in fitted["values"].items() if k in base})
-    half: Any = None
-    if span is not None:
-        text = span.strip().lower()
-        try:
-            if text.endswith("se"):
-                if fitted is None:
-                    raise GridError("--span in standard errors needs --at FIT.json")
-                k = float(text[:-2])
-                if not k > 0:
-                    raise ValueError
-                sc = Scaling.for_parameters(around, names)
-                half = span_from_se(sc, np.array([around[p] for p in names]),
-                                    [fitted["se"].get(p) for p in names], k)
-            else:
-                half = [float(s) for s in text.split(",")]
-                if len(half) not in (1, 2) or not all(h > 0 and math.isfinite(h) for h in half):
-                    raise ValueError
-        except ValueError:
-            raise GridError(f"--span {span!r}: give a positive number, two (A,B), or '<k>se'") from None
+    half = None if span is None else _parse_span(span, fitted, around, names)
     out = Path(out_dir) if out_dir else Path.cwd() / f"grid-{model.name}-{names[0]}-{names[1]}"
     say = _say
     say(f"{n} x {n} forward predictions of {model.name} on {session}")

@@ -68,21 +68,7 @@ def _print(con: Any, summary: dict[str, Any], meta: dict[str, Any]) -> None:
         con.print(f"  {text(k)}: {value(v)}")
     records = summary["records"]
     if records:
-        t = Table(title="records", title_justify="left", box=box.SIMPLE_HEAD, show_edge=False)
-        t.add_column("protocol", no_wrap=True)  # a name is not broken; the others fold
-        for col in ("kind", "samples", "rate [Hz]", "duration [s]", "complete"):
-            t.add_column(text(col), justify="right" if col in ("samples", "rate [Hz]",
-                                                               "duration [s]") else "left",
-                         overflow="fold", no_wrap=col != "complete",  # numbers stay whole
-                         min_width=8 if col == "complete" else None)
-        for r in records:
-            rate = "?" if r["rate_hz"] is None else number(r["rate_hz"], 6)
-            done = "yes" if r["complete"] else "[red]no[/red]"
-            if "samples_lost" in r["extra"]:
-                done += f" ({r['extra']['samples_lost']} lost)"
-            t.add_row(text(r["protocol"]), text(r["kind"]), str(r["samples"]), rate,
-                      number(r["duration_s"]), done)
-        con.print(t)
+        con.print(_records_table(records))
         con.print(_channels(records))
     if summary["cameras"]:
         c = Table(title="cameras", title_justify="left", box=box.SIMPLE_HEAD, show_edge=False)
@@ -112,6 +98,30 @@ def _print(con: Any, summary: dict[str, Any], meta: dict[str, Any]) -> None:
                   f"({text(a.get('driver', '?'))} driver, at {text(a.get('stage', '?'))}, "
                   f"{a.get('samples', 0)} samples, {text(a.get('started', '?'))}): "
                   f"{text(a.get('reason', '?'))}")
+
+
+def _records_table(records: list[dict[str, Any]]) -> Any:
+    """The records as a rich table: protocol, kind, samples, rate, duration, complete."""
+    from rich import box
+    from rich.table import Table
+
+    from skinkit.cli.render import number, text
+
+    t = Table(title="records", title_justify="left", box=box.SIMPLE_HEAD, show_edge=False)
+    t.add_column("protocol", no_wrap=True)  # a name is not broken; the others fold
+    for col in ("kind", "samples", "rate [Hz]", "duration [s]", "complete"):
+        t.add_column(text(col), justify="right" if col in ("samples", "rate [Hz]",
+                                                           "duration [s]") else "left",
+                     overflow="fold", no_wrap=col != "complete",  # numbers stay whole
+                     min_width=8 if col == "complete" else None)
+    for r in records:
+        rate = "?" if r["rate_hz"] is None else number(r["rate_hz"], 6)
+        done = "yes" if r["complete"] else "[red]no[/red]"
+        if "samples_lost" in r["extra"]:
+            done += f" ({r['extra']['samples_lost']} lost)"
+        t.add_row(text(r["protocol"]), text(r["kind"]), str(r["samples"]), rate,
+                  number(r["duration_s"]), done)
+    return t
 
 
 def _channels(records: list[dict[str, Any]]) -> Any:

@@ -554,9 +554,27 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         if s not in mesh.node_sets:
             raise ModelError("boundary.fixed", f"no node set {s!r}; sets are {sorted(mesh.node_sets)}")
         bc.fix(mesh.node_sets[s])
+    extent = float(np.ptp(mesh.nodes, axis=0).max())
+    load = _indenter_and_load(spec, mesh, fixed, bc, extent, require_load)
+    outp = table(spec.get("output", {}), "output")
+    _check_keys(outp, {"points", "point_depth", "sensitivities"}, "output")
+    points = None
+    if "points" in outp:
+        raw = outp["points"]
+        if not isinstance(raw, list) or not raw:
+            raise ModelError("output.points", "expected a list of [x, y, z] points")
+        points = np.array([vector(p, "m", f"output.points[{i}]") for i, p in enumerate(raw)])
+    depth = bounded(outp.get("point_depth", 0.0), "m", "output.point_depth", 0.0, extent, lo_open=False)
+    return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed, points, depth,
+                 flag(outp.get("sensitivities", False), "output.sensitivities"), fields)
+
+
+def _indenter_and_load(spec: Mapping[str, Any], mesh: FEMesh, fixed: list[str],
+                       bc: BoundaryConditions, extent: float, require_load: bool) -> Any:
+    """The ``[indenter]`` (a rigid set of nodes driven in displacement or force, set on
+    ``bc``) and the ``[load]`` programme in its unit; ``extent`` [m] bounds a displacement."""
     ind = spec.get("indenter")
     unit = "m"
-    extent = float(np.ptp(mesh.nodes, axis=0).max())
     if ind is not None:
         _check_keys(ind, {"mode", "components"}, "indenter")
         mode = ind.get("mode", "displacement")
@@ -577,17 +595,7 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         bc.rigid = Rigid(nodes, mode, load.value, tuple(int(c) for c in comps))
     else:
         load = _load(spec, unit, extent) if (require_load or "load" in spec) else _no_load()
-    outp = table(spec.get("output", {}), "output")
-    _check_keys(outp, {"points", "point_depth", "sensitivities"}, "output")
-    points = None
-    if "points" in outp:
-        raw = outp["points"]
-        if not isinstance(raw, list) or not raw:
-            raise ModelError("output.points", "expected a list of [x, y, z] points")
-        points = np.array([vector(p, "m", f"output.points[{i}]") for i, p in enumerate(raw)])
-    depth = bounded(outp.get("point_depth", 0.0), "m", "output.point_depth", 0.0, extent, lo_open=False)
-    return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed, points, depth,
-                 flag(outp.get("sensitivities", False), "output.sensitivities"), fields)
+    return load
 
 
 #: accepted ``[solver]`` relative and absolute tolerances, Newton iterations and step cuts

@@ -70,6 +70,28 @@ def prestretch(l1: float, l2: float, angle: float = 0.0, l3: float | None = None
 _CHUNK = 48
 
 
+def _bind_materials(mesh: FEMesh, materials: list[Material]) -> None:
+    """One material per region of ``mesh``: give each its elements, checked parameters and
+    pre-stretch ``F0`` (in place; ModelError naming the material otherwise)."""
+    names = [m.region for m in materials]
+    for r in mesh.regions:
+        if names.count(r) != 1:
+            raise ModelError("materials", f"region {r!r} needs exactly one material, "
+                             f"has {names.count(r)}")
+    for m in materials:
+        if m.region not in mesh.regions:
+            raise ModelError("materials", f"no region {m.region!r} in the mesh ({mesh.regions})")
+        m.elements = mesh.region_elements(m.region)
+        m.params = lawkit.check_parameters(m.law, dict(m.params), f"materials[{m.region}]")
+        if m.prestress is not None:
+            m.prestress = tuple(float(x) for x in m.prestress)
+            m.F0 = prestretch(*m.prestress)
+        if m.F0 is not None:
+            m.F0 = np.asarray(m.F0, dtype=float)
+            if np.linalg.det(m.F0.reshape(-1, 3, 3)).min() <= 0:
+                raise ModelError(f"materials[{m.region}].prestress", "det F0 must be positive")
+
+
 class Problem:
     """Mesh, geometry and materials; evaluates element forces and tangents.
 
@@ -82,23 +104,7 @@ class Problem:
         #: the time [s] (or load factor) the solver is at: time-dependent fields read it
         self.t = 0.0
         self.geom = geom if geom is not None else geometry(mesh, intorder)
-        names = [m.region for m in materials]
-        for r in mesh.regions:
-            if names.count(r) != 1:
-                raise ModelError("materials", f"region {r!r} needs exactly one material, "
-                                 f"has {names.count(r)}")
-        for m in materials:
-            if m.region not in mesh.regions:
-                raise ModelError("materials", f"no region {m.region!r} in the mesh ({mesh.regions})")
-            m.elements = mesh.region_elements(m.region)
-            m.params = lawkit.check_parameters(m.law, dict(m.params), f"materials[{m.region}]")
-            if m.prestress is not None:
-                m.prestress = tuple(float(x) for x in m.prestress)
-                m.F0 = prestretch(*m.prestress)
-            if m.F0 is not None:
-                m.F0 = np.asarray(m.F0, dtype=float)
-                if np.linalg.det(m.F0.reshape(-1, 3, 3)).min() <= 0:
-                    raise ModelError(f"materials[{m.region}].prestress", "det F0 must be positive")
+        _bind_materials(mesh, materials)
         self.materials = materials
         # group the elements material by material once, so that each material works on a
         # contiguous slice of the geometry arrays (no gathers in the hot path)

@@ -257,16 +257,7 @@ class HistorySensitivity:
             np.zeros((solver.dofmap.n_unknowns, 0))
         dm = solver.dofmap
         rigid = dm.bc.rigid
-        dup = np.zeros((prob.n_dof, npar))
-        for j, p in enumerate(self.pars):
-            if p.kind != "drive":
-                continue
-            dv = np.asarray(rigid.derivative(p.name, t), dtype=float)[dm.rigid_components]
-            if dm.force_mode:
-                rhs[dm.n_free:, j] -= dv   # r = f_int - f_ext: ∂r/∂p = -∂f_ext/∂p
-            else:
-                dup[dm.rigid_dofs, j] = dv[None, :]
-                rhs[:, j] += solver.pattern.vector(np.einsum("eij,ej->ei", Ke, dup[g.edofs, j]))
+        dup = self._drive(rhs, t, Ke)
         dq = -solver.linear.solve(rhs).reshape(dm.n_unknowns, -1) if npar else rhs
         mp = dm.map
         du = dup.copy()
@@ -283,6 +274,23 @@ class HistorySensitivity:
             tip_u[dm.rigid_components] = du[dm.rigid_dofs[0]]
             tip_f = react.reshape(-1, 3, npar)[rigid.nodes].sum(axis=0)
         return Sensitivities(list(self.names), du, tip_u, tip_f, react)
+
+    def _drive(self, rhs: np.ndarray, t: float, Ke: np.ndarray) -> np.ndarray:
+        """Add the drive parameters' part to ``rhs`` ``(n_unknowns, n_par)`` (in place) and
+        return the prescribed displacements' derivatives ``(n_dof, n_par)`` [m per unit]."""
+        solver, prob = self.solver, self.solver.problem
+        dm, edofs = solver.dofmap, prob.geom.edofs
+        dup = np.zeros((prob.n_dof, len(self.pars)))
+        for j, p in enumerate(self.pars):
+            if p.kind != "drive":
+                continue
+            dv = np.asarray(dm.bc.rigid.derivative(p.name, t), dtype=float)[dm.rigid_components]
+            if dm.force_mode:
+                rhs[dm.n_free:, j] -= dv   # r = f_int - f_ext: ∂r/∂p = -∂f_ext/∂p
+            else:
+                dup[dm.rigid_dofs, j] = dv[None, :]
+                rhs[:, j] += solver.pattern.vector(np.einsum("eij,ej->ei", Ke, dup[edofs, j]))
+        return dup
 
     def _update_history(self, u: np.ndarray, du: np.ndarray, dt: float, cache: dict) -> None:
         """Carry the total dSₑ/dp and dh/dp of this step to the next."""

@@ -240,50 +240,77 @@ def measure(entries: Sequence[Entry], channel: str, time_s: np.ndarray, values: 
     out = {k: np.array(a, dtype=float) for k, a in d.items()}
     for e in entries:
         if e.kind == "bias" and e.channel == channel:
-            b = _basis(e, time_s)
-            v[:, e.component] += e.value * b
-            if e.parameter in names:
-                out.setdefault(e.parameter, np.zeros_like(v))[:, e.component] += b
+            v = _bias(e, time_s, v, out, names)
         elif e.kind == "series" and e.channel == channel:
-            if e.source not in channels:
-                raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")
-            sv, sd = channels[e.source]
-            sv = np.nan_to_num(np.asarray(sv, dtype=float))
-            v = v + e.value * sv
-            for k, a in sd.items():
-                out[k] = out.get(k, np.zeros_like(v)) + e.value * a
-            if e.parameter in names:
-                out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + sv
+            v = _series(e, channels, v, out, names)
         elif e.kind == "similarity" and channel in _POINTS and e.channel in _POINTS:
-            if e.mode == "scale":
-                for key in out:
-                    out[key] = (1 + e.value) * out[key]
-                if e.parameter in names:
-                    out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + v
-                v = (1 + e.value) * v
-            else:
-                c, s = np.cos(e.value), np.sin(e.value)
-                R2 = np.array([[c, -s], [s, c]])
-                dR2 = np.array([[-s, -c], [c, -s]])
-                xy = v[..., :2]
-                for key in out:
-                    out[key][..., :2] = out[key][..., :2] @ R2.T
-                if e.parameter in names:
-                    dd = out.get(e.parameter, np.zeros_like(v))
-                    dd[..., :2] += xy @ dR2.T
-                    out[e.parameter] = dd
-                v[..., :2] = xy @ R2.T
+            v = _similarity(e, v, out, names)
         elif e.kind == "tilt" and channel in ("tip_force", "tip_position"):
-            R, dRa, dRb = _tilt(e.value, e.azimuth)
-            # recorded (robot frame) = Rᵀ skin-frame, row by row: v @ R
-            for key in out:
-                out[key] = out[key] @ R
-            if e.parameter in names:
-                out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + v @ dRa
-            if e.azimuth_parameter and e.azimuth_parameter in names:
-                out[e.azimuth_parameter] = out.get(e.azimuth_parameter, np.zeros_like(v)) + v @ dRb
-            v = v @ R
+            v = _tilted(e, v, out, names)
     return v, out
+
+
+# Each step below takes the recorded values ``v`` so far and their derivatives ``out`` (updated
+# in place, both copies made by measure), and returns the values after the entry ``e``.
+
+def _bias(e: Entry, time_s: np.ndarray, v: np.ndarray, out: dict[str, np.ndarray],
+          names: Sequence[str]) -> np.ndarray:
+    """An offset (times its time basis) added to one component."""
+    b = _basis(e, time_s)
+    v[:, e.component] += e.value * b
+    if e.parameter in names:
+        out.setdefault(e.parameter, np.zeros_like(v))[:, e.component] += b
+    return v
+
+
+def _series(e: Entry, channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
+            v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
+    """Another channel, times the entry's value, added (e.g. crosstalk)."""
+    if e.source not in channels:
+        raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")
+    sv, sd = channels[e.source]
+    sv = np.nan_to_num(np.asarray(sv, dtype=float))
+    v = v + e.value * sv
+    for k, a in sd.items():
+        out[k] = out.get(k, np.zeros_like(v)) + e.value * a
+    if e.parameter in names:
+        out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + sv
+    return v
+
+
+def _similarity(e: Entry, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
+    """Points scaled by ``1 + value``, or rotated in-plane by ``value`` [rad]."""
+    if e.mode == "scale":
+        for key in out:
+            out[key] = (1 + e.value) * out[key]
+        if e.parameter in names:
+            out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + v
+        return (1 + e.value) * v
+    c, s = np.cos(e.value), np.sin(e.value)
+    R2 = np.array([[c, -s], [s, c]])
+    dR2 = np.array([[-s, -c], [c, -s]])
+    xy = v[..., :2]
+    for key in out:
+        out[key][..., :2] = out[key][..., :2] @ R2.T
+    if e.parameter in names:
+        dd = out.get(e.parameter, np.zeros_like(v))
+        dd[..., :2] += xy @ dR2.T
+        out[e.parameter] = dd
+    v[..., :2] = xy @ R2.T
+    return v
+
+
+def _tilted(e: Entry, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
+    """The probe's force and position seen in the robot frame of a tilted indenter."""
+    R, dRa, dRb = _tilt(e.value, e.azimuth)
+    # recorded (robot frame) = Rᵀ skin-frame, row by row: v @ R
+    for key in out:
+        out[key] = out[key] @ R
+    if e.parameter in names:
+        out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) + v @ dRa
+    if e.azimuth_parameter and e.azimuth_parameter in names:
+        out[e.azimuth_parameter] = out.get(e.azimuth_parameter, np.zeros_like(v)) + v @ dRb
+    return v @ R
 
 
 __all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parameter_unit", "parameters", "parse"]

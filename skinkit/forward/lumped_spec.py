@@ -128,19 +128,7 @@ def parse_lumped(spec: Mapping[str, Any]) -> LumpedSpec:
     given = lt.get("parameters", {}) or {}
     if not isinstance(given, Mapping):
         raise ForwardError("lumped.parameters", "must be a table")
-    elastic = ""
-    if dynamic:
-        names = list(_DYNAMIC[family])
-        for key in ("elastic", "relaxation", "preconditioning"):
-            if lt.get(key):
-                raise ForwardError(f"lumped.{key}",
-                                   f"applies to quasi-static models, not to a {family!r} one")
-    else:
-        elastic = str(lt.get("elastic", "linear"))
-        if elastic not in ELASTIC:
-            raise ForwardError("lumped.elastic", f"must be one of {list(ELASTIC)}, got {elastic!r}")
-        names = poly_names(list(given)) if elastic == "polynomial" else \
-            {"linear": ["k"], "exponential": ["a", "b"]}[elastic]
+    elastic, names = _parameter_names(lt, family, given)
     missing = [n for n in names if n not in given]
     unknown = sorted(set(given) - set(names))
     if missing or unknown:
@@ -149,6 +137,33 @@ def parse_lumped(spec: Mapping[str, Any]) -> LumpedSpec:
     values: dict[str, float] = {}
     for n in names:
         values[f"lumped.{n}"] = _q(given[n], _READ_UNITS.get(n, "1"), f"lumped.parameters.{n}")
+    n_rel, pre = _relaxation_and_preconditioning(lt, values)
+    out = LumpedSpec(family, _AXES[ax.lstrip("-")], sense, drive, elastic, names, values, n_rel,
+                     pre, hold, inst_mod.parse(spec.get("instrument")))
+    check_values(out, out.values)
+    _check_instrument(out.entries, drive)
+    return out
+
+
+def _parameter_names(lt: Mapping[str, Any], family: str, given: Mapping[str, Any]) -> tuple[str, list[str]]:
+    """The elastic law (``""`` for a dynamic family) and the parameter names it takes."""
+    if family != "quasi-static":
+        for key in ("elastic", "relaxation", "preconditioning"):
+            if lt.get(key):
+                raise ForwardError(f"lumped.{key}",
+                                   f"applies to quasi-static models, not to a {family!r} one")
+        return "", list(_DYNAMIC[family])
+    elastic = str(lt.get("elastic", "linear"))
+    if elastic not in ELASTIC:
+        raise ForwardError("lumped.elastic", f"must be one of {list(ELASTIC)}, got {elastic!r}")
+    names = poly_names(list(given)) if elastic == "polynomial" else \
+        {"linear": ["k"], "exponential": ["a", "b"]}[elastic]
+    return elastic, names
+
+
+def _relaxation_and_preconditioning(lt: Mapping[str, Any], values: dict[str, float]) -> tuple[int, bool]:
+    """Read ``[[lumped.relaxation]]`` (g, tau [s]) and ``[lumped.preconditioning]`` into
+    ``values``; returns the number of relaxation terms and whether preconditioning is on."""
     rel = lt.get("relaxation", []) or []
     if not isinstance(rel, list) or not all(isinstance(r, Mapping) for r in rel):
         raise ForwardError("lumped.relaxation", "must be an array of tables ([[lumped.relaxation]])")
@@ -163,10 +178,13 @@ def parse_lumped(spec: Mapping[str, Any]) -> LumpedSpec:
         if not isinstance(pre, Mapping) or sorted(pre) != ["softening"]:
             raise ForwardError("lumped.preconditioning", "must be a table with exactly 'softening'")
         values["lumped.softening"] = _q(pre["softening"], "1", "lumped.preconditioning.softening")
-    out = LumpedSpec(family, _AXES[ax.lstrip("-")], sense, drive, elastic, names, values, len(rel),
-                     pre is not None, hold, inst_mod.parse(spec.get("instrument")))
-    check_values(out, out.values)
-    for i, e in enumerate(out.entries):
+    return len(rel), pre is not None
+
+
+def _check_instrument(entries: Any, drive: str) -> None:
+    """Instrument entries a lumped model can honour (no tracked points; the driving channel
+    only as tip_position from tip_force)."""
+    for i, e in enumerate(entries):
         if e.kind == "similarity":
             raise ForwardError(f"instrument[{i}].kind", "a 'similarity' entry acts on tracked points, "
                                "which a lumped model does not predict")
@@ -174,7 +192,6 @@ def parse_lumped(spec: Mapping[str, Any]) -> LumpedSpec:
                 (e.channel, e.source) != ("tip_position", "tip_force"):
             raise ForwardError(f"instrument[{i}].channel", f"a series entry on the driving channel {drive!r} "
                                "is available only as tip_position from tip_force")
-    return out
 
 
 def entry_of(name: str) -> str:

@@ -115,7 +115,10 @@ class _Evaluations:
         os.replace(tmp, path)
 
 
-def fit(model: Any, observations: Observations, free: Sequence[str] | None = None, *,
+# C901: the optimiser's objective, Jacobian, checkpoint replay and result assembly share the
+# evaluation state of one fit (closures over it); not yet split into an object (issue 13
+# item 9 follow-up).
+def fit(model: Any, observations: Observations, free: Sequence[str] | None = None, *,  # noqa: C901
         weighting: str = "noise", optimiser: str = "scipy-lsq", start: dict[str, float] | None = None,
         ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50, jacobian: str = "analytic",
         checkpoint: str | os.PathLike[str] | None = None,

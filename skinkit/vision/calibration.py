@@ -147,21 +147,7 @@ def calibrate_detections(det: Detections, inner: tuple[int, int] | None, square_
     carry their board's object points)."""
     F, C = det.found.shape
     names = list(camera_names) if camera_names is not None else [f"cam{c}" for c in range(C)]
-    if len(names) != C:
-        raise VisionError(f"{len(names)} camera names for {C} cameras in the images")
-    if C < 2:
-        raise VisionError("a rig calibration needs at least 2 cameras")
-    if not square_m > 0:
-        raise VisionError(f"board square size must be positive, got {square_m} m")
-    counts = det.found.sum(axis=0)
-    few = [f"{names[c]} ({counts[c]})" for c in range(C) if counts[c] < min_views]
-    if few:
-        raise VisionError(f"too few board detections: {', '.join(few)}; each camera needs at "
-                          f"least {min_views} views of the whole board")
-    for c in range(C):
-        shared = np.any(det.found[det.found[:, c]][:, np.arange(C) != c])
-        if not shared:
-            raise VisionError(f"{names[c]} never sees the board at the same time as another camera")
+    _check_detections(det, names, square_m, min_views)
     obj = _object_points(det, inner, square_m).astype(np.float32)
     # OpenCV 5.0's multiview calibration initialises poses badly from partly observed
     # boards, so each camera is first calibrated alone on every corner it saw (partial
@@ -181,20 +167,7 @@ def calibrate_detections(det: Detections, inner: tuple[int, int] | None, square_
             per.append(pts.astype(np.float32))
         img_points.append(per)
     flag = cv2.CALIB_FIX_K3 if fix_k3 else 0
-    Ks0, dists0 = [], []
-    for c in range(C):
-        views = np.flatnonzero(det.found[:, c])
-        seen = [np.isfinite(det.corners[f, c, :, 0]) for f in views]
-        try:
-            _, K, dist, _, _ = cv2.calibrateCamera(
-                [obj[m] for m in seen],
-                [det.corners[f, c, m].astype(np.float32) for f, m in zip(views, seen, strict=True)],
-                det.image_size, None, None, flags=flag)
-        except cv2.error as exc:
-            detail = str(exc).strip().splitlines()[-1]
-            raise VisionError(f"calibration of {names[c]} alone failed: {detail}") from None
-        Ks0.append(K)
-        dists0.append(dist.ravel()[:5].reshape(1, 5))
+    Ks0, dists0 = _single_camera_intrinsics(det, obj, names, flag)
     if not hasattr(cv2, "calibrateMultiviewExtended"):
         raise VisionError(f"joint rig calibration needs OpenCV >= 5.0 (calibrateMultiviewExtended); "
                           f"this is OpenCV {cv2.__version__}")
@@ -229,6 +202,48 @@ def calibrate_detections(det: Detections, inner: tuple[int, int] | None, square_
     per_cam = np.array([reprojection_rms(rig[c], used, c, obj, rvecs0, tvecs0, Rs, Ts)
                         for c in range(C)])
     return Calibration(rig, float(rms), per_cam, per_view, det, world_view)
+
+
+def _check_detections(det: Detections, names: list[str], square_m: float, min_views: int) -> None:
+    """VisionError unless there are names for every camera (at least 2), a positive square
+    size, ``min_views`` detections per camera and a view shared with another camera."""
+    C = det.found.shape[1]
+    if len(names) != C:
+        raise VisionError(f"{len(names)} camera names for {C} cameras in the images")
+    if C < 2:
+        raise VisionError("a rig calibration needs at least 2 cameras")
+    if not square_m > 0:
+        raise VisionError(f"board square size must be positive, got {square_m} m")
+    counts = det.found.sum(axis=0)
+    few = [f"{names[c]} ({counts[c]})" for c in range(C) if counts[c] < min_views]
+    if few:
+        raise VisionError(f"too few board detections: {', '.join(few)}; each camera needs at "
+                          f"least {min_views} views of the whole board")
+    for c in range(C):
+        shared = np.any(det.found[det.found[:, c]][:, np.arange(C) != c])
+        if not shared:
+            raise VisionError(f"{names[c]} never sees the board at the same time as another camera")
+
+
+def _single_camera_intrinsics(det: Detections, obj: np.ndarray, names: list[str],
+                              flag: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each camera calibrated alone on every corner it saw: ``K`` (3, 3) [px] and the
+    distortion ``(1, 5)``, the starting point of the joint adjustment."""
+    Ks0, dists0 = [], []
+    for c in range(det.found.shape[1]):
+        views = np.flatnonzero(det.found[:, c])
+        seen = [np.isfinite(det.corners[f, c, :, 0]) for f in views]
+        try:
+            _, K, dist, _, _ = cv2.calibrateCamera(
+                [obj[m] for m in seen],
+                [det.corners[f, c, m].astype(np.float32) for f, m in zip(views, seen, strict=True)],
+                det.image_size, None, None, flags=flag)
+        except cv2.error as exc:
+            detail = str(exc).strip().splitlines()[-1]
+            raise VisionError(f"calibration of {names[c]} alone failed: {detail}") from None
+        Ks0.append(K)
+        dists0.append(dist.ravel()[:5].reshape(1, 5))
+    return Ks0, dists0
 
 
 def _object_points(det: Detections, inner: tuple[int, int] | None, square_m: float) -> np.ndarray:

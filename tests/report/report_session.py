@@ -157,7 +157,9 @@ class ReportDOM:
 
     LOADERS = {"link", "iframe", "object", "embed", "frame", "base", "audio", "video", "source"}
 
-    def __init__(self, text: str) -> None:
+    # C901: mccabe counts the three small handlers of the inline HTML parser (which fill this
+    # object) as branches of __init__; each handler alone is simple.
+    def __init__(self, text: str) -> None:  # noqa: C901
         from html.parser import HTMLParser
 
         self.parts: list[str] = []
