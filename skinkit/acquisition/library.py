@@ -300,12 +300,20 @@ def _resolve(name: str, parameters: dict[str, Any]) -> tuple[_Entry, dict[str, A
         )
     params = dict(entry.defaults)
     for key, value in parameters.items():
+        kind = type(entry.defaults[key])
         try:
-            params[key] = type(entry.defaults[key])(value)
+            number = float(value)
         except (TypeError, ValueError):
             raise ProtocolError(
                 f"protocol {name!r}: parameter {key!r} must be a number, got {value!r}"
             ) from None
+        # a count (periods, increments, seed) cut to a whole number would run another protocol
+        # than the one asked for: 1.5 periods is not 1
+        if kind is int and not (math.isfinite(number) and number.is_integer()):
+            raise ProtocolError(
+                f"protocol {name!r}: parameter {key!r} must be a whole number, got {value!r}"
+            )
+        params[key] = int(number) if kind is int else kind(value)
     return entry, params
 
 

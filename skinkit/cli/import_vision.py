@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._types import FiniteFloat
+
 
 @click.command("import-images")
 @click.argument("experiment", type=click.Path(dir_okay=False, path_type=Path))
@@ -17,7 +19,7 @@ import click
 @click.option("--match", type=click.Choice(["auto", "name", "order"]), default="auto", show_default=True,
               help="match frames across cameras by the number in the file names, or by sort order "
                    "(auto: by name when every camera's names carry distinct numbers)")
-@click.option("--fps", default=1.0, show_default=True,
+@click.option("--fps", default=1.0, show_default=True, type=FiniteFloat(min=0.0, min_open=True),
               help="frame rate [Hz]: frame k is stored at k / fps seconds")
 def import_images(experiment: Path, cameras: tuple[tuple[str, str], ...], name: str, match: str,
                   fps: float) -> None:
@@ -26,9 +28,13 @@ def import_images(experiment: Path, cameras: tuple[tuple[str, str], ...], name: 
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from skinkit.cli._paths import check_name
     from skinkit.vision.image_import import import_images as run
     from skinkit.vision.image_import import plan_frames
 
+    check_name(name, "--name")  # before the progress bar: the error is then its only line
+    for cam, _ in cameras:
+        check_name(cam, "--camera")
     plan = plan_frames(cameras, match)
     with Progress(TextColumn(f"importing {name}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=Console(stderr=True), transient=True) as prog:
@@ -65,8 +71,9 @@ def import_calibration(experiment: Path, files: tuple[Path, ...], unit: str | No
 @click.option("--name", default=None, help="track name in EXPERIMENT (default: the CSV file's stem)")
 @click.option("--unit", type=click.Choice(["m", "mm", "cm", "um", "px"]), default=None,
               help="unit of coordinate columns named without one (x, y, z)")
-@click.option("--m-per-px", type=float, default=None, help="scale of pixel coordinates [m/px]")
-@click.option("--fps", default=1.0, show_default=True,
+@click.option("--m-per-px", type=FiniteFloat(min=0.0, min_open=True), default=None,
+              help="scale of pixel coordinates [m/px]")
+@click.option("--fps", default=1.0, show_default=True, type=FiniteFloat(min=0.0, min_open=True),
               help="frame rate [Hz] when the CSV has no time column: frame k at k / fps seconds")
 @click.option("--ignore", multiple=True, help="a column to skip (e.g. a correlation score); repeatable")
 @click.option("--overwrite", is_flag=True, help="replace a track of that name")

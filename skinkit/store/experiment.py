@@ -37,6 +37,24 @@ def _one_line(exc: BaseException) -> str:
 _F = TypeVar("_F", bound=Callable[..., Any])
 
 
+def _memory_bytes() -> int | None:
+    """This machine's physical memory [bytes], or None where the OS does not say."""
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def check_name(name: Any, what: str) -> str:
+    """A name stored as an HDF5 group (record, image sequence, camera, profile, track, fit,
+    gap, calibration): non-empty text without '/' (a path: nested groups), '\\', '..' or NUL."""
+    if not isinstance(name, str) or not name.strip():
+        raise SchemaError(what, f"must be a non-empty name, got {name!r}")
+    if "/" in name or "\\" in name or ".." in name or "\0" in name:
+        raise SchemaError(what, f"{name!r}: a name must not contain '/', '\\', '..' or NUL")
+    return name
+
+
 def _int_pair(value: Any) -> tuple[int, int]:
     """Two integers from an attribute value (``ValueError``/``TypeError`` otherwise)."""
     arr = np.asarray(value)
@@ -343,7 +361,7 @@ class Experiment:
         records = f.require_group(L.RECORDS)
         if protocol.name in records:
             raise self._err(f"/{L.RECORDS}/{protocol.name}", "a record of this protocol already exists")
-        g = records.create_group(protocol.name)
+        g = records.create_group(check_name(protocol.name, "record name"))
         g.attrs["protocol"] = protocol.to_json()
         g.attrs["channels"] = json.dumps(list(channels))
         g.attrs["rate_hz"] = float("nan") if rate_hz is None else float(rate_hz)
@@ -422,6 +440,25 @@ class Experiment:
     def _committed(self, g: h5py.Group) -> int:
         return self._count(g, self._dataset(g, "time_s", 1, unit="s").shape[0])
 
+    def _check_declared(self, g: h5py.Group, n: int, names: Sequence[str]) -> None:
+        """Refuse, before reading, ``n`` rows of datasets ``names`` of ``g`` that the file does
+        not hold (declared but never written: a damaged file) or that would not fit in memory."""
+        total = 0
+        for name in names:
+            d = g[name]
+            row = int(np.prod(d.shape[1:], dtype=np.int64)) * d.dtype.itemsize
+            need = n * row
+            total += need
+            # unwritten chunks take no space: a file that stores fewer bytes than it declares
+            # (and does not compress) never held those rows
+            if d.compression is None and d.id.get_storage_size() < need:
+                raise self._err(d.name, f"declares {n:,} rows ({need / 1e9:.3g} GB) but stores only "
+                                f"{d.id.get_storage_size():,} bytes: damaged (rows never written)")
+        mem = _memory_bytes()
+        if mem is not None and total > mem // 2:
+            raise self._err(g.name, f"{n:,} samples take {total / 1e9:.3g} GB to read, more than half "
+                            f"this machine's {mem / 1e9:.3g} GB of memory")
+
     @_reading
     def read_record(self, name: str) -> RobotRecord:
         """The committed samples of record ``name``, validated."""
@@ -435,15 +472,15 @@ class Experiment:
             raise self._err(f"{g.name}@channels", f"malformed channel list {channels!r}")
         n = self._committed(g)
         time_s = self._dataset(g, "time_s", 1, unit="s")
-        data: dict[str, Any] = {}
         for c in channels:
             d = self._dataset(g, c, 2, last=3, unit=RobotRecord.CHANNELS[c])
             if d.shape[0] < n:
                 raise self._err(d.name, f"has {d.shape[0]} rows but {n} samples are committed")
-            data[c] = d[:n]
         flags = self._dataset(g, "flags", 1)
         if time_s.shape[0] < n or flags.shape[0] < n:
             raise self._err(g.name, f"time_s or flags shorter than the {n} committed samples")
+        self._check_declared(g, n, ["time_s", "flags", *channels])
+        data: dict[str, Any] = {c: g[c][:n] for c in channels}
         try:
             return RobotRecord(time_s=time_s[:n], flags=flags[:n], protocol=protocol, **data)
         except SchemaError as exc:
@@ -496,7 +533,7 @@ class Experiment:
             del f[L.RIG]
         g = f.require_group(L.RIG)
         for i, cam in enumerate(rig.cameras):
-            c = g.create_group(cam.name)
+            c = g.create_group(check_name(cam.name, "camera name"))
             c.attrs["index"] = i
             c.create_dataset("K", data=cam.K).attrs["unit"] = "px"
             c.create_dataset("distortion", data=cam.distortion)
@@ -537,6 +574,9 @@ class Experiment:
                      dtype: Any = np.uint8) -> Iterator[Any]:
         """Append frames one at a time: ``w.append(frame (C, H, W), time_s)``; flushed per frame."""
         f = self._writable()
+        check_name(name, "image sequence name")
+        for cam in camera_names:
+            check_name(cam, "camera name")
         if f"{L.IMAGES}/{name}" in f:
             raise self._err(f"/{L.IMAGES}/{name}", "an image sequence of this name already exists")
         w, h = (int(s) for s in image_size)
@@ -601,6 +641,7 @@ class Experiment:
         g = self._group(f"{L.IMAGES}/{name}")
         frames = self._dataset(g, "frames", 4)
         n = self._count(g, frames.shape[0]) if "committed" in g else frames.shape[0]
+        self._check_declared(g, n, ["frames"])
         try:
             return ImageSequence(name=name, frames=frames[:n],
                                  camera_names=tuple(self._json_attr(g, "camera_names", list)),
@@ -609,14 +650,16 @@ class Experiment:
             raise self._err(g.name, str(exc)) from None
 
     # -- surfaces ------------------------------------------------------------------------
-    def _replace_group(self, path: str) -> h5py.Group:
+    def _replace_group(self, base: str, name: str) -> h5py.Group:
+        singular = base.rstrip("s")
+        path = f"{base}/{check_name(name, f'{singular} name')}"
         f = self._writable()
         if path in f:
             del f[path]
         return f.require_group(path)
 
     def write_profile(self, name: str, profile: SurfaceProfile) -> None:
-        g = self._replace_group(f"{L.PROFILES}/{name}")
+        g = self._replace_group(L.PROFILES, name)
         g.create_dataset("points", data=profile.points).attrs["unit"] = "m"
         g.create_dataset("quality", data=profile.quality)
         if profile.uncertainty_px is not None:
@@ -641,7 +684,7 @@ class Experiment:
             raise self._err(g.name, str(exc)) from None
 
     def write_track(self, name: str, track: SurfaceTrack) -> None:
-        g = self._replace_group(f"{L.TRACKS}/{name}")
+        g = self._replace_group(L.TRACKS, name)
         g.create_dataset("points", data=track.points, chunks=True).attrs["unit"] = "m"
         g.create_dataset("valid", data=track.valid)
         g.create_dataset("time_s", data=track.time_s).attrs["unit"] = "s"
@@ -678,7 +721,7 @@ class Experiment:
 
     # -- results -------------------------------------------------------------------------
     def _write_json(self, base: str, name: str, payload: dict[str, Any]) -> None:
-        g = self._replace_group(f"{base}/{name}")
+        g = self._replace_group(base, name)
         g.attrs["json"] = json.dumps(payload, allow_nan=True)
         self._f.flush()
 

@@ -81,6 +81,11 @@ WARN_MEMORIES = 10
 MIN_SAMPLES = 64
 #: a Gaussian-like input has ~1 sample at its extreme; more than this fraction is a plateau
 CLIP_FRACTION = 2e-3
+#: most IRF lags identified unless ``SKINKIT_MAX_IRF_LAGS`` allows more: the correlation IRF
+#: eigen-decomposes an L x L matrix (about 32 L^2 bytes with LAPACK's workspace, L^3 time):
+#: 4,096 lags take about 0.5 GB and tens of seconds, while a skin IRF lasts < 0.25 s, 500
+#: lags at the robot's 2 kHz (thesis 4.2.1)
+MAX_IRF_LAGS = 4096
 
 
 @dataclass
@@ -316,13 +321,44 @@ def _refuse_constant(w: _Work) -> None:
                              "output response is needed")
 
 
+def max_irf_lags() -> int:
+    """The most IRF lags identified: ``SKINKIT_MAX_IRF_LAGS`` if set, else :data:`MAX_IRF_LAGS`."""
+    raw = os.environ.get("SKINKIT_MAX_IRF_LAGS", "").strip()
+    if not raw:
+        return MAX_IRF_LAGS
+    try:
+        value = int(raw)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise SysidError(f"SKINKIT_MAX_IRF_LAGS={raw!r}: must be a whole number of lags >= 1")
+    return value
+
+
+def check_irf_size(lags: int, rate_hz: float, memory_s: float) -> None:
+    """Refuse, before allocating, an IRF of ``lags`` lags (``memory_s`` [s] at ``rate_hz``
+    [Hz]; both sides counted when two-sided) above :func:`max_irf_lags`, with the memory it
+    would take and the longest memory allowed at this rate."""
+    limit = max_irf_lags()
+    if lags <= limit:
+        return
+    gb = 32.0 * float(lags) ** 2 / 1e9
+    longest = (limit - 1) / rate_hz / (2 if lags > int(round(memory_s * rate_hz)) + 1 else 1)
+    raise SysidError(f"an IRF memory of {memory_s:.4g} s at {rate_hz:.6g} Hz is {lags:,} lags: a "
+                     f"{lags:,} x {lags:,} correlation matrix, about {gb:.3g} GB and L^3 time to "
+                     f"decompose, over the limit of {limit:,} lags; use a memory of at most "
+                     f"{longest:.4g} s (skinkit sysid --memory), or raise SKINKIT_MAX_IRF_LAGS")
+
+
 def _check_memory(n: int, rate: float, memory_s: float | None, issues: list[str]) -> None:
-    """Refuse a record shorter than MIN_MEMORIES IRF memories; warn below WARN_MEMORIES."""
+    """Refuse a record shorter than MIN_MEMORIES IRF memories, or a memory of more lags than
+    :func:`max_irf_lags`; warn below WARN_MEMORIES."""
     if memory_s is None:
         return
     if not np.isfinite(memory_s) or memory_s <= 0:
         raise SysidError(f"memory must be a positive time in seconds, got {memory_s!r}")
     m = int(round(memory_s * rate)) + 1
+    check_irf_size(m, rate, memory_s)
     if n < MIN_MEMORIES * m:
         raise SysidError(f"record of {n / rate:.4g} s ({n} samples) is too short for an IRF "
                          f"memory of {memory_s:.4g} s: need at least {MIN_MEMORIES} memory "

@@ -144,6 +144,29 @@ class IncrementalResult:
         return out
 
 
+#: stochastic segments whose mean forces all lie within this fraction of their force's
+#: standard deviation are one level, not increments: the segment means of a plain stochastic
+#: test differ by ~std / sqrt(effective samples), those of an incremental protocol by about
+#: full scale / steps, several standard deviations (thesis 4.1.3: 20 % of full scale stochastic)
+STEP_LEVEL = 0.25
+
+
+def _require_steps(segments: Sequence[Segment], f: np.ndarray) -> None:
+    """Refuse a record in which the detected stochastic segments do not step the mean force:
+    fewer than two segments, or all at one level (a plain stochastic test)."""
+    if len(segments) < 2:
+        raise SysidError(f"not an incremental protocol: {len(segments)} stochastic segment(s) found "
+                         "(an incremental record steps the mean force over several); identify it "
+                         "as one stochastic record (skinkit sysid without --incremental)")
+    means = np.array([s.mean_N for s in segments])
+    sd = float(np.median([np.std(f[s.start:s.stop]) for s in segments]))
+    if float(np.ptp(means)) <= STEP_LEVEL * sd:
+        raise SysidError(f"not an incremental protocol: the {len(segments)} stochastic segments "
+                         f"all have a mean force of {means.mean():.4g} N (spread {np.ptp(means):.3g} N, "
+                         f"force std {sd:.3g} N); identify it as one stochastic record "
+                         "(skinkit sysid without --incremental)")
+
+
 def identify_incremental(force_N: Any, position_m: Any = None, rate_hz: float | None = None,
                          segments: Sequence[Segment | tuple[int, int]] | None = None, *,
                          axis: int | str = 2,
@@ -183,6 +206,7 @@ def identify_incremental(force_N: Any, position_m: Any = None, rate_hz: float | 
     y = np.asarray(position_m, float)
     if segments is None:
         segments = detect_segments(f, rate_hz)
+        _require_steps(segments, f)
     if f.shape != y.shape or f.ndim != 1:
         raise SysidError(f"force_N {f.shape} and position_m {y.shape} must be equal (N,) arrays")
     segs = [s if isinstance(s, Segment) else Segment(int(s[0]), int(s[1]), "identify",

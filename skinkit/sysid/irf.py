@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import toeplitz
 
-from skinkit.sysid.checks import SysidError
+from skinkit.sysid.checks import SysidError, check_irf_size
 
 
 @dataclass
@@ -109,6 +109,7 @@ def estimate_irf(x: np.ndarray, y: np.ndarray, rate_hz: float, memory_s: float,
     L = n_pos + n_neg
     if L >= n:
         raise SysidError(f"IRF of {L} lags needs more than {n} samples")
+    check_irf_size(L, rate_hz, memory_s)
     rxx, phi = correlations(x, y, n_pos, n_neg)
     R = toeplitz(rxx)
     s, V = np.linalg.eigh(R)
@@ -142,6 +143,9 @@ def estimate_irf_lstsq(x: np.ndarray, y: np.ndarray, rate_hz: float, memory_s: f
     x = np.asarray(x, float) - np.mean(x)
     y = np.asarray(y, float) - np.mean(y)
     L = int(round(memory_s * rate_hz)) + 1
+    check_irf_size(L, rate_hz, memory_s)
+    if L >= x.size:
+        raise SysidError(f"IRF of {L} lags needs more than {x.size} samples")
     # rows whose lags all fall inside the record: X[n, k] = x[n - k], n = L-1 .. N-1
     X = toeplitz(x[L - 1:], x[L - 1::-1])
     g, *_ = np.linalg.lstsq(X, y[L - 1:], rcond=None)

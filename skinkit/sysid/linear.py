@@ -16,6 +16,7 @@ from skinkit.sysid.checks import (
     PoorFitWarning,
     Signals,
     SysidError,
+    max_irf_lags,
     nonphysical,
     warn,
 )
@@ -133,7 +134,9 @@ def auto_memory(sig: Signals, two_sided: bool, hold: str) -> float:
     """Memory [s]: where the damped sinusoid fitted to a long IRF has decayed to
     ``ENVELOPE_END`` of its start; where no sinusoid fits, 1.5 x the last lag whose IRF
     value is significant (3 standard deviations)."""
-    m0 = min(MAX_AUTO_MEMORY_S, (sig.n / WARN_MEMORIES - 1) / sig.rate_hz)
+    # at most the lags allowed (a fast-sampled record gets a shorter automatic memory)
+    lags = max_irf_lags() // (2 if two_sided else 1)
+    m0 = min(MAX_AUTO_MEMORY_S, (sig.n / WARN_MEMORIES - 1) / sig.rate_hz, (lags - 1) / sig.rate_hz)
     if m0 * sig.rate_hz < 8:
         raise SysidError(f"record of {sig.n} samples is too short for an automatic IRF memory")
     # a first, cheap estimate: Levinson solution with a ridge (1 % of the input variance)

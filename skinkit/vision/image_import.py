@@ -55,6 +55,11 @@ class FramePlan:
         return len(self.files)
 
 
+def _good_name(name: str) -> bool:
+    """A name stored as an HDF5 group: non-empty, no path ('/', '\\', '..') and no NUL."""
+    return bool(name.strip()) and not any(c in name for c in ("/", "\\", "..", "\0"))
+
+
 def expand(pattern: str) -> list[Path]:
     """Files matching ``pattern`` (a glob, or a folder: its image files), naturally sorted."""
     p = Path(pattern).expanduser()
@@ -107,9 +112,9 @@ def plan_frames(cameras: Sequence[tuple[str, str]], match: str = "auto") -> Fram
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise VisionError(f"camera name(s) given twice: {', '.join(dup)}")
-    bad = [n for n in names if not n or "/" in n]
+    bad = [n for n in names if not _good_name(n)]
     if bad:
-        raise VisionError(f"camera name {bad[0]!r} is empty or contains '/'")
+        raise VisionError(f"camera name {bad[0]!r} is empty or contains '/', '\\', '..' or NUL")
     files = []
     for name, pattern in cameras:
         found = expand(pattern)
@@ -193,8 +198,8 @@ def import_images(experiment: str | Path, plan: FramePlan, name: str, fps: float
 
     if not (np.isfinite(fps) and fps > 0):
         raise VisionError(f"frame rate must be positive, got {fps} Hz")
-    if not name or "/" in name:
-        raise VisionError(f"sequence name {name!r} is empty or contains '/'")
+    if not _good_name(name):
+        raise VisionError(f"sequence name {name!r} is empty or contains '/', '\\', '..' or NUL")
     path = Path(experiment)
     created = not path.exists()
     tmp = f".importing-{name}"
