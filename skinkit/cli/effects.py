@@ -6,6 +6,8 @@ import json
 
 import click
 
+from skinkit.cli._types import FiniteFloat
+
 
 @click.group("effects")
 def effects() -> None:
@@ -70,7 +72,7 @@ def _forces_from_trajectories(spec, obs, workers):
               help="predict this session's protocols with its noise (default: the model's [session] "
                    "protocols driven by their programmes, with the robot's and the cameras' noise)")
 @click.option("--effects", "names", default=None, help="only these effects (comma-separated)")
-@click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
+@click.option("--threshold", type=FiniteFloat(min=0, min_open=True), default=5.0, show_default=True,
               help="a channel sees an effect that changes it by more than this many noise levels")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")

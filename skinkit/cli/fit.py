@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from skinkit.cli._session import read_session, split_names
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 
@@ -58,11 +59,11 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 @click.option("--segments", type=click.Choice(["cycles"]), default=None,
               help="split every record into protocols first (cycles: one per loading cycle, "
                    "named <protocol>-cycle-<k>), so --holdout can name a cycle")
-@click.option("--until", "until_s", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="fit only the first part of every record, up to this time [s]")
-@click.option("--ftol", type=click.FloatRange(min=0, min_open=True), default=1e-6, show_default=True,
+@click.option("--ftol", type=FiniteFloat(min=0, min_open=True), default=1e-6, show_default=True,
               help="stop when the objective changes by less than this, relatively")
-@click.option("--xtol", type=click.FloatRange(min=0, min_open=True), default=1e-3, show_default=True,
+@click.option("--xtol", type=FiniteFloat(min=0, min_open=True), default=1e-3, show_default=True,
               help="stop when the step in scaled parameters is below this")
 @click.option("--max-iterations", type=click.IntRange(min=1), default=50, show_default=True,
               help="at most this many forward evaluations per start")

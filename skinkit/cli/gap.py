@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from skinkit.cli._session import split_names
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 
@@ -33,7 +34,7 @@ def gap() -> None:
               help="name of the report stored in an experiment-file SESSION (default: gap-<model name>)")
 @click.option("--overwrite", is_flag=True, help="replace a report of that name already stored in SESSION")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes (FE models)")
-@click.option("--until", "until_s", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="diagnose only the session's first seconds [s] (e.g. the imaged part of a record)")
 @click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,

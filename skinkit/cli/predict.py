@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from skinkit.cli._session import read_session, split_names
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 
@@ -15,7 +16,7 @@ from skinkit.errors import SkinkitError
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.argument("session", type=click.Path(dir_okay=False))
 @click.option("--protocols", default=None, help="only these protocols (comma-separated)")
-@click.option("--until", "until_s", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="only the first part of every record, up to this time [s]")
 @click.option("--holdout", default=None, help="mark these protocols held out (comma-separated)")
 @click.option("--segments", type=click.Choice(["cycles"]), default=None,

@@ -7,7 +7,11 @@ import math
 
 import click
 
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
+
+#: the device calibration (``/calibrations/<name>``) where ``calibrate`` notes its board views
+RIG_CALIBRATION = "rig"
 
 
 @click.group("vision")
@@ -24,10 +28,12 @@ def _num(x: float) -> float | None:
 @click.argument("cur_image", type=click.Path(dir_okay=False))
 @click.option("--points", "points_csv", required=True, type=click.Path(dir_okay=False),
               help="CSV with header x_px,y_px: points in REF_IMAGE (origin: centre of the top-left pixel)")
-@click.option("--subset", "subset_px", default=64, show_default=True, help="subset side [px]")
+@click.option("--subset", "subset_px", default=64, show_default=True, type=click.IntRange(8, 4096),
+              help="subset side [px]")
 @click.option("--tracker", "tracker_name", default="gn", show_default=True,
               help="tracker plugin (skinkit.trackers)")
-@click.option("--search", "search_px", default=None, type=int, help="integer search radius [px]")
+@click.option("--search", "search_px", default=None, type=click.IntRange(0, 4096),
+              help="integer search radius [px]")
 @click.option("--json", "as_json", is_flag=True, help="print JSON instead of a table")
 def track(ref_image: str, cur_image: str, points_csv: str, subset_px: int, tracker_name: str,
           search_px: int | None, as_json: bool) -> None:
@@ -69,16 +75,27 @@ def _parse_board(text: str) -> tuple[int, int]:
     return cols, rows
 
 
-def _images(exp: object, name: str | None) -> object:
+def _images(exp: object, name: str | None, of_skin: bool = False) -> object:
+    """The image sequence ``name`` (the only one when None); ``of_skin``: refuse the board
+    views the rig was calibrated from (profiling and tracking need the speckled skin)."""
     names = exp.image_names()  # type: ignore[attr-defined]
     if not names:
         raise SkinkitError(f"{exp.path}: holds no image sequences")  # type: ignore[attr-defined]
+    board = None
+    if of_skin and RIG_CALIBRATION in exp.calibration_names():  # type: ignore[attr-defined]
+        board = exp.read_calibration(RIG_CALIBRATION).get("images")  # type: ignore[attr-defined]
     if name is None:
-        if len(names) > 1:
+        skin = [n for n in names if n != board]
+        if len(skin) > 1:
             raise SkinkitError(f"several image sequences ({', '.join(names)}): choose one with --images")
-        name = names[0]
+        name = skin[0] if skin else names[0]
     if name not in names:
-        raise SkinkitError(f"no image sequence {name!r}; the file holds {', '.join(names)}")
+        raise SkinkitError(f"--images {name!r}: no such image sequence; the file holds {', '.join(names)}")
+    if name == board:
+        others = [n for n in names if n != board]
+        where = f" ({', '.join(others)})" if others else " (import them with skinkit import-images)"
+        raise SkinkitError(f"--images {name!r}: holds the board views the rig was calibrated from, not "
+                           f"the speckled skin; choose the skin's images{where}")
     return exp.read_images(name)  # type: ignore[attr-defined]
 
 
@@ -88,11 +105,14 @@ def _images(exp: object, name: str | None) -> object:
 @click.option("--board", "board_text", default="9x6", show_default=True,
               help="checkerboard: inner corners COLSxROWS (one even, one odd); "
                    "ChArUco: squares COLSxROWS")
-@click.option("--square-mm", default=3.0, show_default=True, help="board square side [mm]")
+@click.option("--square-mm", default=3.0, show_default=True, type=FiniteFloat(0.0, 1000.0, min_open=True),
+              help="board square side [mm]")
 @click.option("--charuco", is_flag=True, help="the board is a ChArUco board (partial views allowed)")
-@click.option("--marker-mm", default=None, type=float, help="ChArUco marker side [mm] (default 0.75 square)")
+@click.option("--marker-mm", default=None, type=FiniteFloat(0.0, 1000.0, min_open=True),
+              help="ChArUco marker side [mm] (default 0.75 square)")
 @click.option("--dictionary", default="DICT_4X4_50", show_default=True, help="ChArUco ArUco dictionary")
-@click.option("--min-views", default=4, show_default=True, help="board views each camera needs")
+@click.option("--min-views", default=4, show_default=True, type=click.IntRange(1, 100_000),
+              help="board views each camera needs")
 def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, square_mm: float,
                   charuco: bool, marker_mm: float | None, dictionary: str, min_views: int) -> None:
     """Calibrate the rig from board views in EXPERIMENT and store it there."""
@@ -117,7 +137,12 @@ def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, squ
             cal = calibrate(seq.frames, size, square_mm * 1e-3, camera_names=names,  # type: ignore[attr-defined]
                             min_views=min_views)
         exp.write_rig(cal.rig)
-    views = cal.detections.found.sum(axis=0)
+        views = cal.detections.found.sum(axis=0)
+        # where the rig came from: profile and track-3d refuse these board views as skin images
+        exp.write_calibration(RIG_CALIBRATION, {
+            "images": seq.name, "board": board_text, "square_mm": square_mm, "charuco": charuco,  # type: ignore[attr-defined]
+            "rms_px": float(cal.rms_px), "per_camera_rms_px": [float(x) for x in cal.per_camera_rms_px],
+            "views": [int(v) for v in views]})
     for name, rms, n in zip(cal.rig.names, cal.per_camera_rms_px, views, strict=True):
         click.echo(f"{name}: {n} board views, reprojection RMS {rms:.3f} px")
     click.echo(f"overall reprojection RMS {cal.rms_px:.3f} px; rig stored in {experiment} "
@@ -127,10 +152,13 @@ def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, squ
 @vision.command("profile")
 @click.argument("experiment", type=click.Path(dir_okay=False))
 @click.option("--images", "images_name", default=None, help="image sequence to profile")
-@click.option("--frame", default=0, show_default=True, help="frame of the undeformed surface")
+@click.option("--frame", default=0, show_default=True, type=click.IntRange(min=0),
+              help="frame of the undeformed surface")
 @click.option("--profiler", "profiler_name", default="patchwork", show_default=True)
-@click.option("--spacing", "spacing_px", default=12, show_default=True, help="grid step [px]")
-@click.option("--subset", "subset_px", default=31, show_default=True, help="subset side [px]")
+@click.option("--spacing", "spacing_px", default=12, show_default=True, type=click.IntRange(1, 4096),
+              help="grid step [px]")
+@click.option("--subset", "subset_px", default=31, show_default=True, type=click.IntRange(8, 4096),
+              help="subset side [px]")
 @click.option("--name", "out_name", default="profile", show_default=True, help="name of the stored profile")
 @click.option("--plot", "plot_path", default=None, type=click.Path(dir_okay=False),
               help="also save a figure (height and ISU maps) to this PNG")
@@ -144,7 +172,7 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
 
     with open_experiment(experiment, mode="a") as exp:
         rig = exp.read_rig()
-        seq = _images(exp, images_name)
+        seq = _images(exp, images_name, of_skin=True)
         kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}
         prof = registry.create("skinkit.profilers", profiler_name, **kwargs)
         from rich.console import Console
@@ -166,7 +194,8 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
 @click.option("--images", "images_name", default=None, help="image sequence to track through")
 @click.option("--profile", "profile_name", default="profile", show_default=True)
 @click.option("--tracker", "tracker_name", default="gn", show_default=True)
-@click.option("--subset", "subset_px", default=41, show_default=True, help="subset side [px]")
+@click.option("--subset", "subset_px", default=41, show_default=True, type=click.IntRange(8, 4096),
+              help="subset side [px]")
 @click.option("--name", "out_name", default=None, help="name of the stored track (default: the images')")
 def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tracker_name: str,
                 subset_px: int, out_name: str | None) -> None:
@@ -177,7 +206,7 @@ def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tra
 
     with open_experiment(experiment, mode="a") as exp:
         rig = exp.read_rig()
-        seq = _images(exp, images_name)
+        seq = _images(exp, images_name, of_skin=True)
         if profile_name not in exp.profile_names():
             raise SkinkitError(f"no profile {profile_name!r} in {experiment}; "
                                "run `skinkit vision profile` first")
