@@ -73,10 +73,7 @@ def _number(text: str, where: str, col: str) -> float:
         raise StoreError(where, "", f"column {col!r}: {t!r} is not a number") from None
 
 
-# C901: one pass over a user's CSV whose every check names the file, line and column in the
-# order a reader would find the problem; not yet split into header / rows / assembly
-# (issue 13 item 9 follow-up).
-def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per_px: float | None = None,  # noqa: C901
+def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per_px: float | None = None,
                     fps: float = 1.0, ignore: Sequence[str] = ()) -> TrackImport:
     """Read a tracks CSV (module docstring) into a :class:`SurfaceTrack` [m].
 
@@ -97,17 +94,49 @@ def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per
     rows = list(csv.reader(text.splitlines(), delimiter=delim))
     if not rows or not any(h.strip() for h in rows[0]):
         raise StoreError(str(p), "", "is empty (expected a header such as frame,point,x_mm,y_mm,z_mm)")
-    raw = [h.strip() for h in rows[0]]
+    h = _header(p, rows[0], unit, m_per_px, ignore)
+    data, times = _rows(p, rows, h)
+    return _assemble(p, h, data, times, fps)
+
+
+@dataclass
+class _Header:
+    """What the header line says: the lower-case names, the coordinate columns (index ->
+    axis, point label or None, unit or None) with their scale to metres, the layout, the
+    special columns' indices and the wide form's point labels."""
+
+    names: list[str]
+    coords: dict[int, tuple[str, str | None, str | None]]
+    scale: dict[int, float]
+    long_form: bool
+    special: dict[str, int]
+    points: list[str]
+
+    @property
+    def has_z(self) -> bool:
+        return "z" in {a for a, _, _ in self.coords.values()}
+
+    @property
+    def displacements(self) -> bool:
+        return bool({a for a, _, _ in self.coords.values()} & {"u", "v", "w"})
+
+
+_SPECIAL = {"frame", "point", "point_id", "time_s", "time_ms", "valid"}
+
+
+def _header(p: Path, first: list[str], unit: str | None, m_per_px: float | None,
+            ignore: Sequence[str]) -> _Header:
+    """Parse and check the header line (StoreError naming ``line 1`` otherwise)."""
+    raw = [h.strip() for h in first]
     header = [h.lower() for h in raw]
     skip = {s.strip().lower() for s in ignore}
     long_form = "point" in header or "point_id" in header
     if "frame" not in header:
         raise StoreError(str(p), "line 1", f"no 'frame' column (header: {', '.join(header)})")
-    special = {"frame", "point", "point_id", "time_s", "time_ms", "valid"}
     coords: dict[int, tuple[str, str | None, str | None]] = {}
     unknown = []
     for i, h in enumerate(header):
-        if h in special or h in skip:
+        if h in _SPECIAL or h in skip:
             continue
         c = _column(raw[i], long_form)
         if c is None:
@@ -119,38 +148,42 @@ def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per
             "wide form: frame, x_<point>_<unit>, y_<point>_<unit>[, z_<point>_<unit>]"
         raise StoreError(str(p), "line 1", f"unknown column(s) {', '.join(repr(u) for u in unknown)} "
                          f"({form}; optional time_s|time_ms, valid, u/v/w displacements)")
-    scale: dict[int, float] = {}
-    for i, (_axis, _pt, u) in coords.items():
-        u = u or unit
-        if u is None:
-            raise StoreError(str(p), "line 1", f"column {header[i]!r} has no unit: name it "
-                             f"{header[i]}_mm (or _m, _um, _px), or give the unit")
-        if u == "px":
-            if m_per_px is None or not m_per_px > 0:
-                raise StoreError(str(p), "line 1", f"column {header[i]!r} is in pixels: give the "
-                                 "scale in metres per pixel")
-            scale[i] = float(m_per_px)
-        else:
-            scale[i] = float(UNITS[u])  # type: ignore[arg-type]
+    scale = {i: _scale(p, header[i], u or unit, m_per_px) for i, (_a, _pt, u) in coords.items()}
     points = sorted({pt for _, pt, _ in coords.values()}, key=str) if not long_form else []
     axes_given = {a for a, _, _ in coords.values()}
     for need in ("x", "y"):
         if need not in axes_given:
             raise StoreError(str(p), "line 1", f"no {need!r} coordinate column")
-    has_z = "z" in axes_given
-    disp = bool(axes_given & {"u", "v", "w"})
-    ci = {h: header.index(h) for h in special if h in header}
-    pcol = ci.get("point", ci.get("point_id"))
+    special = {h: header.index(h) for h in _SPECIAL if h in header}
+    return _Header(header, coords, scale, long_form, special, points)
 
-    # (frame, point) -> [position (3,), valid]; frame -> time
+
+def _scale(p: Path, column: str, u: str | None, m_per_px: float | None) -> float:
+    """Metres per unit of ``column`` (its own unit ``u``, or the one given for bare columns)."""
+    if u is None:
+        raise StoreError(str(p), "line 1", f"column {column!r} has no unit: name it "
+                         f"{column}_mm (or _m, _um, _px), or give the unit")
+    if u == "px":
+        if m_per_px is None or not m_per_px > 0:
+            raise StoreError(str(p), "line 1", f"column {column!r} is in pixels: give the "
+                             "scale in metres per pixel")
+        return float(m_per_px)
+    return float(UNITS[u])  # type: ignore[arg-type]
+
+
+def _rows(p: Path, rows: list[list[str]], h: _Header
+          ) -> tuple[dict[tuple[float, str], tuple[np.ndarray, bool]], dict[float, float]]:
+    """(frame, point) -> (position (3,) [m], valid), and frame -> time [s], from the data lines."""
+    ci = h.special
+    pcol = ci.get("point", ci.get("point_id"))
     data: dict[tuple[float, str], tuple[np.ndarray, bool]] = {}
     times: dict[float, float] = {}
     for lineno, row in enumerate(rows[1:], start=2):
         if not row or all(not c.strip() for c in row):
             continue
         where = f"{p}:line {lineno}"
-        if len(row) < len(header):
-            raise StoreError(where, "", f"has {len(row)} fields, the header {len(header)}")
+        if len(row) < len(h.names):
+            raise StoreError(where, "", f"has {len(row)} fields, the header {len(h.names)}")
         frame = _number(row[ci["frame"]], where, "frame")
         if not np.isfinite(frame):
             raise StoreError(where, "", "column 'frame' is empty")
@@ -160,23 +193,36 @@ def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per
             if frame in times and times[frame] != t:
                 raise StoreError(where, "", f"frame {frame:g} has two times ({times[frame]:g} and {t:g} s)")
             times[frame] = t
-        labels = [row[pcol].strip()] if long_form else points  # type: ignore[index]
+        labels = [row[pcol].strip()] if h.long_form else h.points  # type: ignore[index]
         for label in labels:
-            pos = np.zeros(3)
-            ref = np.zeros(3)
-            for i, (axis, pt, _u) in coords.items():
-                if pt != (None if long_form else label):
-                    continue
-                v = _number(row[i], where, header[i]) * scale[i]
-                (pos if axis in "xyz" else ref)[_AXES[axis]] += v
-            ok = bool(np.all(np.isfinite(pos + ref)))
-            if "valid" in ci:
-                ok = ok and _number(row[ci["valid"]], where, "valid") != 0
+            point = _point(row, where, h, label)
             if (frame, label) in data:
                 raise StoreError(where, "", f"point {label!r} appears twice in frame {frame:g}")
-            data[(frame, label)] = (pos + ref if disp else pos, ok)
+            data[(frame, label)] = point
     if not data:
         raise StoreError(str(p), "", "holds no track rows")
+    return data, times
+
+
+def _point(row: list[str], where: str, h: _Header, label: str) -> tuple[np.ndarray, bool]:
+    """One point's position (3,) [m] on one data line (reference plus displacement when the
+    file gives u, v, w) and whether it is valid."""
+    pos = np.zeros(3)
+    ref = np.zeros(3)
+    for i, (axis, pt, _u) in h.coords.items():
+        if pt != (None if h.long_form else label):
+            continue
+        v = _number(row[i], where, h.names[i]) * h.scale[i]
+        (pos if axis in "xyz" else ref)[_AXES[axis]] += v
+    ok = bool(np.all(np.isfinite(pos + ref)))
+    if "valid" in h.special:
+        ok = ok and _number(row[h.special["valid"]], where, "valid") != 0
+    return (pos + ref if h.displacements else pos), ok
+
+
+def _assemble(p: Path, h: _Header, data: dict[tuple[float, str], tuple[np.ndarray, bool]],
+              times: dict[float, float], fps: float) -> TrackImport:
+    """The track ``(points, frames, 3)`` [m] with its validity, times and the import's facts."""
     frames = sorted({f for f, _ in data})
     labels = sorted({lb for _, lb in data}, key=lambda s: (not _is_int(s), int(s) if _is_int(s) else 0, s))
     P, F = len(labels), len(frames)
@@ -194,12 +240,12 @@ def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per
         track = SurfaceTrack(pts, valid, time_s, ids)
     except SchemaError as exc:
         raise StoreError(str(p), "", str(exc)) from None
-    attrs: dict[str, Any] = {"source": str(p.resolve()), "dimensions": 3 if has_z else 2,
-                             "layout": "long" if long_form else "wide",
+    attrs: dict[str, Any] = {"source": str(p.resolve()), "dimensions": 3 if h.has_z else 2,
+                             "layout": "long" if h.long_form else "wide",
                              "frames": [float(f) for f in frames]}
     if not all(_is_int(s) for s in labels):
         attrs["point_labels"] = labels
-    if not has_z:
+    if not h.has_z:
         attrs["z"] = "not measured (2D tracks): stored as 0"
     return TrackImport(track, attrs)
 
