@@ -185,6 +185,34 @@ def _vertical_axis(Xe: np.ndarray) -> tuple[int, float]:
     return a, (1.0 if Jm[2, a] > 0 else 0.0)
 
 
+def _face_newton(Xe: np.ndarray, xy: np.ndarray, free: list[int], axis: int, end: float, tol: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Face coordinates ``(n, 2)`` of the points ``xy`` ``(n, 2)`` [m] on the top faces of
+    elements ``Xe`` ``(n, 27, 3)`` (Newton on the in-plane map, clipped to [-0.5, 1.5]) and the
+    in-plane miss ``(n,)`` [m] of the face point found."""
+    n = len(xy)
+    s = np.full((2, n), 0.5)
+    xi = np.zeros((3, n))
+    xi[axis] = end
+    for _ in range(30):
+        xi[free] = s
+        N, dN = _shape(xi)
+        x = np.einsum("am,mai->mi", N, Xe)
+        Jm = np.einsum("ajm,mai->mij", dN, Xe)[:, :2][:, :, free]
+        r = xy - x[:, :2]
+        det = Jm[:, 0, 0] * Jm[:, 1, 1] - Jm[:, 0, 1] * Jm[:, 1, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ds = np.stack([(Jm[:, 1, 1] * r[:, 0] - Jm[:, 0, 1] * r[:, 1]) / det,
+                           (Jm[:, 0, 0] * r[:, 1] - Jm[:, 1, 0] * r[:, 0]) / det])
+        ds = np.where(np.isfinite(ds), ds, 0.0)   # a degenerate face: left where it is, then refused
+        s = np.clip(s + ds, -0.5, 1.5)
+        if np.max(np.abs(ds)) < tol:
+            break
+    xi[free] = s
+    x = np.einsum("am,mai->mi", _shape(xi)[0], Xe)
+    return s.T, np.linalg.norm(xy - x[:, :2], axis=1)
+
+
 def surface_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: float = 1e-12
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Measured surface points ``(M, 3)`` [m] moved onto the mesh's top surface and then
@@ -211,53 +239,40 @@ def surface_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: fl
     nrm = np.zeros((M, 3))
     xy = pts[:, :2].copy()
     free = [i for i in range(3) if i != axis]
+    ctr = Xe_all[..., :2].mean(axis=1)
+    scale = np.ptp(Xe_all.reshape(len(Xe_all), -1), axis=1)
+    pad = 1e-9 * float(np.ptp(mesh.nodes, axis=0).max())
     for _ in range(4):
         found = np.full(M, -1)
         loc = np.zeros((M, 2))
-        pad = 1e-9 * float(np.ptp(mesh.nodes, axis=0).max())
         inbox = np.all((xy[:, None] >= lo[None] - pad) & (xy[:, None] <= hi[None] + pad), axis=2)
-        for m in range(M):
-            for e in np.flatnonzero(inbox[m]):
-                Xe = Xe_all[e]
-                s = np.full(2, 0.5)
-                for _ in range(30):
-                    xi = np.zeros((3, 1))
-                    xi[free, 0] = s
-                    xi[axis, 0] = end
-                    N, dN = _shape(xi)
-                    x = N[:, 0] @ Xe
-                    Jm = np.einsum("aj,ai->ij", dN[:, :, 0], Xe)[:2][:, free]
-                    r = xy[m] - x[:2]
-                    try:
-                        ds = np.linalg.solve(Jm, r)
-                    except np.linalg.LinAlgError:
-                        break
-                    s = np.clip(s + ds, -0.5, 1.5)
-                    if np.max(np.abs(ds)) < tol:
-                        break
-                xi = np.zeros((3, 1))
-                xi[free, 0] = s
-                xi[axis, 0] = end
-                miss = float(np.linalg.norm(xy[m] - (_shape(xi)[0][:, 0] @ Xe)[:2]))
-                # inside the face, and really there: a clipped Newton can stop at a wrong point
-                if np.all((s > -1e-8) & (s < 1 + 1e-8)) and miss < 1e-9 * max(1.0, float(np.ptp(Xe))):
-                    found[m] = e
-                    loc[m] = np.clip(s, 0, 1)
-                    break
+        dist = np.linalg.norm(xy[:, None] - ctr[None], axis=2)
+        dist[~inbox] = np.inf
+        order = np.argsort(dist, axis=1)[:, :max(int(inbox.sum(axis=1).max()), 1)]
+        # every point's candidate faces, nearest centre first, all points at once per rank
+        for j in range(order.shape[1]):
+            todo = np.flatnonzero((found < 0) & np.isfinite(dist[np.arange(M), order[:, j]]))
+            if todo.size == 0:
+                break
+            e = order[todo, j]
+            sj, miss = _face_newton(Xe_all[e], xy[todo], free, axis, end, tol)
+            # inside the face, and really there: a clipped Newton can stop at a wrong point
+            ok = np.all((sj > -1e-8) & (sj < 1 + 1e-8), axis=1) & (miss < 1e-9 * np.maximum(1.0, scale[e]))
+            found[todo[ok]] = e[ok]
+            loc[todo[ok]] = np.clip(sj[ok], 0, 1)
         if np.any(found < 0):
             bad = int(np.flatnonzero(found < 0)[0])
             raise ModelError(f"points[{bad}]", f"{pts[bad].tolist()} m lies outside the model's top surface")
-        for m in range(M):
-            xi = np.zeros((3, 1))
-            xi[free, 0] = loc[m]
-            xi[axis, 0] = end
-            N, dN = _shape(xi)
-            Xe = Xe_all[found[m]]
-            out[m] = N[:, 0] @ Xe
-            Jm = np.einsum("aj,ai->ij", dN[:, :, 0], Xe)
-            n = np.cross(Jm[:, free[0]], Jm[:, free[1]])
-            n = n / np.linalg.norm(n)
-            nrm[m] = n if n[2] > 0 else -n
+        xi = np.zeros((3, M))
+        xi[free] = loc.T
+        xi[axis] = end
+        N, dN = _shape(xi)
+        Xe = Xe_all[found]
+        out = np.einsum("am,mai->mi", N, Xe)
+        Jm = np.einsum("ajm,mai->mij", dN, Xe)
+        n = np.cross(Jm[:, :, free[0]], Jm[:, :, free[1]])
+        n = n / np.linalg.norm(n, axis=1, keepdims=True)
+        nrm = np.where(n[:, 2:3] > 0, n, -n)
         # the measured point should lie on the normal through the surface point
         off = pts - out
         along = np.einsum("mi,mi->m", off, nrm)
