@@ -26,7 +26,9 @@ def _fe_spec(path: Path) -> dict:
     from skinkit.fem.errors import ModelError
     from skinkit.fem.model import read_model, table
     from skinkit.forward.effects import apply_all, resolve
+    from skinkit.forward.spec_check import check_description
     spec = read_model(path)
+    check_description(spec)  # the session-driven tables too: a misspelt key is not ignored
     kind = table(spec.get("model", {}), "model").get("kind", "fe")
     if kind == "lumped":
         raise SkinkitError(f"{path}: model.kind = 'lumped' is a lumped model, which has no mesh to "

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._types import FiniteFloat
 from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_extensometer
 
 
@@ -14,9 +15,11 @@ from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_ext
 @click.argument("experiment", type=click.Path(path_type=Path))
 @click.option("--protocol", default="extension", show_default=True, help="Protocol (record and track) name.")
 @click.option("--overwrite", is_flag=True, help="Replace EXPERIMENT if it exists.")
-@click.option("--rate", "rate_hz", type=float, default=NOMINAL_RATE_HZ, show_default=True,
+@click.option("--rate", "rate_hz", type=FiniteFloat(min=0.0, min_open=True), default=NOMINAL_RATE_HZ,
+              show_default=True,
               help="Nominal sampling rate of the device [Hz] (the files have no time stamps).")
-@click.option("--mark-spacing", "mark_spacing_mm", type=float, default=MARK_SPACING_M * 1e3,
+@click.option("--mark-spacing", "mark_spacing_mm", type=FiniteFloat(min=0.0, min_open=True),
+              default=MARK_SPACING_M * 1e3,
               show_default=True,
               help="Distance between the two marks on one pad [mm]; sets the pixel scale.")
 @click.option("--moving-pad", type=click.Choice(["1", "2"]), default="1", show_default=True,

@@ -170,15 +170,16 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
     from skinkit import registry
     from skinkit.store import open_experiment
 
-    with open_experiment(experiment, mode="a") as exp:
+    with open_experiment(experiment) as exp:  # read only: a refused profile leaves the file as it was
         rig = exp.read_rig()
         seq = _images(exp, images_name, of_skin=True)
-        kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}
-        prof = registry.create("skinkit.profilers", profiler_name, **kwargs)
-        from rich.console import Console
+    kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}
+    prof = registry.create("skinkit.profilers", profiler_name, **kwargs)
+    from rich.console import Console
 
-        with Console(stderr=True).status(f"profiling with {profiler_name} ..."):
-            sp = prof.profile(seq, rig, frame=frame)
+    with Console(stderr=True).status(f"profiling with {profiler_name} ..."):
+        sp = prof.profile(seq, rig, frame=frame)
+    with open_experiment(experiment, mode="a") as exp:
         exp.write_profile(out_name, sp)
     if plot_path:
         from skinkit.vision.plots import plot_profile
@@ -204,16 +205,17 @@ def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tra
     from skinkit.store import open_experiment
     from skinkit.vision.tracking3d import track_3d
 
-    with open_experiment(experiment, mode="a") as exp:
+    with open_experiment(experiment) as exp:  # read only: a refused track leaves the file as it was
         rig = exp.read_rig()
         seq = _images(exp, images_name, of_skin=True)
         if profile_name not in exp.profile_names():
             raise SkinkitError(f"no profile {profile_name!r} in {experiment}; "
                                "run `skinkit vision profile` first")
         sp = exp.read_profile(profile_name)
-        tracker = registry.create("skinkit.trackers", tracker_name)
-        track, _ = track_3d(rig, seq, sp.points, tracker, subset_px, progress=True)  # type: ignore[arg-type]
-        name = out_name or seq.name  # type: ignore[attr-defined]
+    tracker = registry.create("skinkit.trackers", tracker_name)
+    track, _ = track_3d(rig, seq, sp.points, tracker, subset_px, progress=True)  # type: ignore[arg-type]
+    name = out_name or seq.name  # type: ignore[attr-defined]
+    with open_experiment(experiment, mode="a") as exp:
         exp.write_track(name, track)
     ok = track.valid.all(axis=1).sum()
     click.echo(f"track {name!r}: {track.n_points} points x {track.n_frames} frames, "

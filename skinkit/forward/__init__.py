@@ -23,12 +23,19 @@ from skinkit.forward.observations import read_observations
 
 
 def read_description(path_or_spec: str | os.PathLike[str] | Mapping[str, Any]) -> dict[str, Any]:
-    """A model description: the parsed TOML file, or a copy of the mapping given."""
-    if isinstance(path_or_spec, Mapping):
-        return dict(path_or_spec)
-    from skinkit.fem.model import read_model
+    """A model description: the parsed TOML file, or a copy of the mapping given. Its session,
+    surface, drive, instrument, fields, effects and bindings tables are checked here
+    (:mod:`skinkit.forward.spec_check`): an error names the entry before any work."""
+    from skinkit.forward.spec_check import check_description
 
-    return read_model(Path(path_or_spec))
+    if isinstance(path_or_spec, Mapping):
+        spec = dict(path_or_spec)
+    else:
+        from skinkit.fem.model import read_model
+
+        spec = read_model(Path(path_or_spec))
+    check_description(spec)
+    return spec
 
 
 def model_kind(spec: Mapping[str, Any]) -> str:
