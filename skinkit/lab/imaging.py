@@ -25,8 +25,8 @@ DISTORTION = (-0.08, 0.03, 0.0005, -0.0003, 0.0)
 BOARD_INNER = (9, 6)
 BOARD_SQUARE_M = 0.003
 #: the flat first board's origin (its first inner corner) in the skin frame: centred on the probe
-BOARD_ORIGIN_M = np.array([-(BOARD_INNER[0] - 1) / 2 * BOARD_SQUARE_M, -(BOARD_INNER[1] - 1) / 2 * BOARD_SQUARE_M,
-                           0.0])
+BOARD_ORIGIN_M = np.array([-(BOARD_INNER[0] - 1) / 2 * BOARD_SQUARE_M,
+                           -(BOARD_INNER[1] - 1) / 2 * BOARD_SQUARE_M, 0.0])
 #: speckle: 0.45 mm cells over 50 mm x 50 mm of skin
 SPECKLE_CELL_M = 0.00045
 SPECKLE_HALF_M = (0.025, 0.025)
@@ -51,7 +51,8 @@ def followed_grid(radius_m: float, height: Callable[[np.ndarray], np.ndarray],
 
 
 def displacement_field(grid: np.ndarray, points: np.ndarray, displacement: np.ndarray,
-                       table_spacing_m: float = TABLE_SPACING_M) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+                       table_spacing_m: float = TABLE_SPACING_M
+                       ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     """``u(X, Y) -> (N, 3)`` [m]: bicubic interpolation of ``displacement`` ``(P, 3)`` [m] at the
     grid's ``points`` ``(P, 3)``; zero at grid nodes outside the disc and beyond the grid.
 
@@ -175,5 +176,5 @@ def noise_pair(cams: Cameras, rng: np.random.Generator, grid: np.ndarray | None 
     return ImageSequence("noise-floor", cams.views([field, field], rng), cams.rig.names, [0.0, 1.0])
 
 
-__all__ = ["BOARD_INNER", "BOARD_ORIGIN_M", "BOARD_SQUARE_M", "Cameras", "displacement_field", "followed_grid",
-           "noise_pair", "protocol_images"]
+__all__ = ["BOARD_INNER", "BOARD_ORIGIN_M", "BOARD_SQUARE_M", "Cameras", "displacement_field",
+           "followed_grid", "noise_pair", "protocol_images"]

@@ -41,13 +41,14 @@ def _quiet(step: str, fraction: float) -> None:
 
 
 def stream_records(path: Path, records: list[RobotRecord], block: int,
-                   progress: Progress = _quiet) -> None:
-    """Write ``records`` into a new experiment file ``path`` in blocks of ``block`` samples,
-    each flushed, as a driver streaming from the robot would."""
+                   progress: Progress = _quiet, append: bool = False) -> None:
+    """Write ``records`` into a new experiment file ``path`` (``append``: an existing one) in
+    blocks of ``block`` samples, each flushed, as a driver streaming from the robot would."""
     total = sum(r.n_samples for r in records)
     done = 0
-    with create_experiment(path, overwrite=True) as exp:
-        exp.set_metadata(subject="virtual", site="forearm (virtual lab)", operator="skinkit demo")
+    with (open_experiment(path, "a") if append else create_experiment(path, overwrite=True)) as exp:
+        if not append:
+            exp.set_metadata(subject="virtual", site="forearm (virtual lab)", operator="skinkit demo")
         for record in records:
             with exp.record_writer(record.protocol, record.channels, record.rate_hz) as w:
                 for start in range(0, record.n_samples, block):

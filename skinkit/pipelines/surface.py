@@ -53,7 +53,8 @@ def tracked_points(profile: SurfaceProfile, probe_radius_m: float, outer_m: floa
     r = np.hypot(profile.points[:, 0], profile.points[:, 1])
     keep = (r >= probe_radius_m + clearance_m - 1e-12) & (r <= outer_m + 1e-12)
     if keep.sum() < 10:
-        raise SkinkitError(f"the profile has only {int(keep.sum())} points between {probe_radius_m + clearance_m:g} "
+        inner = probe_radius_m + clearance_m
+        raise SkinkitError(f"the profile has only {int(keep.sum())} points between {inner:g} "
                            f"and {outer_m:g} m from the probe's axis: too few to track")
     return profile.points[keep]
 

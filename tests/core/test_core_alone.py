@@ -36,8 +36,7 @@ def test_loading_a_builtin_plugin_says_it_is_not_installed():
         registry.load("skinkit.optimisers", "scipy-lsq")
 
 
-def test_demo_and_store_work_without_plugins(tmp_path):
-    res = CliRunner().invoke(cli, ["demo", "--out", str(tmp_path), "--json"])
-    assert res.exit_code == 0, res.output
-    res = CliRunner().invoke(cli, ["inspect", str(tmp_path / "session.h5"), "--json"])
-    assert res.exit_code == 0 and json.loads(res.output)["records"][0]["complete"]
+def test_demo_names_the_plugins_it_needs(tmp_path):
+    res = CliRunner().invoke(cli, ["demo", "--out", str(tmp_path / "d")])
+    assert res.exit_code == 2 and "skinkit-plugins" in res.output and "skinkit.laws:goh" in res.output
+    assert not (tmp_path / "d").exists()

@@ -1,0 +1,349 @@
+"""The main job, chained end to end on the virtual lab: a session to a gap report.
+
+1. **acquire** — the virtual forearm (:mod:`skinkit.lab.forearm`, the truth: layered GOH + QLV
+   skin with natural pre-stress) is driven by thesis Table 12's protocols; the robot's
+   instruments record tip position and force (:mod:`skinkit.lab.sensors`), four cameras image
+   the speckled skin at every trigger (:mod:`skinkit.lab.imaging`), and two stochastic-force
+   records of the lumped forearm (thesis Tables 7–8) are streamed block by block. All of it goes
+   into one experiment file; the truth goes to ``truth.json`` beside it and is read again only
+   by step 7.
+2. **lumped** — K, B, I (robot mass removed) and the Wiener model, from the stochastic records.
+3. **cameras** — calibration from the board views, automatic profile, 3D tracks of the points
+   around the probe with their noise floor (:mod:`skinkit.pipelines.surface`).
+4. **identify** — the thesis's model (no pre-stress), its mesh fitted to the measured profile and
+   the tracked points embedded in it, c, k1, κ and g1 fitted to force, motion and points.
+5. **diagnose** — where the calibrated model misses, which candidate effect explains it, how far
+   the gap shrinks (:func:`skinkit.gap.diagnose`), stored in the file with its HTML page.
+6. **report** — one self-contained HTML file of everything the experiment file holds.
+7. **compare** — only now is the truth read: each step's result against it.
+
+Every step reads only what the steps before it wrote into the experiment file (and the model
+and rig descriptions a lab would have); ``summary.json`` holds the closing table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skinkit.store import open_experiment
+
+Progress = Callable[[str, float], None]
+SESSION = "session.h5"
+TRUTH = "truth.json"
+#: what the lab knows of its probe: the model file's indenter (4 mm diameter)
+PROBE_RADIUS_M = 2e-3
+#: the robot's moving mass [kg], from its specification (thesis: 25 g)
+ROBOT_MASS_KG = 0.025
+
+
+def _quiet(step: str, fraction: float) -> None:
+    pass
+
+
+def _render_job(job: tuple[Any, ...]) -> Any:
+    """One image sequence of the session (a worker process's task): the board views, the rest
+    pair, or a protocol's frames; every draw follows from the session's seed."""
+    from skinkit.lab.imaging import Cameras, noise_pair, protocol_images
+    from skinkit.lab.session import SURFACE_RADIUS_M
+    from skinkit.vision import scene
+
+    name, seed = job[0], int(job[1])
+    cams = Cameras.make(scene.forearm(SURFACE_RADIUS_M), seed=seed + 7)
+    if name == "calibration":
+        return cams.boards(seed + 13)
+    if name == "noise-floor":   # the skin at rest: in its pre-stressed state, as every protocol starts
+        grid, points, rest = job[2:]
+        return noise_pair(cams, np.random.default_rng([seed, 11]), grid, points, rest)
+    k, times, grid, points, followed = job[2:]
+    return protocol_images(cams, name, times, grid, points, followed, np.random.default_rng([seed, 12, k]))
+
+
+def _render(jobs: list[tuple[Any, ...]], workers: int, progress: Callable[[float], None]) -> list[Any]:
+    """The image sequences of ``jobs``, rendered by ``workers`` processes, in the jobs' order."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from multiprocessing import get_context
+
+    out: list[Any] = [None] * len(jobs)
+    progress(0.0)
+    if workers <= 1:
+        for i, job in enumerate(jobs):
+            out[i] = _render_job(job)
+            progress((i + 1) / len(jobs))
+        return out
+    with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=get_context("spawn")) as ex:
+        futures = {ex.submit(_render_job, job): i for i, job in enumerate(jobs)}
+        for n, fut in enumerate(as_completed(futures)):
+            out[futures[fut]] = fut.result()
+            progress((n + 1) / len(jobs))
+    return out
+
+
+def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress = _quiet) -> dict[str, Any]:
+    """Step 1: write ``out/session.h5`` (records, images) and ``out/truth.json``; the truth document."""
+    from skinkit.lab import forearm
+    from skinkit.lab.imaging import followed_grid
+    from skinkit.lab.lumped import LumpedTruth, stochastic_session
+    from skinkit.lab.session import simulate, surface_height, write_records
+    from skinkit.pipelines.demo import stream_records
+
+    session, truth_path = out / SESSION, out / TRUTH
+    for p in (session, truth_path):
+        p.unlink(missing_ok=True)
+    spec = forearm.truth_spec(quick)
+    grid, points = followed_grid(forearm.disc_radius_m(spec), lambda xy: surface_height(xy, True))
+    vs = simulate(spec, seed, points=points, workers=workers,
+                  progress=lambda s, f: progress("acquire: truth model", f))
+    write_records(vs, session, operator="skinkit demo")
+    lumped = LumpedTruth()
+    records = [stochastic_session(lumped, wiener=False, seed=seed),
+               stochastic_session(lumped, wiener=True, seed=seed + 1)]
+    stream_records(session, records, block=1000, append=True)
+    imaged = [p for p in vs.planned if p.frames.size]
+    rest = vs.noiseless[imaged[0].protocol.name]["points"][:, 0]
+    jobs: list[tuple[Any, ...]] = [("calibration", seed), ("noise-floor", seed, grid, points, rest)]
+    jobs += [(p.protocol.name, seed, k, p.frames, grid, points, vs.noiseless[p.protocol.name]["points"])
+             for k, p in enumerate(imaged)]
+    sequences = _render(jobs, workers, lambda f: progress("acquire: render cameras", f))
+    with open_experiment(session, "a") as exp:
+        for seq in sequences:
+            exp.write_images(seq)
+    followed = {f"followed_{p.protocol.name}": vs.noiseless[p.protocol.name]["points"] for p in imaged}
+    np.savez_compressed(out / "truth-surface.npz", grid_m=grid, points_m=points, **followed)
+    truth = dict(vs.truth, session_file=str(session), lumped=lumped.to_dict(),
+                 cameras={"rig": "ring of 4 at 55 deg, 125 mm", "speckle_cell_m": 0.00045,
+                          "sensor_noise": 0.01})
+    truth_path.write_text(json.dumps(truth, indent=1, allow_nan=False) + "\n")
+    progress("acquire: render cameras", 1.0)
+    return {"protocols": [p.protocol.name for p in vs.planned], "images": [s.name for s in sequences],
+            "frames_per_protocol": {p.protocol.name: int(p.frames.size) for p in imaged},
+            "views": sum(int(np.prod(s.frames.shape[:2])) for s in sequences)}
+
+
+def identify_lumped(session: Path, progress: Progress = _quiet) -> dict[str, Any]:
+    """Step 2: the linear and Wiener models of the stochastic records, stored as fits."""
+    from skinkit.pipelines.demo import _fit
+    from skinkit.sysid import identify_linear, identify_wiener
+
+    progress("lumped: K, B, I; Wiener", 0.0)
+    with open_experiment(session) as exp:
+        names = exp.record_names()
+        lin_rec = exp.read_record(next(n for n in names if n == "stochastic_linear"))
+        wie_rec = exp.read_record(next(n for n in names if n == "stochastic_wiener"))
+    from skinkit.sysid.robot import RobotDynamics
+
+    lin = identify_linear(lin_rec, robot=RobotDynamics(mass_kg=ROBOT_MASS_KG))
+    wie = identify_wiener(wie_rec)
+    ld, wd = lin.to_dict(), wie.to_dict()
+    with open_experiment(session, "a") as exp:
+        exp.write_fit("linear", _fit("linear", {
+            "K": (ld["K_N_per_m"], "N/m", ld["K_se_N_per_m"]),
+            "B": (ld["B_Ns_per_m"], "N s/m", ld["B_se_Ns_per_m"]),
+            "I": (ld["I_kg"], "kg", ld["I_se_kg"])}, ld["vaf_linear_pct"], lin_rec.n_samples))
+        exp.write_fit("wiener", _fit("wiener", {
+            "C1": (wd["C1_m"], "m", wd["C1_se_m"]), "C2": (wd["C2_per_N"], "1", wd["C2_se_per_N"]),
+            "Is": (wd["Is_s2"], "1", wd["Is_se_s2"]), "Bs": (wd["Bs_s"], "s", wd["Bs_se_s"])},
+            wd["vaf_wiener_pct"], wie_rec.n_samples))
+    progress("lumped: K, B, I; Wiener", 1.0)
+    return {"linear": ld, "wiener": wd}
+
+
+def measure_cameras(session: Path, progress: Progress = _quiet) -> dict[str, Any]:
+    """Step 3: calibrate, profile and track from the file's images."""
+    from skinkit.lab.imaging import BOARD_INNER, BOARD_ORIGIN_M, BOARD_SQUARE_M
+    from skinkit.pipelines.surface import measure_surface
+
+    return measure_surface(session, BOARD_INNER, BOARD_SQUARE_M, BOARD_ORIGIN_M, PROBE_RADIUS_M,
+                           progress=lambda s, f: progress(f"cameras: {s}", f))
+
+
+def _observations(session: Path, quick: bool) -> Any:
+    from skinkit.forward import read_observations
+    from skinkit.lab import forearm
+
+    return read_observations(session, protocols=forearm.QUICK_PROTOCOLS if quick else forearm.PROTOCOLS)
+
+
+def identify_fe(session: Path, quick: bool, workers: int, progress: Progress = _quiet
+                ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Step 4: fit the thesis's model; its fit summary and its description at the optimum."""
+    from skinkit.forward import load
+    from skinkit.inverse import fit
+    from skinkit.inverse.fit import fit_json
+    from skinkit.lab import forearm
+
+    spec = forearm.model_spec(quick)
+    obs = _observations(session, quick)
+    model = load(spec, workers=workers)
+    try:
+        progress("identify: thesis model", 0.0)
+        res = fit(model, obs, list(forearm.FREE),
+                  progress=lambda i, phi, x: progress("identify: thesis model", min(i / 12, 0.95)))
+        with open_experiment(session, "a") as exp:
+            exp.write_fit(f"fit-{model.name}", res)
+        desc = model.description(model.parameters().with_values(res.parameters.values()))
+    finally:
+        model.close()
+    progress("identify: thesis model", 1.0)
+    out = fit_json(res)
+    out["stored_as"] = f"fit-{model.name}"
+    return out, desc
+
+
+def diagnose_gap(session: Path, out: Path, description: dict[str, Any], quick: bool, workers: int,
+                 progress: Progress = _quiet) -> dict[str, Any]:
+    """Step 5: the gap diagnosis of the calibrated model (started at its optimum)."""
+    from skinkit.gap import diagnose
+    from skinkit.gap.diagnose import write_report
+    from skinkit.lab import forearm
+
+    lines: list[str] = []
+
+    def say(line: str) -> None:
+        lines.append(line)
+        progress(f"gap: {line[:60]}", 0.5)
+
+    obs = _observations(session, quick)
+    report = diagnose(description, obs, free=list(forearm.FREE), max_effects=1, candidates=2,
+                      workers=workers, progress=say)
+    name = "gap-" + str(description.get("model", {}).get("name", "model"))
+    with open_experiment(session, "a") as exp:
+        exp.write_gap(name, report)
+    written = write_report(report, out / "gap")
+    d = report.to_dict()
+    d["stored_as"] = name
+    d["files"] = [str(p) for p in written]
+    d["log"] = lines
+    progress("gap: done", 1.0)
+    return d
+
+
+def _track_error(out: Path) -> float | None:
+    """RMS [m] of the 3D error of every tracked displacement against the truth's surface motion."""
+    from skinkit.lab.imaging import displacement_field
+
+    field = np.load(out / "truth-surface.npz")
+    errs = []
+    with open_experiment(out / SESSION) as exp:
+        for name in exp.track_names():
+            key = f"followed_{name}"
+            if key not in field:
+                continue
+            tr = exp.read_track(name)
+            ref = tr.points[:, 0]
+            for f in range(1, tr.time_s.size):   # motion from the protocol's start (its rest state)
+                moved = field[key][:, f] - field[key][:, 0]
+                u = displacement_field(field["grid_m"], field["points_m"], moved)
+                d = tr.points[:, f] - ref - u(ref[:, 0], ref[:, 1])
+                errs.append(d[tr.valid[:, f]])
+    if not errs:
+        return None
+    e = np.concatenate(errs)
+    return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+
+
+def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """Step 7: the closing table — each step's result against the truth file (read only here)."""
+    from skinkit.gap.thesis_case import canonical_prestress
+    from skinkit.lab.session import surface_height
+
+    truth = json.loads((out / TRUTH).read_text())
+    rows: list[dict[str, Any]] = []
+
+    def row(step: str, what: str, found: float | str | None, true: float | str | None, unit: str = "",
+            rel: bool = True) -> None:
+        err = None
+        if isinstance(found, (int, float)) and isinstance(true, (int, float)) and true != 0:
+            err = 100.0 * (found / true - 1.0) if rel else found - true
+        rows.append({"step": step, "result": what, "found": found, "truth": true, "unit": unit,
+                     "error": err, "error_unit": "%" if rel else unit, "time_s": None})
+
+    lt, lin, wie = truth["lumped"], summary["lumped"]["linear"], summary["lumped"]["wiener"]
+    row("lumped", "K", lin["K_N_per_m"], lt["K_N_per_m"], "N/m")
+    row("lumped", "B", lin["B_Ns_per_m"], lt["B_Ns_per_m"], "N s/m")
+    row("lumped", "I", lin["I_kg"], lt["I_kg"], "kg")
+    row("lumped", "Wiener C1", wie["C1_m"], lt["C1_m"], "m")
+    row("lumped", "Wiener C2", wie["C2_per_N"], lt["C2_per_N"], "1/N")
+    cams = summary["cameras"]
+    row("cameras", "reprojection RMS", cams["reprojection_rms_px"], None, "px")
+    with open_experiment(out / SESSION) as exp:
+        prof = exp.read_profile("undeformed")
+    dz = prof.points[:, 2] - surface_height(prof.points[:, :2], bool(truth["surface"]["curved"]))
+    row("cameras", "profile height RMS error", float(np.sqrt(np.mean(dz**2))), 0.0, "m", rel=False)
+    row("cameras", "track RMS error (3D)", _track_error(out), 0.0, "m", rel=False)
+    tp = {p["name"]: p["value"] for p in truth["parameters"]}
+    fe = summary["identify"]
+    for name in fe["parameters"]:
+        if name in tp:
+            par = fe["parameters"][name]
+            row("identify", name, par["value"], tp[name], par.get("unit", ""))
+    gap = summary["diagnose"]
+    named = gap.get("named") or []
+    row("diagnose", "named effect", ", ".join(named) or "none", "prestress", rel=False)
+    cand = next((c for c in gap.get("candidates", [])
+                 if c["effect"] == "prestress" and c.get("parameters")), None)
+    if cand is not None:
+        p = {k.split(".", 1)[1]: v["value"] for k, v in cand["parameters"].items()}
+        l1, l2, a = canonical_prestress(p["l1"], p["l2"], p["angle"])
+        eff = next(e for e in truth["effects"] if e["name"] == "prestress")
+        t1, t2, ta = canonical_prestress(eff["l1"], eff["l2"], eff["angle"])
+        row("diagnose", "prestress λ1", l1, t1, "1")
+        row("diagnose", "prestress λ2", l2, t2, "1")
+        row("diagnose", "prestress angle", math.degrees(a), math.degrees(ta), "deg", rel=False)
+    row("diagnose", "shrinkage of the excess", gap["shrinkage"]["overall"], None, "1")
+    return rows
+
+
+def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: int = 2,
+              progress: Progress = _quiet) -> dict[str, Any]:
+    """Run steps 1–7 into ``out_dir``; the JSON-ready summary (also ``out_dir/summary.json``)."""
+    from skinkit.report import write_report
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    session = out / SESSION
+    summary: dict[str, Any] = {"experiment_file": str(session), "truth_file": str(out / TRUTH),
+                               "quick": quick, "seed": seed, "times_s": {}}
+
+    def timed(key: str, fn: Callable[[], Any]) -> Any:
+        t0 = time.perf_counter()
+        res = fn()
+        summary["times_s"][key] = time.perf_counter() - t0
+        return res
+
+    summary["acquire"] = timed("acquire", lambda: acquire(out, seed, quick, workers, progress))
+    summary["lumped"] = timed("lumped", lambda: identify_lumped(session, progress))
+    summary["cameras"] = timed("cameras", lambda: measure_cameras(session, progress))
+    fe, desc = timed("identify", lambda: identify_fe(session, quick, workers, progress))
+    summary["identify"] = fe
+    summary["diagnose"] = timed("diagnose",
+                                lambda: diagnose_gap(session, out, desc, quick, workers, progress))
+    report = timed("report", lambda: write_report(session, out / "report.html", overwrite=True))
+    summary["report"] = str(report)
+    progress("compare with the truth", 0.0)
+    summary["table"] = compare(out, summary)
+    for r in summary["table"]:
+        r["time_s"] = summary["times_s"].get(r["step"])
+    progress("compare with the truth", 1.0)
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    return summary
+
+
+__all__ = ["acquire", "compare", "diagnose_gap", "identify_fe", "identify_lumped", "measure_cameras",
+           "missing_plugins", "run_chain"]
+
+
+def missing_plugins() -> list[str]:
+    """The plugins the chain needs that are not installed (``group:name``)."""
+    from skinkit import registry
+
+    wanted = [("skinkit.laws", law) for law in ("qlv", "goh", "neo-hookean-enu")]
+    wanted += [("skinkit.profilers", "patchwork"), ("skinkit.trackers", "gn"),
+               ("skinkit.effects", "prestress")]
+    return [f"{g}:{n}" for g, n in wanted if n not in registry.names(g)]
