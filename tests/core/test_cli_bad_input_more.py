@@ -335,3 +335,22 @@ def test_the_example_models_and_the_lab_descriptions_pass(tmp_path):
         read_description(f)
     read_description(model_spec())
     read_description(truth_spec())
+
+
+def test_documented_ranges_are_the_enforced_ones():
+    """docs/models/README.md's table of checks states the limits the readers enforce."""
+    from skinkit.fem import model as M
+    from skinkit.forward.spec_check import MAX_DRIVE_STEP_S
+
+    doc = Path(__file__).parents[2].joinpath("docs", "models", "README.md").read_text(encoding="utf-8")
+
+    def g(x: float) -> str:  # 1e+06 as 1e6, 1e-06 as 1e-6
+        return f"{x:g}".replace("e+0", "e").replace("e-0", "e-").replace("e+", "e")
+
+    lo, hi = M.INTORDER_RANGE
+    facts = [f"1 to {M.MAX_ELEMENTS_PER_DIRECTION} per direction", f"(0, {g(M.LENGTH_RANGE[1])}] m",
+             f"in [{g(M.PRESTRETCH_RANGE[0])}, {g(M.PRESTRETCH_RANGE[1])}]", f"{M.MAX_UNKNOWNS:,} unknowns",
+             f"at most {g(M.MAX_FORCE_N)} N", f"1 to {M.MAX_STEPS:,}", f"(0, {g(M.DURATION_RANGE[1])}] s",
+             f"[{g(M.FREQUENCY_RANGE[0])}, {g(M.FREQUENCY_RANGE[1])}] Hz", f"(0, {g(M.RTOL_RANGE[1])}]",
+             f"{lo} to {hi}", f"at most {g(M.MAX_MODULUS_PA)} Pa", f"(0, {g(MAX_DRIVE_STEP_S)}] s"]
+    assert [f for f in facts if f not in doc] == []
