@@ -351,14 +351,14 @@ def check_irf_size(lags: int, rate_hz: float, memory_s: float) -> None:
 
 
 def _check_memory(n: int, rate: float, memory_s: float | None, issues: list[str]) -> None:
-    """Refuse a record shorter than MIN_MEMORIES IRF memories, or a memory of more lags than
-    :func:`max_irf_lags`; warn below WARN_MEMORIES."""
+    """Refuse a record shorter than MIN_MEMORIES IRF memories; warn below WARN_MEMORIES.
+    (The IRF's size is checked where it is identified, after a record that is not a
+    stochastic test has been refused as such: :func:`check_irf_size`.)"""
     if memory_s is None:
         return
     if not np.isfinite(memory_s) or memory_s <= 0:
         raise SysidError(f"memory must be a positive time in seconds, got {memory_s!r}")
     m = int(round(memory_s * rate)) + 1
-    check_irf_size(m, rate, memory_s)
     if n < MIN_MEMORIES * m:
         raise SysidError(f"record of {n / rate:.4g} s ({n} samples) is too short for an IRF "
                          f"memory of {memory_s:.4g} s: need at least {MIN_MEMORIES} memory "

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.sysid.checks import SysidError, check_signals
+from skinkit.sysid.checks import SysidError, check_irf_size, check_signals
 from skinkit.sysid.inputs import Segment
 from skinkit.sysid.linear import LinearModel, identify_signals
 from skinkit.sysid.robot import RobotDynamics
@@ -215,6 +215,9 @@ def identify_incremental(force_N: Any, position_m: Any = None, rate_hz: float | 
     segs = [s for s in segs if s.kind == "identify"]
     if not segs:
         raise SysidError("no segments of kind 'identify' to analyse")
+    if memory_s is not None and np.isfinite(memory_s) and memory_s > 0:
+        # refused once for the record, not once per increment
+        check_irf_size(int(round(memory_s * rate_hz)) + 1, float(rate_hz), memory_s)
     out = []
     it: Iterable[Segment] = segs
     if progress:

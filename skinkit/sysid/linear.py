@@ -16,6 +16,7 @@ from skinkit.sysid.checks import (
     PoorFitWarning,
     Signals,
     SysidError,
+    check_irf_size,
     max_irf_lags,
     nonphysical,
     warn,
@@ -232,6 +233,8 @@ def identify_signals(sig: Signals, memory_s: float | None = None, *, two_sided: 
         raise SysidError(f"hold must be one of {', '.join(HOLDS)}, got {hold!r}")
     if memory_s is None:
         memory_s = auto_memory(sig, two_sided, hold)
+    n_pos = int(round(memory_s * sig.rate_hz)) + 1
+    check_irf_size(2 * n_pos - 1 if two_sided else n_pos, sig.rate_hz, memory_s)  # before allocating
     _check_causality(sig, memory_s)
     f, y, rate = sig.force_N, sig.position_m, sig.rate_hz
     irf = estimate_irf(f, y, rate, memory_s, two_sided, rank)
