@@ -224,11 +224,32 @@ def diagnose_gap(session: Path, out: Path, description: dict[str, Any], quick: b
     return d
 
 
-def _track_error(out: Path) -> float | None:
-    """RMS [m] of the 3D error of every tracked displacement against the truth's surface motion."""
+def _truth_field(out: Path) -> Any:
+    return np.load(out / "truth-surface.npz")
+
+
+def _profile_error(out: Path, curved: bool) -> float:
+    """RMS [m] of the measured profile's height against the true skin at rest (pre-stressed)."""
+    from skinkit.lab.imaging import displacement_field
+    from skinkit.lab.session import surface_height
+
+    field = _truth_field(out)
+    rest = next(k for k in field.files if k.startswith("followed_"))
+    u0 = displacement_field(field["grid_m"], field["points_m"], field[rest][:, 0] - field["points_m"])
+    with open_experiment(out / SESSION) as exp:
+        p = exp.read_profile("undeformed").points
+    X = p[:, :2] - u0(p[:, 0], p[:, 1])[:, :2]   # material coordinates (one fixed-point step: u0 is small)
+    z = surface_height(X, curved) + u0(X[:, 0], X[:, 1])[:, 2]
+    return float(np.sqrt(np.mean((p[:, 2] - z) ** 2)))
+
+
+def _track_error(out: Path, windowed: bool) -> float | None:
+    """RMS [m] of the 3D error of every tracked displacement against the truth's surface motion,
+    at the tracked point or (``windowed``) averaged over its subset's footprint."""
+    from skinkit.forward.fe import _GAUSS3, window_offsets
     from skinkit.lab.imaging import displacement_field
 
-    field = np.load(out / "truth-surface.npz")
+    field = _truth_field(out)
     errs = []
     with open_experiment(out / SESSION) as exp:
         for name in exp.track_names():
@@ -236,11 +257,15 @@ def _track_error(out: Path) -> float | None:
             if key not in field:
                 continue
             tr = exp.read_track(name)
+            w = exp.track_attrs(name).get("window_m") if windowed else None
+            off = window_offsets(w) if w else np.zeros((1, 3))
+            wq = np.outer(_GAUSS3[1], _GAUSS3[1]).ravel() / 4 if w else np.ones(1)
             ref = tr.points[:, 0]
             for f in range(1, tr.time_s.size):   # motion from the protocol's start (its rest state)
                 moved = field[key][:, f] - field[key][:, 0]
                 u = displacement_field(field["grid_m"], field["points_m"], moved)
-                d = tr.points[:, f] - ref - u(ref[:, 0], ref[:, 1])
+                pred = sum(wq[q] * u(ref[:, 0] + off[q, 0], ref[:, 1] + off[q, 1]) for q in range(len(wq)))
+                d = tr.points[:, f] - ref - pred
                 errs.append(d[tr.valid[:, f]])
     if not errs:
         return None
@@ -251,7 +276,6 @@ def _track_error(out: Path) -> float | None:
 def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
     """Step 7: the closing table — each step's result against the truth file (read only here)."""
     from skinkit.gap.thesis_case import canonical_prestress
-    from skinkit.lab.session import surface_height
 
     truth = json.loads((out / TRUTH).read_text())
     rows: list[dict[str, Any]] = []
@@ -259,7 +283,7 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
     def row(step: str, what: str, found: float | str | None, true: float | str | None, unit: str = "",
             rel: bool = True) -> None:
         err = None
-        if isinstance(found, (int, float)) and isinstance(true, (int, float)) and true != 0:
+        if isinstance(found, (int, float)) and isinstance(true, (int, float)) and (true != 0 or not rel):
             err = 100.0 * (found / true - 1.0) if rel else found - true
         rows.append({"step": step, "result": what, "found": found, "truth": true, "unit": unit,
                      "error": err, "error_unit": "%" if rel else unit, "time_s": None})
@@ -272,16 +296,16 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
     row("lumped", "Wiener C2", wie["C2_per_N"], lt["C2_per_N"], "1/N")
     cams = summary["cameras"]
     row("cameras", "reprojection RMS", cams["reprojection_rms_px"], None, "px")
-    with open_experiment(out / SESSION) as exp:
-        prof = exp.read_profile("undeformed")
-    dz = prof.points[:, 2] - surface_height(prof.points[:, :2], bool(truth["surface"]["curved"]))
-    row("cameras", "profile height RMS error", float(np.sqrt(np.mean(dz**2))), 0.0, "m", rel=False)
-    row("cameras", "track RMS error (3D)", _track_error(out), 0.0, "m", rel=False)
+    um = 1e6
+    curved = bool(truth["surface"]["curved"])
+    row("cameras", "profile height RMS error", um * _profile_error(out, curved), 0.0, "µm", rel=False)
+    for windowed, what in ((False, "point motion"), (True, "subset mean")):
+        e = _track_error(out, windowed)
+        row("cameras", f"track RMS error vs {what}", None if e is None else um * e, 0.0, "µm", rel=False)
     tp = {p["name"]: p["value"] for p in truth["parameters"]}
     fe = summary["identify"]
-    for name in fe["parameters"]:
-        if name in tp:
-            par = fe["parameters"][name]
+    for name, par in fe["parameters"].items():
+        if name in tp and par.get("free"):
             row("identify", name, par["value"], tp[name], par.get("unit", ""))
     gap = summary["diagnose"]
     named = gap.get("named") or []
@@ -297,6 +321,11 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
         row("diagnose", "prestress λ2", l2, t2, "1")
         row("diagnose", "prestress angle", math.degrees(a), math.degrees(ta), "deg", rel=False)
     row("diagnose", "shrinkage of the excess", gap["shrinkage"]["overall"], None, "1")
+    final = gap.get("final_parameters") or {}
+    if named:   # the model with the named effect: its parameters against the truth
+        for name, par in fe["parameters"].items():
+            if name in tp and par.get("free") and name in final:
+                row("diagnose", f"{name} (with {named[0]})", final[name], tp[name], par.get("unit", ""))
     return rows
 
 
