@@ -12,6 +12,16 @@ outside the travel range. The skin force acts at the tip; it reaches the arms th
 kinematic Jacobian ``J`` (virtual work), which is refreshed every 100 ticks (the tip moves
 <0.1 mm in 10 ms in every protocol, so the linearisation error is below 1 um).
 
+Watchdog: the firmware counts its own control ticks since the last host command and
+de-energises after ``Limits.watchdog_s`` of them, as an FPGA counter would. Counting ticks
+bounds exactly what the watchdog protects -- how far the robot moves on a dead host -- however
+fast the model runs, and a model that is itself late (an emulator descheduled on a loaded
+machine) never takes its own stall for host silence: no tick passes while it stalls. With a
+wall ``clock`` (the emulator) the host must also have been silent that long on the wall clock,
+so a device fast-forwarding faster than real time never blames a host that talks at wall-clock
+pace (the emulator then waits for the host instead, see :meth:`Device.waiting_for_host`, and
+while it waits the wall clock alone counts the silence).
+
 Samples (one row per streamed tick, see :data:`COLUMNS`): sample index, tick, measured arm
 positions [m], measured currents [A], F/T force [N] (force applied by the probe to the
 skin), F/T torque [N m], flags (RobotRecord FLAG_* bits, OR-ed over the decimation window).
@@ -73,7 +83,12 @@ class Event:
 
 @dataclass
 class Device:
-    """Firmware + physics of one simulated robot. See the module docstring."""
+    """Firmware + physics of one simulated robot. See the module docstring.
+
+    ``clock``: wall clock [s] (monotonic) of a device that runs beside a real host (the
+    emulator's is the time of its latest read of the link, so only silence it saw counts),
+    used only by the watchdog; None (in-process ``sim``) counts device ticks alone.
+    """
 
     params: RobotParameters = field(default_factory=RobotParameters)
     limits: Limits = field(default_factory=Limits)
@@ -123,11 +138,10 @@ class Device:
         self.home_speed = 0.0
         self.home_contact = 0.01
         self.last_fz = 0.0
-        self.last_host = self._now()
+        self.last_host_tick = 0
+        self.last_host_wall = self.clock() if self.clock is not None else 0.0
 
     # -- time -------------------------------------------------------------------------
-    def _now(self) -> float:
-        return self.clock() if self.clock is not None else self.tick * self.params.dt
 
     @property
     def time_s(self) -> float:
@@ -137,7 +151,9 @@ class Device:
     # -- host commands ----------------------------------------------------------------
     def heartbeat(self) -> None:
         """The host is alive (every command counts as one)."""
-        self.last_host = self._now()
+        self.last_host_tick = self.tick
+        if self.clock is not None:
+            self.last_host_wall = self.clock()
 
     def configure(
         self, decimation: int | None = None, watchdog_s: float | None = None, tip_force_N: float | None = None
@@ -289,13 +305,41 @@ class Device:
         ev, self.events = self.events, []
         return ev
 
-    def check_watchdog(self) -> None:
-        """De-energise when the host has been silent longer than the watchdog time."""
-        silent = self._now() - self.last_host
-        if self.energised and silent > self.limits.watchdog_s:
-            self._trip(
-                F.Fault(F.WATCHDOG, value=silent, limit=self.limits.watchdog_s, time_s=self._run_time())
-            )
+    def host_silence_s(self) -> float:
+        """Host silence [s] as the watchdog counts it: device time since the last command and,
+        with a wall ``clock``, the smaller of that and the wall time since it (module docstring)."""
+        silent = (self.tick - self.last_host_tick) * self.params.dt
+        if self.clock is not None:
+            silent = min(silent, self.clock() - self.last_host_wall)
+        return silent
+
+    def _past_watchdog_ticks(self) -> bool:
+        # integer ticks against the limit in ticks: exactly watchdog_s of silence is not past it
+        return self.tick - self.last_host_tick > self.limits.watchdog_s * self.params.control_rate_hz
+
+    def waiting_for_host(self) -> bool:
+        """True once the energised device has run past the watchdog time on its own clock since
+        the host's last command: a device that may outrun real time (the emulator fast-forwarding)
+        stops advancing here until the host speaks or the wall clock confirms the silence and it
+        trips (de-energised, it runs on to stream its post-fault samples)."""
+        return self.energised and self._past_watchdog_ticks()
+
+    def check_watchdog(self, held: bool = False) -> None:
+        """De-energise when the host has been silent longer than the watchdog time: on the
+        device's own clock and, with a wall ``clock``, on that one too. ``held``: the device is
+        not advancing because it waits on the host (its link backed up, or a watchdog time
+        ahead of it), so its ticks cannot count the silence: the wall clock alone does."""
+        if not self.energised:
+            return
+        wd = self.limits.watchdog_s
+        wall = self.clock() - self.last_host_wall if self.clock is not None else None
+        wall_past = wall is not None and wall > wd
+        ticks_past = self._past_watchdog_ticks()
+        if not (wall_past if held else ticks_past and (wall is None or wall_past)):
+            return
+        # the silence both clocks agree on; held with its ticks short of it, the wall clock's
+        silent = self.host_silence_s() if ticks_past else wall
+        self._trip(F.Fault(F.WATCHDOG, value=silent, limit=wd, time_s=self._run_time()))
 
     # -- the control loop -------------------------------------------------------------
     # C901: the per-tick control loop (physics, PID, safety trips, streaming) runs in plain Python
@@ -547,5 +591,7 @@ def run_device_until(
 
 
 def wall_clock() -> float:
-    """The emulator's firmware clock (monotonic wall time)."""
+    """Monotonic wall time [s]: a device ``clock`` for a device run beside a host (the
+    emulator's :func:`~skinkit_hardware.emulator.serve` replaces it by the time of its latest
+    read of the link)."""
     return time.monotonic()

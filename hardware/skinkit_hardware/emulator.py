@@ -7,6 +7,17 @@ prints ``can: skinkit_loopback 127.0.0.1:PORT``. Options inject faults (dropped 
 corrupted frames, a stuck sensor) and set the link speed (baud rate, CAN bit rate) and the
 real-time factor.
 
+Watchdog on the device's own clock: the device counts its control ticks since the host's
+last command (see :mod:`skinkit_hardware.device`). The link is read before every burst of
+at most 5 x 10 ms of device time, and no tick passes while this process is descheduled, so
+a slow or starved emulator (a loaded machine) never takes its own stall for host silence;
+what the watchdog protects -- at most ``watchdog_s`` of motion after the host's last word --
+holds at any speed. At ``--speed 1`` device time never runs ahead of the wall clock by more
+than one burst, so a host silent for the watchdog time trips it as the firmware would; a
+device that would run ahead (``--speed 0``, or above 1) waits for the host once it is a
+watchdog time past the host's last word (never more than one 10 ms step past it), and trips
+when the wall clock agrees.
+
 Control loop independence: the device advances on its own clock and puts decimated samples
 into a bounded transmit buffer (``--buffer-bytes``, the device's memory); the link drains
 it at its own speed. A full buffer drops samples, but their indices are still consumed, so
@@ -183,6 +194,45 @@ class SerialLinkServer:
                 pass
 
 
+class LinkReadClock:
+    """The device's wall clock in the emulator: the monotonic time [s] of the latest read of
+    the link. Host silence on it is the time between the read that last heard the host and the
+    latest read, so only silence the emulator saw counts, never its own stall between reads."""
+
+    def __init__(self) -> None:
+        self.t = time.monotonic()
+
+    def mark(self) -> None:
+        self.t = time.monotonic()
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def apply_command(device: Device, link: Any, cmd: str, args: dict[str, Any]) -> None:
+    """Carry out one host command on ``device`` (every command is also a heartbeat)."""
+    device.heartbeat()
+    if cmd == "hello":
+        link.info(
+            {
+                "control_rate_hz": device.params.control_rate_hz,
+                "decimation": device.decimation,
+                "limits": device.limits.to_dict(),
+                "firmware": "skinkit-emulator 1",
+            }
+        )
+    elif cmd == "load":
+        device.load(**args)
+    elif cmd == "load_corrupt":
+        from skinkit_hardware import faults as F
+
+        device.events.append(Event("refused", fault=F.Fault(F.BAD_COMMAND)))
+    elif cmd == "configure":
+        device.configure(**args)
+    elif cmd != "heartbeat":
+        getattr(device, cmd)(**args)
+
+
 def serve(
     device: Device,
     link: Any,
@@ -195,49 +245,39 @@ def serve(
     if announce:
         print(announce, flush=True)
     rate = device.params.control_rate_hz
+    reads = LinkReadClock()
+    if device.clock is not None:
+        device.clock = reads
     t0 = time.monotonic()
     wall_ref, tick_ref = t0, device.tick
     chunk = 100  # ticks per physics step: 10 ms of device time
     while (max_s is None or time.monotonic() - t0 < max_s) and not (stop is not None and stop.is_set()):
         active = device.mode in (RUNNING, HOMING) or device.post_fault_left > 0
         commands = link.poll(0.0 if active else 0.005)
-        # commands (heartbeats) are read before the watchdog is checked, so a descheduled
-        # emulator never blames the host for its own stall
+        reads.mark()
+        # commands (heartbeats) are read before the device advances; the watchdog counts device
+        # ticks, so a descheduled emulator never blames the host for its own stall (module doc)
         for cmd, args in commands:
-            device.heartbeat()
-            if cmd == "hello":
-                link.info(
-                    {
-                        "control_rate_hz": rate,
-                        "decimation": device.decimation,
-                        "limits": device.limits.to_dict(),
-                        "firmware": "skinkit-emulator 1",
-                    }
-                )
-            elif cmd == "load":
-                device.load(**args)
-            elif cmd == "load_corrupt":
-                from skinkit_hardware import faults as F
-
-                device.events.append(Event("refused", fault=F.Fault(F.BAD_COMMAND)))
-            elif cmd == "configure":
-                device.configure(**args)
-            elif cmd != "heartbeat":
-                getattr(device, cmd)(**args)
+            apply_command(device, link, cmd, args)
         now = time.monotonic()
         active = device.mode in (RUNNING, HOMING) or device.post_fault_left > 0
-        if speed <= 0 and active:
+        if device.waiting_for_host():
+            # a full watchdog time of device time since the host's last word: wait for the
+            # host rather than outrun it; trips once the wall clock agrees it is silent
+            device.check_watchdog(held=True)
+            wall_ref, tick_ref = now, device.tick
+        elif speed <= 0 and active:
             # as fast as the link drains: back-pressure instead of artificial losses
             if link.backlog() < 0.5:
                 device.advance(chunk)
             else:
-                device.check_watchdog()
+                device.check_watchdog(held=True)  # the host does not read: wall clock alone
             wall_ref, tick_ref = now, device.tick
         else:
             factor = speed if speed > 0 else 1.0  # idle at real time even when fast-forwarding
             due = int((now - wall_ref) * rate * factor) - (device.tick - tick_ref)
             steps = 0
-            while due >= chunk and steps < 5:
+            while due >= chunk and steps < 5 and not device.waiting_for_host():
                 device.advance(chunk)
                 due -= chunk
                 steps += 1

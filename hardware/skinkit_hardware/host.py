@@ -79,7 +79,11 @@ class HostDriver:
     """Base of the ``sim``, ``serial`` and ``can`` drivers (see the module docstring)."""
 
     name = "host"
-    #: seconds without any data from the device during a run before the link is declared dead
+    #: seconds without any data from the device during a run before the link is declared dead.
+    #: Wall time on purpose: only the host's clock can tell a dead link or device process. A live
+    #: device streams every 10 ms of its time (the emulator at every pass of its loop, even
+    #: starved to 2 % of a CPU: ~1 s), so 3 s is far beyond a loaded machine's scheduling delays
+    #: (tens of ms); likewise homing's 30 s (~1 s of device time) and the 3 s hello handshake.
     link_timeout_s = 3.0
 
     def __init__(

@@ -222,6 +222,65 @@ def test_watchdog_deenergises_a_silent_host() -> None:
     assert not dev.energised and ev and ev[0].fault.code == F.WATCHDOG
 
 
+class FakeWall:
+    """A wall clock the test moves by hand [s]."""
+
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+WD_TICKS = int(round(Limits().watchdog_s * P.control_rate_hz))
+
+
+def test_watchdog_counts_device_ticks_not_the_wall_clock_of_a_stalled_device() -> None:
+    wall = FakeWall()
+    dev = Device(clock=wall)
+    dev.hold()
+    wall.t += 60.0  # the emulator descheduled for a minute: no tick passed, nobody was silent
+    dev.advance(100)
+    assert dev.energised and not dev.take_events()
+    assert dev.host_silence_s() == pytest.approx(100 / P.control_rate_hz)
+
+
+def test_a_device_ahead_of_the_wall_clock_waits_for_the_host_then_trips_on_both_clocks() -> None:
+    wall = FakeWall()
+    dev = Device(clock=wall)
+    dev.hold()
+    dev.advance(WD_TICKS)  # fast-forward: a watchdog time of device time in no wall time
+    assert not dev.waiting_for_host()  # exactly the limit is not past it
+    dev.advance(100)
+    assert dev.waiting_for_host() and dev.energised  # past it on the device clock only
+    dev.check_watchdog()
+    assert dev.energised
+    dev.heartbeat()  # the host speaks: the device may run on
+    assert not dev.waiting_for_host()
+    dev.advance(WD_TICKS + 100)
+    wall.t += Limits().watchdog_s + 0.01  # ... and now silent on the wall clock too
+    dev.check_watchdog()
+    ev = dev.take_events()
+    assert not dev.energised and not dev.waiting_for_host()  # de-energised: nothing to wait for
+    assert ev and ev[0].fault.code == F.WATCHDOG
+    assert ev[0].fault.value == pytest.approx(Limits().watchdog_s + 0.01)  # the smaller silence
+
+
+def test_a_device_held_by_its_host_counts_the_silence_on_the_wall_clock() -> None:
+    wall = FakeWall()
+    dev = Device(clock=wall)
+    dev.hold()
+    dev.advance(100)
+    wall.t += 0.4  # held (the host does not read): no tick passes, the wall clock counts
+    dev.check_watchdog(held=True)
+    assert dev.energised
+    wall.t += 0.2
+    dev.check_watchdog(held=True)
+    ev = dev.take_events()
+    assert not dev.energised and ev[0].fault.code == F.WATCHDOG
+    assert ev[0].fault.value == pytest.approx(0.6)  # the silence that tripped it, not the ticks'
+
+
 def test_runner_writes_a_complete_record(tmp_path) -> None:
     d = homed()
     path = tmp_path / "run.h5"
