@@ -80,6 +80,8 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, as_json: bool) -> 
         click.echo(line)
     click.echo("")
     click.echo(f"report: {summary['report']}")
+    for p in summary.get("plots", []):
+        click.echo(f"against the truth: {p}")
     for f in gap.get("files", []):
         click.echo(f"gap report: {f}")
     click.echo(f"summary: {out_dir / 'summary.json'}  (total {sum(summary['times_s'].values()):.0f} s)")

@@ -359,6 +359,9 @@ def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: 
     summary["table"] = compare(out, summary)
     for r in summary["table"]:
         r["time_s"] = summary["times_s"].get(r["step"])
+    from skinkit.pipelines.chain_plots import truth_figure
+
+    summary["plots"] = [str(truth_figure(out, summary, summary["table"]))]
     progress("compare with the truth", 1.0)
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
     return summary

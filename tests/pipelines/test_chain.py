@@ -91,4 +91,5 @@ def test_closing_table_compares_every_step(chain):
     assert (rows[("cameras", "track RMS error vs subset mean")]["found"]
             < rows[("cameras", "track RMS error vs point motion")]["found"])
     assert (out / "report.html").stat().st_size > 50_000
+    assert Path(s["plots"][0]).name == "truth.png" and Path(s["plots"][0]).stat().st_size > 20_000
     assert json.loads((out / "summary.json").read_text())["table"] == json.loads(json.dumps(s["table"]))
