@@ -71,7 +71,8 @@ def _parse_board(text: str) -> tuple[int, int]:
     try:
         cols, rows = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise SkinkitError(f"--board {text!r}: expected COLSxROWS inner corners, e.g. 9x6") from None
+        raise SkinkitError(f"--board {text!r}: expected COLSxROWS (inner corners, squares or dots), "
+                           "e.g. 9x6") from None
     return cols, rows
 
 
@@ -102,19 +103,27 @@ def _images(exp: object, name: str | None, of_skin: bool = False) -> object:
 @vision.command("calibrate")
 @click.argument("experiment", type=click.Path(dir_okay=False))
 @click.option("--images", "images_name", default=None, help="image sequence of board views")
-@click.option("--board", "board_text", default="9x6", show_default=True,
-              help="checkerboard: inner corners COLSxROWS (one even, one odd); "
-                   "ChArUco: squares COLSxROWS")
-@click.option("--square-mm", default=3.0, show_default=True, type=FiniteFloat(0.0, 1000.0, min_open=True),
-              help="board square side [mm]")
-@click.option("--charuco", is_flag=True, help="the board is a ChArUco board (partial views allowed)")
+@click.option("--target", type=click.Choice(["checkerboard", "charuco", "dotgrid"]), default=None,
+              help="calibration target  [default: checkerboard]")
+@click.option("--board", "--grid", "board_text", default="9x6", show_default=True,
+              help="checkerboard: inner corners COLSxROWS; ChArUco: squares COLSxROWS; "
+                   "dot grid: dots COLSxROWS")
+@click.option("--square-mm", "--pitch-mm", "square_mm", default=3.0, show_default=True,
+              type=FiniteFloat(0.0, 1000.0, min_open=True),
+              help="board square side, or the dot grid's pitch [mm]")
+@click.option("--charuco", is_flag=True, help="the board is a ChArUco board (same as --target charuco)")
 @click.option("--marker-mm", default=None, type=FiniteFloat(0.0, 1000.0, min_open=True),
               help="ChArUco marker side [mm] (default 0.75 square)")
 @click.option("--dictionary", default="DICT_4X4_50", show_default=True, help="ChArUco ArUco dictionary")
+@click.option("--fiducials", "fiducials_text", default="hollow", show_default=True,
+              help="dot grid: none, hollow or large fiducial dots, at the default L (1,1 2,1 1,2) or "
+                   "at KIND:I,J;I,J;... (grid column, row from 0)")
+@click.option("--asymmetric", is_flag=True, help="dot grid: OpenCV's asymmetric circle grid (staggered rows)")
 @click.option("--min-views", default=4, show_default=True, type=click.IntRange(1, 100_000),
               help="board views each camera needs")
-def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, square_mm: float,
-                  charuco: bool, marker_mm: float | None, dictionary: str, min_views: int) -> None:
+def calibrate_cmd(experiment: str, images_name: str | None, target: str | None, board_text: str,
+                  square_mm: float, charuco: bool, marker_mm: float | None, dictionary: str,
+                  fiducials_text: str, asymmetric: bool, min_views: int) -> None:
     """Calibrate the rig from board views in EXPERIMENT and store it there."""
     import cv2
 
@@ -122,16 +131,25 @@ def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, squ
     from skinkit.vision.calibration import calibrate, calibrate_charuco
     from skinkit.vision.scene import CharucoTarget
 
+    if charuco and target not in (None, "charuco"):
+        raise SkinkitError(f"--charuco contradicts --target {target}")
+    target = "charuco" if charuco else (target or "checkerboard")
     size = _parse_board(board_text)
+    grid = _dot_grid(size, square_mm, fiducials_text, asymmetric) if target == "dotgrid" else None
     with open_experiment(experiment, mode="a") as exp:
         seq = _images(exp, images_name)
         names = seq.camera_names  # type: ignore[attr-defined]
-        if charuco:
+        if target == "charuco":
             if not hasattr(cv2.aruco, dictionary):
                 raise SkinkitError(f"--dictionary {dictionary!r} is not an OpenCV ArUco dictionary")
             marker = (marker_mm if marker_mm is not None else 0.75 * square_mm) * 1e-3
-            target = CharucoTarget(size, square_mm * 1e-3, marker, dictionary)
-            cal = calibrate_charuco(seq.frames, target, camera_names=names,  # type: ignore[attr-defined]
+            board = CharucoTarget(size, square_mm * 1e-3, marker, dictionary)
+            cal = calibrate_charuco(seq.frames, board, camera_names=names,  # type: ignore[attr-defined]
+                                    min_views=min_views)
+        elif grid is not None:
+            from skinkit.vision.dotgrid_detect import calibrate_dotgrid
+
+            cal = calibrate_dotgrid(seq.frames, grid, camera_names=names,  # type: ignore[attr-defined]
                                     min_views=min_views)
         else:
             cal = calibrate(seq.frames, size, square_mm * 1e-3, camera_names=names,  # type: ignore[attr-defined]
@@ -139,14 +157,28 @@ def calibrate_cmd(experiment: str, images_name: str | None, board_text: str, squ
         exp.write_rig(cal.rig)
         views = cal.detections.found.sum(axis=0)
         # where the rig came from: profile and track-3d refuse these board views as skin images
+        record = {"images": seq.name, "board": board_text, "square_mm": square_mm,  # type: ignore[attr-defined]
+                  "charuco": target == "charuco", "target": target}
+        if grid is not None:
+            record.update({"fiducials": fiducials_text, "asymmetric": asymmetric})
         exp.write_calibration(RIG_CALIBRATION, {
-            "images": seq.name, "board": board_text, "square_mm": square_mm, "charuco": charuco,  # type: ignore[attr-defined]
-            "rms_px": float(cal.rms_px), "per_camera_rms_px": [float(x) for x in cal.per_camera_rms_px],
-            "views": [int(v) for v in views]})
+            **record, "rms_px": float(cal.rms_px),
+            "per_camera_rms_px": [float(x) for x in cal.per_camera_rms_px], "views": [int(v) for v in views]})
+    what = "dot grid" if grid is not None else "board"
     for name, rms, n in zip(cal.rig.names, cal.per_camera_rms_px, views, strict=True):
-        click.echo(f"{name}: {n} board views, reprojection RMS {rms:.3f} px")
+        click.echo(f"{name}: {n} {what} views, reprojection RMS {rms:.3f} px")
     click.echo(f"overall reprojection RMS {cal.rms_px:.3f} px; rig stored in {experiment} "
-               f"(world frame: the board in frame {cal.world_view})")
+               f"(world frame: the {what} in frame {cal.world_view})")
+
+
+def _dot_grid(size: tuple[int, int], pitch_mm: float, fiducials_text: str, asymmetric: bool) -> object:
+    """The :class:`~skinkit.vision.dotgrid.DotGrid` the options describe (dots half a pitch
+    across: detection does not depend on their size)."""
+    from skinkit.vision.dotgrid import DotGrid, parse_fiducials
+
+    kind, where = parse_fiducials(fiducials_text)
+    return DotGrid(size[0], size[1], pitch_mm * 1e-3, 0.5 * pitch_mm * 1e-3, fiducials=where,
+                   fiducial_kind=kind, asymmetric=asymmetric)
 
 
 @vision.command("profile")
