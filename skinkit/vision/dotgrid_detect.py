@@ -252,7 +252,10 @@ def detect_dotgrid(image: np.ndarray, grid: DotGrid) -> tuple[np.ndarray | None,
     centres = find_dots(image)
     order = _grid_order(centres, grid)
     if order is None:
-        return None, f"{grid.cols}x{grid.rows} dot grid not found ({len(centres)} dots seen)"
+        P = grid.cols * grid.rows
+        if len(centres) < P:
+            return None, f"{len(centres)} dots seen, the grid has {P}"
+        return None, f"{len(centres)} dots seen, not arranged as {grid.cols}x{grid.rows}"
     pts, ink = _remeasure(image, centres[order], grid)
     obj = grid.object_points()
     cands = [perm for perm, _ in symmetries(grid)
@@ -261,8 +264,7 @@ def detect_dotgrid(image: np.ndarray, grid: DotGrid) -> tuple[np.ndarray | None,
         return pts[cands[0]], ""
     pick = _pick_by_fiducials(_relative_ink(ink, grid), cands, grid)
     if pick is None:
-        return None, (f"{grid.cols}x{grid.rows} dot grid found but not its {len(grid.fiducials)} "
-                      f"{grid.fiducial_kind} fiducial dots")
+        return None, f"grid found but not its {len(grid.fiducials)} {grid.fiducial_kind} fiducial dots"
     return pts[cands[pick]], ""
 
 
