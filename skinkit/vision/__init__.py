@@ -12,6 +12,8 @@ Submodules (each one job):
 - :mod:`skinkit.vision.scene`         skin, boards, cone and markers seen by a rig; ground truth
 - :mod:`skinkit.vision.boards`        checkerboard / ChArUco detection, rendered board views
 - :mod:`skinkit.vision.calibration`   joint calibration of N cameras (OpenCV 5 multiview)
+- :mod:`skinkit.vision.dotgrid`       dot-grid targets with fiducials (DIC style, OpenCV circle grids)
+- :mod:`skinkit.vision.dotgrid_detect` dot-grid detection, ordering, orientation; calibration from it
 - :mod:`skinkit.vision.matching`      SIFT seed correspondences checked against the epipolar geometry
 - :mod:`skinkit.vision.triangulation` multi-view triangulation with reprojection errors
 - :mod:`skinkit.vision.tracking3d`    2D tracks of profiled points -> SurfaceTrack
