@@ -5,10 +5,11 @@ never changes an existing file (issue 15)."""
 from __future__ import annotations
 
 import contextlib
+import fnmatch
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from skinkit.errors import SkinkitError
@@ -53,6 +54,38 @@ def check_out_file(path: str | os.PathLike, option: str, *, parents: bool = Fals
     problem = _existing_ancestor_problem(p)
     if problem:
         raise SkinkitError(f"{option} {p}: cannot create it ({problem})")
+    return p
+
+
+def check_result_dir(path: str | os.PathLike, option: str, *, overwrite: bool,
+                     owned: Sequence[str], command: str) -> Path:
+    """A results directory that a command replaces as a whole (:func:`staged_dir`): absent, empty,
+    or -- with ``overwrite`` -- holding only files the command writes (``owned``, glob patterns).
+    An earlier result is never replaced silently, and a folder of other files never at all.
+    Raises a one-line :class:`SkinkitError` naming ``option``."""
+    p = check_out_dir(path, option)
+    if not p.is_dir():
+        return p
+    entries = sorted(e.name for e in p.iterdir())
+    others = [e for e in entries if not any(fnmatch.fnmatch(e, pat) for pat in owned)]
+    if others:
+        raise SkinkitError(f"{option} {p}: holds files {command} did not write ({others[0]}); "
+                           "give a new or empty folder")
+    if entries and not overwrite:
+        raise SkinkitError(f"{option} {p}: already holds a result ({entries[0]}); give another "
+                           f"{option}, or --overwrite to replace it")
+    return p
+
+
+def check_result_files(folder: str | os.PathLike, names: Sequence[str], option: str, *,
+                       overwrite: bool) -> Path:
+    """A folder a command writes the files ``names`` into (beside whatever else it holds): none of
+    them may exist already unless ``overwrite``. Raises a one-line :class:`SkinkitError`."""
+    p = check_out_dir(folder, option)
+    there = [n for n in names if (p / n).exists() or (p / n).is_symlink()]
+    if there and not overwrite:
+        raise SkinkitError(f"{option} {p}: already holds {there[0]} (an earlier result); give another "
+                           f"{option}, or --overwrite to replace it")
     return p
 
 

@@ -8,8 +8,12 @@ from pathlib import Path
 
 import click
 
-from skinkit.cli._paths import check_out_dir, staged_dir
+from skinkit.cli._paths import check_result_dir, staged_dir
 from skinkit.errors import SkinkitError
+
+#: what ``skinkit solve`` writes in its --out folder (and so may replace with --overwrite)
+SOLVE_FILES = ("result.h5", "summary.json", "step.pvd", "step_*.vtu")
+CONVERGENCE_FILES = ("convergence.json", "convergence.png")
 
 
 def _model_path(model_file: str) -> Path:
@@ -48,14 +52,18 @@ def _progress(total: float, label: str):
 @click.command("solve")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="output directory (default: MODEL_FILE without .toml)")
+              help="output directory (default: the model file's name without .toml, in the current "
+                   "directory)")
+@click.option("--overwrite", is_flag=True, help="replace an earlier result in --out")
 @click.option("--json", "as_json", is_flag=True, help="print the JSON summary")
 @click.option("--no-vtu", is_flag=True, help="skip the VTU series")
-def solve(model_file: str, out_dir: str | None, as_json: bool, no_vtu: bool) -> None:
+def solve(model_file: str, out_dir: str | None, overwrite: bool, as_json: bool, no_vtu: bool) -> None:
     """Solve MODEL_FILE (TOML); write result.h5, summary.json and a VTU series."""
     from skinkit.fem.model import build_model
     from skinkit.fem.run import solve_model, write_outputs
-    out = check_out_dir(Path(out_dir) if out_dir else _model_path(model_file).with_suffix(""), "--out")
+    # outputs go where the user is, never beside the model file (which may be in the package/docs)
+    out = check_result_dir(Path(out_dir) if out_dir else Path.cwd() / _model_path(model_file).stem, "--out",
+                           overwrite=overwrite, owned=SOLVE_FILES, command="skinkit solve")
     model = build_model(_fe_spec(_model_path(model_file)))
     times = model.load.times
     # rich formats the label: braces of the model's name are text, not fields
@@ -118,14 +126,17 @@ def _refined(spec: dict, level: int) -> dict:
 @click.option("--levels", type=click.IntRange(1, 8), default=3, show_default=True,
               help="refinement levels (1 = as given)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="directory for convergence.json and convergence.png")
+              help="directory for convergence.json and convergence.png (default: <model file name>"
+                   "_convergence in the current directory)")
+@click.option("--overwrite", is_flag=True, help="replace an earlier result in --out")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
-def convergence(model_file: str, levels: int, out_dir: str | None, as_json: bool) -> None:
+def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bool, as_json: bool) -> None:
     """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count."""
     from skinkit.fem.model import build_model, check_size, layer_table
     from skinkit.fem.run import solve_model
     path = _model_path(model_file)
-    out = check_out_dir(Path(out_dir) if out_dir else path.with_name(path.stem + "_convergence"), "--out")
+    out = check_result_dir(Path(out_dir) if out_dir else Path.cwd() / f"{path.stem}_convergence", "--out",
+                           overwrite=overwrite, owned=CONVERGENCE_FILES, command="skinkit convergence")
     spec = _fe_spec(path)
     first = build_model(spec)  # validates every entry before any refinement
     finest = _refined(spec, levels)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._paths import check_name, check_result_files
 from skinkit.cli._session import read_session, split_names
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -70,11 +71,13 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 @click.option("--resume", is_flag=True,
               help="continue a killed fit from its last completed evaluation (same --out)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="directory for fit.json, plots and the checkpoint (default: fit-<model name>)")
+              help="directory for fit.json, plots and the checkpoint (default: the fit's --name, in "
+                   "the current directory)")
 @click.option("--plots", is_flag=True, help="write plots of the fit to --out")
 @click.option("--name", "fit_name", default=None,
               help="name of the fit stored in an experiment-file SESSION (default: fit-<model name>)")
-@click.option("--overwrite", is_flag=True, help="replace a fit of that name already stored in SESSION")
+@click.option("--overwrite", is_flag=True,
+              help="replace a fit of that name already stored in SESSION, and fit.json in --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 # C901: a command of 19 options: each option is checked where it is used, in the order the
@@ -114,7 +117,8 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         obs = obs.until(until_s)
     fit_name = fit_name or f"fit-{model.name}"
     stores = str(session).lower().endswith((".h5", ".hdf5"))
-    out = Path(out_dir) if out_dir else Path.cwd() / f"fit-{model.name}"
+    # default: named after the fit (fit-<model name> unless --name), in the current directory
+    out = Path(out_dir) if out_dir else Path.cwd() / check_name(fit_name, "--name")
     evals_dir = out / "evaluations"
     state_file = out / "checkpoint.json"
     params = free_set(model.parameters(), split_names(free) or None)
@@ -161,6 +165,8 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
             if fit_name in exp.fit_names():
                 raise SkinkitError(f"{session} already holds a fit named {fit_name!r}: give another --name, "
                                    "or --overwrite to replace it")
+    if not resume:   # a finished fit's fit.json is a result too: not replaced silently by a new fit
+        check_result_files(out, ("fit.json",), "--out", overwrite=overwrite)
     if not resume:   # a fresh fit: evaluations of an earlier one in this --out are not its own
         shutil.rmtree(evals_dir, ignore_errors=True)
     out.mkdir(parents=True, exist_ok=True)

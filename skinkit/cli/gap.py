@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._paths import check_result_files
 from skinkit.cli._session import split_names
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -32,7 +33,8 @@ def gap() -> None:
               help="write gap.json (and gap.html) to this directory")
 @click.option("--name", "gap_name", default=None,
               help="name of the report stored in an experiment-file SESSION (default: gap-<model name>)")
-@click.option("--overwrite", is_flag=True, help="replace a report of that name already stored in SESSION")
+@click.option("--overwrite", is_flag=True,
+              help="replace a report of that name already stored in SESSION, and gap.json/gap.html in --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes (FE models)")
 @click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="diagnose only the session's first seconds [s] (e.g. the imaged part of a record)")
@@ -64,6 +66,8 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
             if name in exp.gap_names():
                 raise SkinkitError(f"{session} already holds a gap report named {name!r}: give another "
                                    "--name, or --overwrite to replace it")
+    if out_dir:   # an earlier report in --out is not replaced silently either
+        check_result_files(out_dir, ("gap.json", "gap.html"), "--out", overwrite=overwrite)
 
     def progress(line: str) -> None:
         click.echo(f"  {line}", err=True)

@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 
+from skinkit.cli._paths import check_result_files
 from skinkit.cli._session import read_session, split_names
 from skinkit.errors import SkinkitError
 
@@ -106,10 +107,12 @@ def _parse_span(span: str, fitted: dict[str, Any] | None, around: Any, names: li
 @click.option("--holdout", default=None, help="protocols kept out (comma-separated)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="directory for grid.json and grid.png (default: grid-<model>-<A>-<B>)")
+@click.option("--overwrite", is_flag=True, help="replace grid.json and grid.png already in --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the grid as JSON")
 def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at: str | None, weighting: str,
-         holdout: str | None, out_dir: str | None, workers: int | None, as_json: bool) -> None:
+         holdout: str | None, out_dir: str | None, overwrite: bool, workers: int | None,
+         as_json: bool) -> None:
     """The objective over a grid of two parameters of MODEL_FILE on SESSION, the others fixed (Fig 7-10)."""
     from skinkit.inverse import WEIGHTINGS
     from skinkit.inverse.grid import GridError, attach_covariance, objective_grid
@@ -136,6 +139,7 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
         around = base.with_values({k: v for k, v in fitted["values"].items() if k in base})
     half = None if span is None else _parse_span(span, fitted, around, names)
     out = Path(out_dir) if out_dir else Path.cwd() / f"grid-{model.name}-{names[0]}-{names[1]}"
+    check_result_files(out, ("grid.json", "grid.png"), "--out", overwrite=overwrite)  # before the grid runs
     say = _say
     say(f"{n} x {n} forward predictions of {model.name} on {session}")
     g = objective_grid(model, obs, (names[0], names[1]), n=n, span=half, weighting=weighting, around=around,
@@ -174,10 +178,11 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
 @click.option("--holdout", default=None, help="protocols kept out (comma-separated)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="directory for profile.json and profile.png (default: profile-<model>-<parameter>)")
+@click.option("--overwrite", is_flag=True, help="replace profile.json and profile.png already in --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the profile as JSON")
 def profile(model_file: str, session: str, name: str, free: str | None, n: int, values: str | None,
-            weighting: str, holdout: str | None, out_dir: str | None, workers: int | None,
+            weighting: str, holdout: str | None, out_dir: str | None, overwrite: bool, workers: int | None,
             as_json: bool) -> None:
     """The profile likelihood of one parameter of MODEL_FILE on SESSION: the others re-fitted at each
     value; its 95 % interval beside the quadratic (Wald) one."""
@@ -197,6 +202,7 @@ def profile(model_file: str, session: str, name: str, free: str | None, n: int, 
             raise GridError(f"--values {values!r}: give numbers in SI, comma-separated") from None
     model, obs = _session(model_file, session, holdout, workers)
     out = Path(out_dir) if out_dir else Path.cwd() / f"profile-{model.name}-{name}"
+    check_result_files(out, ("profile.json", "profile.png"), "--out", overwrite=overwrite)  # before it runs
     pr = profile_likelihood(model, obs, name, split_names(free) or None, values=vals, n=n,
                             weighting=weighting, progress=_say)
     pr = _clean({**pr, "session": str(session)})

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._paths import check_out_file
 from skinkit.cli._session import read_session, split_names
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -31,15 +32,22 @@ from skinkit.errors import SkinkitError
               help="tip axis of a one-axis CSV record (default: the model's, else z)")
 @click.option("--out", "out_file", type=click.Path(dir_okay=False), default=None,
               help="write the predictions (HDF5) here")
+@click.option("--overwrite", is_flag=True, help="replace an existing --out file")
 @click.option("--json", "as_json", is_flag=True, help="print the residual summary as JSON")
 def predict(model_file: str, session: str, protocols: str | None, until_s: float | None, holdout: str | None,
             segments: str | None, sets: tuple[str, ...],
             sensitivities: bool, workers: int | None, scheduler: str | None, axis: str | None,
-            out_file: str | None, as_json: bool) -> None:
+            out_file: str | None, overwrite: bool, as_json: bool) -> None:
     """Predict SESSION (experiment file or CSV record) with MODEL_FILE; report the residuals."""
     from skinkit.fem.model import quantity
     from skinkit.forward import load
     from skinkit.forward.residuals import summarise
+
+    if out_file:   # before any prediction: an earlier file is not replaced silently
+        out = check_out_file(out_file, "--out")
+        if out.exists() and not overwrite:
+            raise SkinkitError(f"--out {out}: already exists (an earlier result); give another --out, "
+                               "or --overwrite to replace it")
 
     model = load(model_file, workers=workers, scheduler=scheduler)
     obs = read_session(model, session, holdout, segments, axis)

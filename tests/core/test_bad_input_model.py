@@ -123,12 +123,16 @@ def test_bad_entry_is_one_line_naming_it(tmp_path, mutate, entry, words):
     assert _tree(tmp_path) == before
 
 
-def test_valid_base_model_solves(tmp_path):
-    path = write(base_spec(), tmp_path / "m.toml")
+def test_valid_base_model_solves(tmp_path, monkeypatch):
+    (tmp_path / "models").mkdir()
+    path = write(base_spec(), tmp_path / "models" / "m.toml")
+    monkeypatch.chdir(tmp_path)
     r = _run("solve", str(path), "--no-vtu")
     assert r.exit_code == 0, r.output
+    # the default output: named after the model, in the current directory, not beside the model
     assert sorted(p.name for p in (tmp_path / "m").iterdir()) == ["result.h5", "summary.json"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m", "m.toml"]  # no temporary left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m", "models"]  # no temporary left
+    assert sorted(p.name for p in (tmp_path / "models").iterdir()) == ["m.toml"]
 
 
 def test_size_estimate_is_exact_for_the_base_mesh():
@@ -198,8 +202,9 @@ def test_failed_solve_keeps_existing_output_and_leaves_nothing(tmp_path):
     spec["solver"].update(max_cuts=0, max_iter=3)
     bad = write(spec, tmp_path / "bad.toml")
     before[bad.name] = bad.stat().st_mtime_ns
-    r = _run("solve", str(bad), "--out", str(out), "--no-vtu")
+    r = _run("solve", str(bad), "--out", str(out), "--no-vtu", "--overwrite")
     assert r.exit_code == 2, r.output
+    assert "gave up at load" in r.output, r.output  # the solver failed: not a refusal of --out
     assert _tree(tmp_path) == before  # the earlier result is untouched, no temporary is left
 
 

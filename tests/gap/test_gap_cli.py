@@ -108,6 +108,10 @@ def test_json_shape_store_and_out(files):
     r = CliRunner().invoke(main, args[:-1])
     assert r.exit_code == 2 and "already holds a gap report named 'gap-gap-cli'" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+    # ... nor the report written to --out, under another name
+    r = CliRunner().invoke(main, [*args[:-1], "--name", "other"])
+    assert r.exit_code == 2 and f"--out {d / 'out'}: already holds gap.json" in r.stderr
+    assert json.loads((d / "out" / "gap.json").read_text()) == written
 
 
 def test_plain_verdict(files):

@@ -132,7 +132,8 @@ def test_killed_fit_resumes_to_the_same_optimum(disc_session, tmp_path):
 
 def test_stored_fit_is_not_overwritten_silently(disc_session, tmp_path):
     """A fit stored in the session under a name: a new fit of that name is refused before it
-    starts, another --name is stored beside it, --overwrite replaces."""
+    starts, another --name is stored beside it, --overwrite replaces. Its fit.json in --out is
+    not replaced silently either: the other name writes to its own --out."""
     from skinkit.store import open_experiment
     d = disc_session
     args = ["fit", str(d / "m.toml"), str(d / "s.h5"), "--free", "skin.E", "--out", str(tmp_path),
@@ -142,6 +143,8 @@ def test_stored_fit_is_not_overwritten_silently(disc_session, tmp_path):
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 2 and "already holds a fit" in r.output
     r = CliRunner().invoke(main, [*args[:-1], "second"])
+    assert r.exit_code == 2 and f"--out {tmp_path}: already holds fit.json" in r.output
+    r = CliRunner().invoke(main, [*args[:-1], "second", "--out", str(tmp_path / "second")])
     assert r.exit_code == 0, r.output
     with open_experiment(d / "s.h5") as exp:
         assert {"first", "second"} <= set(exp.fit_names())
