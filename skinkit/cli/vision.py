@@ -230,8 +230,9 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
 @click.option("--subset", "subset_px", default=41, show_default=True, type=click.IntRange(8, 4096),
               help="subset side [px]")
 @click.option("--name", "out_name", default=None, help="name of the stored track (default: the images')")
+@click.option("--overwrite", is_flag=True, help="replace a track of that name already stored")
 def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tracker_name: str,
-                subset_px: int, out_name: str | None) -> None:
+                subset_px: int, out_name: str | None, overwrite: bool) -> None:
     """Track the profiled points through an image sequence in 3D; store the SurfaceTrack."""
     from skinkit import registry
     from skinkit.store import open_experiment
@@ -244,9 +245,12 @@ def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tra
             raise SkinkitError(f"no profile {profile_name!r} in {experiment}; "
                                "run `skinkit vision profile` first")
         sp = exp.read_profile(profile_name)
+        name = out_name or seq.name  # type: ignore[attr-defined]
+        if name in exp.track_names() and not overwrite:  # refused before tracking, not after
+            raise SkinkitError(f"{experiment} already holds a track named {name!r}; give another "
+                               "--name, or --overwrite to replace it")
     tracker = registry.create("skinkit.trackers", tracker_name)
     track, _ = track_3d(rig, seq, sp.points, tracker, subset_px, progress=True)  # type: ignore[arg-type]
-    name = out_name or seq.name  # type: ignore[attr-defined]
     with open_experiment(experiment, mode="a") as exp:
         exp.write_track(name, track)
     ok = track.valid.all(axis=1).sum()

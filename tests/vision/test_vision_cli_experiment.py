@@ -41,11 +41,22 @@ def test_calibrate_profile_track(tmp_path, true_rig, board_set, arm_scene):
     assert (tmp_path / "profile.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     r = _run("track-3d", str(path), "--images", "indent", "--tracker", "pcc")
     assert r.returncode == 0, r.stderr
+    # a stored track is not replaced silently: refused in one line before any tracking, the
+    # file byte for byte as it was; --overwrite replaces it
+    stored = path.read_bytes()
+    r = _run("track-3d", str(path), "--images", "indent", "--tracker", "pcc")
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == [
+        f"error: {path} already holds a track named 'indent'; give another --name, or --overwrite to "
+        "replace it"], r.stderr
+    assert path.read_bytes() == stored
+    r = _run("track-3d", str(path), "--images", "indent", "--tracker", "pcc", "--overwrite")
+    assert r.returncode == 0, r.stderr
 
     with open_experiment(path) as exp:
         rig = exp.read_rig()
         profile = exp.read_profile("profile")
         track = exp.read_track("indent")
+        assert exp.track_names() == ["indent"]
     assert rig.names == true_rig.names
     assert profile.n_points >= 100
     assert track.n_frames == 2 and track.valid[:, 1].mean() > 0.7
