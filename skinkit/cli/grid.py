@@ -95,7 +95,8 @@ def _parse_span(span: str, fitted: dict[str, Any] | None, around: Any, names: li
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.argument("session", type=click.Path(dir_okay=False))
 @click.option("--pair", required=True, help="the two parameters of the grid, comma-separated (A,B)")
-@click.option("--n", "n", type=int, default=11, show_default=True, help="grid points per parameter (>= 3)")
+@click.option("--n", "n", type=click.IntRange(3, 201), default=11, show_default=True,
+              help="grid points per parameter (n² forward solves)")
 @click.option("--span", default=None,
               help="half-width about the centre: in scaled units (a fraction of the bounds' range; decades "
                    "for log-scaled parameters), one number or A_SPAN,B_SPAN; or '<k>se' (k standard errors "
@@ -171,7 +172,8 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
 @click.option("--parameter", "name", required=True, help="the parameter to profile")
 @click.option("--free", default=None,
               help="the parameters re-fitted at each value (comma-separated; default: the model's free ones)")
-@click.option("--n", "n", type=int, default=9, show_default=True, help="values profiled (>= 3), over ±3 se")
+@click.option("--n", "n", type=click.IntRange(3, 201), default=9, show_default=True,
+              help="values profiled, over ±3 se (one fit each)")
 @click.option("--values", "values", default=None, help="the values to profile instead [SI], comma-separated")
 @click.option("--objective", "weighting", default="noise", show_default=True,
               help="weighting (as skinkit fit)")
