@@ -11,8 +11,8 @@ The subset: one test per link, speed and failure path, the ones that died under 
 (``watchdog (host silent) 0.55-0.64 s``). Left out: pure encoding tests and the in-process
 ``sim`` driver (no second process, no wall clock), the lossy-link variants (same timing as the
 equivalence tests) and the starved-emulator test (it makes its own worst case). Measured on
-the shared 2-core machine (other work keeping its load average at 4-5): these 8 take 12 s
-alone and 20 s beside the two busy loops; the three whole files 24 s alone, 51 s beside them.
+the shared 2-core machine (other work keeping its load average at 3-5): these 8 take 12-14 s
+alone and 20-43 s beside the two busy loops; the three whole files 24 s alone, 50 s beside them.
 """
 
 from __future__ import annotations
