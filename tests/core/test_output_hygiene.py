@@ -101,15 +101,9 @@ def test_predict_out_is_not_replaced_silently(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.h5"]
 
 
-# the README tour's line that makes its second run fail, until the README passes overwrite=True
-_PENDING = 'create_experiment("session.h5")'
-
-
 @pytest.mark.needs_plugins
 @pytest.mark.skipif(not (SHARED / "data" / "real").exists(), reason="shared data not beside the checkout")
 def test_readme_tour_runs_twice_and_writes_only_in_the_current_directory(tmp_path, monkeypatch, capsys):
-    from skinkit.errors import StoreError
-
     code = re.search(r"## A tour of the Python API\s+```python\n(.*?)```", (ROOT / "README.md").read_text(),
                      re.S).group(1)
     code = code.replace("../shared/", f"{SHARED}{os.sep}")  # written to run from the checkout
@@ -117,14 +111,8 @@ def test_readme_tour_runs_twice_and_writes_only_in_the_current_directory(tmp_pat
     before = _state(repo_paths)
     monkeypatch.chdir(tmp_path)
     printed = []
-    for run in (1, 2):
-        try:
-            exec(compile(code, "README.md", "exec"), {})
-        except StoreError as exc:
-            if run == 2 and _PENDING in code and "already exists" in str(exc):
-                pytest.xfail("README tour: create_experiment('session.h5') refuses the file its first run "
-                             "wrote; the tour needs overwrite=True to run twice (README change pending)")
-            raise
+    for _ in (1, 2):
+        exec(compile(code, "README.md", "exec"), {})
         printed.append(capsys.readouterr().out)
     assert printed[0] == printed[1]  # the same session, read back the same way
     assert [p.name for p in tmp_path.iterdir()] == ["session.h5"]
