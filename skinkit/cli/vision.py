@@ -121,9 +121,10 @@ def _images(exp: object, name: str | None, of_skin: bool = False) -> object:
 @click.option("--asymmetric", is_flag=True, help="dot grid: OpenCV's asymmetric circle grid (staggered rows)")
 @click.option("--min-views", default=4, show_default=True, type=click.IntRange(1, 100_000),
               help="board views each camera needs")
+@click.option("--overwrite", is_flag=True, help="replace a rig already stored in EXPERIMENT")
 def calibrate_cmd(experiment: str, images_name: str | None, target: str | None, board_text: str,
                   square_mm: float, charuco: bool, marker_mm: float | None, dictionary: str,
-                  fiducials_text: str, asymmetric: bool, min_views: int) -> None:
+                  fiducials_text: str, asymmetric: bool, min_views: int, overwrite: bool) -> None:
     """Calibrate the rig from board views in EXPERIMENT and store it there."""
     import cv2
 
@@ -136,6 +137,10 @@ def calibrate_cmd(experiment: str, images_name: str | None, target: str | None, 
     target = "charuco" if charuco else (target or "checkerboard")
     size = _parse_board(board_text)
     grid = _dot_grid(size, square_mm, fiducials_text, asymmetric) if target == "dotgrid" else None
+    with open_experiment(experiment) as exp:   # refused before calibrating, not after
+        if exp.camera_names() and not overwrite:
+            raise SkinkitError(f"{experiment} already holds a rig ({', '.join(exp.camera_names())}); "
+                               "--overwrite to replace it")
     with open_experiment(experiment, mode="a") as exp:
         seq = _images(exp, images_name)
         names = seq.camera_names  # type: ignore[attr-defined]
@@ -194,8 +199,10 @@ def _dot_grid(size: tuple[int, int], pitch_mm: float, fiducials_text: str, asymm
 @click.option("--name", "out_name", default="profile", show_default=True, help="name of the stored profile")
 @click.option("--plot", "plot_path", default=None, type=click.Path(dir_okay=False),
               help="also save a figure (height and ISU maps) to this PNG")
+@click.option("--overwrite", is_flag=True, help="replace a profile of that name already stored")
 def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_name: str,
-                spacing_px: int, subset_px: int, out_name: str, plot_path: str | None) -> None:
+                spacing_px: int, subset_px: int, out_name: str, plot_path: str | None,
+                overwrite: bool) -> None:
     """Profile the surface automatically and store the point cloud in EXPERIMENT."""
     import numpy as np
 
@@ -203,6 +210,9 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
     from skinkit.store import open_experiment
 
     with open_experiment(experiment) as exp:  # read only: a refused profile leaves the file as it was
+        if out_name in exp.profile_names() and not overwrite:   # refused before profiling, not after
+            raise SkinkitError(f"{experiment} already holds a profile named {out_name!r}; give another "
+                               "--name, or --overwrite to replace it")
         rig = exp.read_rig()
         seq = _images(exp, images_name, of_skin=True)
     kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}

@@ -51,6 +51,13 @@ def test_calibrate_profile_track(tmp_path, true_rig, board_set, arm_scene):
     assert path.read_bytes() == stored
     r = _run("track-3d", str(path), "--images", "indent", "--tracker", "pcc", "--overwrite")
     assert r.returncode == 0, r.stderr
+    # nor a stored profile or rig: both refused before any work, the file as it was
+    stored = path.read_bytes()
+    r = _run("profile", str(path), "--images", "indent", "--spacing", "24")
+    assert r.returncode == 2 and "already holds a profile named 'profile'" in r.stderr, r.stderr
+    r = _run("calibrate", str(path), "--images", "calib", "--board", "9x6", "--square-mm", "3")
+    assert r.returncode == 2 and "already holds a rig" in r.stderr and "--overwrite" in r.stderr, r.stderr
+    assert path.read_bytes() == stored
 
     with open_experiment(path) as exp:
         rig = exp.read_rig()
