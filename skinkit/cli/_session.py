@@ -13,13 +13,16 @@ def split_names(text: str | None) -> list[str]:
 
 
 def read_session(model: Any, session: str | os.PathLike[str], holdout: str | None = None,
-                 segments: str | None = None, axis: str | None = None) -> Any:
-    """The observations of ``session`` for ``model``: ``holdout`` (comma-separated protocols)
-    marked held out, records split into ``segments`` first, a one-axis CSV read along ``axis``
-    (default: the model's own axis when it is x, y or z, else z)."""
+                 segments: str | None = None, axis: str | None = None, protocols: str | None = None) -> Any:
+    """The observations of ``session`` for ``model``: only the records ``protocols`` names
+    (comma-separated; default all, e.g. to leave out records another model describes),
+    ``holdout`` (comma-separated protocols) marked held out, records split into ``segments``
+    first, a one-axis CSV read along ``axis`` (default: the model's own axis when it is x, y or
+    z, else z)."""
     from skinkit.forward import read_observations
 
     if axis is None:
         axis = str(getattr(model, "axis", "z"))
         axis = axis if axis in ("x", "y", "z") else "z"
-    return read_observations(session, held_out=split_names(holdout), axis=axis, segments=segments)
+    return read_observations(session, held_out=split_names(holdout), axis=axis, segments=segments,
+                             protocols=split_names(protocols) or None)

@@ -56,6 +56,8 @@ def _bound(item: str, params) -> tuple[str, float, float]:
               help="narrow a parameter's bounds for the fit (SI or with units), repeatable")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
               help="multi-start: this many starts from a space-filling design; every start is kept")
+@click.option("--protocols", default=None,
+              help="read only these records of SESSION (comma-separated; default all)")
 @click.option("--holdout", default=None, help="protocols kept out of the fit and predicted (comma-separated)")
 @click.option("--segments", type=click.Choice(["cycles"]), default=None,
               help="split every record into protocols first (cycles: one per loading cycle, "
@@ -86,7 +88,7 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,  # noqa: C901
         start_items: tuple[str, ...], bound_items: tuple[str, ...], starts: int,
         holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
-        max_iterations: int,
+        max_iterations: int, protocols: str | None,
         resume: bool, out_dir: str | None, plots: bool, fit_name: str | None, overwrite: bool,
         workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
@@ -112,7 +114,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         raise SkinkitError(f"--optimiser {optimiser!r} is not installed; installed: "
                            f"{', '.join(registry.names('skinkit.optimisers'))}")
     model = load(model_file, workers=workers)
-    obs = read_session(model, session, holdout, segments)
+    obs = read_session(model, session, holdout, segments, protocols=protocols)
     if until_s is not None:
         obs = obs.until(until_s)
     fit_name = fit_name or f"fit-{model.name}"
@@ -149,6 +151,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
                 "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
                 "holdout": split_names(holdout), "start": given,
                 "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "until": until_s,
+                "protocols": split_names(protocols),
                 "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations}
     if resume:
         if not state_file.is_file():

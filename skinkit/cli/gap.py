@@ -23,6 +23,8 @@ def gap() -> None:
 @click.argument("session", type=click.Path(dir_okay=False))
 @click.option("--effects", default=None,
               help="candidate effects (comma-separated; default: every installed effect that applies)")
+@click.option("--protocols", default=None,
+              help="read only these records of SESSION (comma-separated; default all)")
 @click.option("--holdout", default=None, help="protocols kept out of the fit and predicted (comma-separated)")
 @click.option("--max-effects", type=click.IntRange(min=0), default=2, show_default=True,
               help="name at most this many effects, one per round (0: score and locate only)")
@@ -41,7 +43,8 @@ def gap() -> None:
 @click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,
                  candidates: int, free: str | None, out_dir: str | None, gap_name: str | None,
-                 overwrite: bool, workers: int | None, until_s: float | None, as_json: bool) -> None:
+                 overwrite: bool, workers: int | None, until_s: float | None, as_json: bool,
+                 protocols: str | None) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
     then refits of the best), and how far the gap shrinks with it.
@@ -76,6 +79,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     if effects is not None and not wanted:
         raise SkinkitError("--effects: no effect named")
     report = diagnose(model_file, session, effects=wanted, holdout=split_names(holdout),
+                      protocols=split_names(protocols) or None,
                       free=None if free is None else split_names(free), max_effects=max_effects,
                       candidates=candidates, workers=workers, until=until_s, progress=progress)
     if stores:

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from skinkit.cli._paths import check_out_file
-from skinkit.cli._session import read_session, split_names
+from skinkit.cli._session import read_session
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
@@ -16,7 +16,8 @@ from skinkit.errors import SkinkitError
 @click.command("predict")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.argument("session", type=click.Path(dir_okay=False))
-@click.option("--protocols", default=None, help="only these protocols (comma-separated)")
+@click.option("--protocols", default=None,
+              help="read only these records of SESSION (comma-separated; default all)")
 @click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="only the first part of every record, up to this time [s]")
 @click.option("--holdout", default=None, help="mark these protocols held out (comma-separated)")
@@ -50,9 +51,7 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
                                "or --overwrite to replace it")
 
     model = load(model_file, workers=workers, scheduler=scheduler)
-    obs = read_session(model, session, holdout, segments, axis)
-    if protocols:
-        obs = obs.select(split_names(protocols))
+    obs = read_session(model, session, holdout, segments, axis, protocols)
     if until_s is not None:
         obs = obs.until(until_s)
     params = model.parameters()

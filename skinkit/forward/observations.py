@@ -223,6 +223,9 @@ def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = ()
         from skinkit.store import read_robot_csv
 
         rec = read_robot_csv(p, axis=axis)
+        if protocols is not None and rec.protocol.name not in protocols:
+            raise SchemaError("protocols", f"no record(s) {sorted(set(protocols))} in {p} (it has "
+                                           f"{[rec.protocol.name]})")
         obs = Observations({rec.protocol.name: ProtocolObservations(
             rec.protocol, channels_from_record(rec, str(p)), False)}, None, str(p))
     else:

@@ -266,7 +266,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              effects: Sequence[str] | None = None, holdout: Sequence[str] = (),
              free: Sequence[str] | None = None, max_effects: int = 2, candidates: int = 3,
              alpha: float = 0.05, workers: int | None = None, until: float | None = None,
-             progress: Callable[[str], None] | None = None) -> GapReport:
+             progress: Callable[[str], None] | None = None,
+             protocols: Sequence[str] | None = None) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -275,7 +276,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     calibrate (default the model file's free ones); ``max_effects``: rounds of naming;
     ``candidates``: refits per round; ``alpha``: the level of every test; ``workers``: worker
     processes of a finite-element model; ``until`` [s]: only the session's first seconds (e.g. the
-    imaged part of a record); ``progress(line)``: what is being done.
+    imaged part of a record); ``progress(line)``: what is being done; ``protocols``: read only
+    these records of a session path (e.g. leave out records another model describes).
     """
     from skinkit.forward import load, model_kind, read_description
     from skinkit.gap.where import cell_chi2, locate
@@ -301,7 +303,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         if not isinstance(observations, Observations):
             from skinkit.cli._session import read_session
             source = str(observations)
-            observations = read_session(base, observations, ",".join(holdout) or None)
+            observations = read_session(base, observations, ",".join(holdout) or None,
+                                        protocols=",".join(protocols) if protocols else None)
         else:
             source = observations.source
             if holdout:
