@@ -50,6 +50,10 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
+#: the figures --plot writes (refused if present without --overwrite)
+PLOT_FILES = ("sysid.png", "sysid_residuals.png", "sysid_comparison.png", "incremental.png")
+
+
 @click.command()
 @click.argument("record", type=click.Path(path_type=Path, dir_okay=False))
 @click.option("--model", type=click.Choice(["linear", "wiener", "hammerstein"]),
@@ -88,10 +92,11 @@ def _clean(obj: Any) -> Any:
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @click.option("--plot", "plot_dir", type=click.Path(path_type=Path, file_okay=False),
               default=None, help="Write figures (identification, residuals) into this folder.")
+@click.option("--overwrite", is_flag=True, help="Replace figures an earlier run left in the --plot folder.")
 def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None, axis: str,
           robot_mass: float, robot_damping: float, robot_stiffness: float, hold: str,
           refine: bool, two_sided: bool, fit_offset: bool, compare: bool, incremental: bool,
-          probe_radius_mm: float | None, as_json: bool, plot_dir: Path | None) -> None:
+          probe_radius_mm: float | None, as_json: bool, plot_dir: Path | None, overwrite: bool) -> None:
     """Identify K, B, I (and a Wiener or Hammerstein nonlinearity) from RECORD.
 
     RECORD is an experiment file (choose the record with --protocol) or a CSV file with
@@ -108,6 +113,11 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
     from skinkit.sysid.record import record_signals
     from skinkit.sysid.wiener import identify_wiener_signals
 
+    if plot_dir is not None and not overwrite:   # before any work: earlier figures are not replaced silently
+        earlier = sorted(f for f in PLOT_FILES if (plot_dir / f).exists())
+        if earlier:
+            raise SkinkitError(f"--plot {plot_dir}: already holds {', '.join(earlier)} (an earlier result); "
+                               "give another folder, or --overwrite to replace them")
     rec = _load(record, protocol, axis)
     robot = None
     if robot_mass or robot_damping or robot_stiffness:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 
 import click
 
@@ -199,7 +200,7 @@ def _dot_grid(size: tuple[int, int], pitch_mm: float, fiducials_text: str, asymm
 @click.option("--name", "out_name", default="profile", show_default=True, help="name of the stored profile")
 @click.option("--plot", "plot_path", default=None, type=click.Path(dir_okay=False),
               help="also save a figure (height and ISU maps) to this PNG")
-@click.option("--overwrite", is_flag=True, help="replace a profile of that name already stored")
+@click.option("--overwrite", is_flag=True, help="replace a profile of that name already stored (and --plot)")
 def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_name: str,
                 spacing_px: int, subset_px: int, out_name: str, plot_path: str | None,
                 overwrite: bool) -> None:
@@ -213,6 +214,9 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
         if out_name in exp.profile_names() and not overwrite:   # refused before profiling, not after
             raise SkinkitError(f"{experiment} already holds a profile named {out_name!r}; give another "
                                "--name, or --overwrite to replace it")
+        if plot_path and os.path.exists(plot_path) and not overwrite:
+            raise SkinkitError(f"--plot {plot_path}: already exists (an earlier figure); give another path, "
+                               "or --overwrite to replace it")
         rig = exp.read_rig()
         seq = _images(exp, images_name, of_skin=True)
     kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}

@@ -45,6 +45,14 @@ def test_cli_wiener_json_and_plots(wiener_csv, tmp_path):
     vafs = {row["model"]: row["vaf_pct"] for row in d["comparison"]}
     assert vafs["wiener"] == pytest.approx(d["vaf_wiener_pct"], abs=1e-9)
     assert vafs["wiener"] > vafs["hammerstein"] and vafs["wiener"] > vafs["linear"]
+    # the figures are not replaced silently: refused before any work, the files as they were
+    before = {p: Path(p).read_bytes() for p in d["plots"]}
+    r = CliRunner().invoke(cli, ["sysid", str(wiener_csv), "--model", "wiener",
+                                 "--plot", str(tmp_path / "plots")])
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert r.exit_code == 2 and len(lines) == 1, r.output
+    assert "--overwrite" in lines[0] and "sysid.png" in lines[0], r.output
+    assert all(Path(p).read_bytes() == b for p, b in before.items())
 
 
 def test_cli_linear_experiment_file_with_protocol(tmp_path, total):

@@ -55,6 +55,9 @@ def test_calibrate_profile_track(tmp_path, true_rig, board_set, arm_scene):
     stored = path.read_bytes()
     r = _run("profile", str(path), "--images", "indent", "--spacing", "24")
     assert r.returncode == 2 and "already holds a profile named 'profile'" in r.stderr, r.stderr
+    r = _run("profile", str(path), "--images", "indent", "--name", "again",
+             "--plot", str(tmp_path / "profile.png"))
+    assert r.returncode == 2 and "--plot" in r.stderr and "already exists" in r.stderr, r.stderr
     r = _run("calibrate", str(path), "--images", "calib", "--board", "9x6", "--square-mm", "3")
     assert r.returncode == 2 and "already holds a rig" in r.stderr and "--overwrite" in r.stderr, r.stderr
     assert path.read_bytes() == stored
