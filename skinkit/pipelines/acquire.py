@@ -1,14 +1,39 @@
-"""Acquisition step: run named protocols through a driver plugin into an experiment file."""
+"""Acquisition: run named protocols through a driver plugin into an experiment file, or stream
+records already in memory into one block by block, as a driver would."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from skinkit import registry
-from skinkit.store import open_experiment
+from skinkit.schemas import RobotRecord
+from skinkit.store import create_experiment, open_experiment
+
+
+def _quiet(step: str, fraction: float) -> None:
+    pass
+
+
+def stream_records(path: Path, records: list[RobotRecord], block: int,
+                   progress: Callable[[str, float], None] = _quiet, append: bool = False) -> None:
+    """Write ``records`` into a new experiment file ``path`` (``append``: an existing one) in
+    blocks of ``block`` samples, each flushed, as a driver streaming from the robot would."""
+    total = sum(r.n_samples for r in records)
+    done = 0
+    with (open_experiment(path, "a") if append else create_experiment(path, overwrite=True)) as exp:
+        if not append:
+            exp.set_metadata(subject="virtual", site="forearm (virtual lab)", operator="skinkit demo")
+        for record in records:
+            with exp.record_writer(record.protocol, record.channels, record.rate_hz) as w:
+                for start in range(0, record.n_samples, block):
+                    chunk = record.slice(start, start + block)
+                    w.append(chunk)
+                    done += chunk.n_samples
+                    progress("stream to store", done / total)
 
 
 def run_protocols(path: Path, protocols: list[str], driver: str = "sim", progress: bool = False,

@@ -91,7 +91,7 @@ def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress 
     from skinkit.lab.imaging import followed_grid
     from skinkit.lab.lumped import LumpedTruth, stochastic_session
     from skinkit.lab.session import simulate, surface_height, write_records
-    from skinkit.pipelines.demo import stream_records
+    from skinkit.pipelines.acquire import stream_records
 
     session, truth_path = out / SESSION, out / TRUTH
     for p in (session, truth_path):
@@ -126,9 +126,21 @@ def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress 
             "views": sum(int(np.prod(s.frames.shape[:2])) for s in sequences)}
 
 
+def _sysid_fit(model: str, values: dict[str, tuple[float, str, float]], vaf_pct: float,
+               n_samples: int) -> Any:
+    """A FitResult of a lumped identification from name -> (value, unit, standard error)."""
+    from skinkit.schemas import FitResult, Parameter, ParameterSet
+
+    params = ParameterSet(Parameter(k, v, u, lower=-math.inf) for k, (v, u, _) in values.items())
+    se = [s for (_, _, s) in values.values()]
+    cov = np.diag(np.square(se)) if all(np.isfinite(se)) else None
+    return FitResult(model, params, objective=1.0 - vaf_pct / 100.0, n_evaluations=n_samples,
+                     covariance=cov, extra={"vaf_pct": vaf_pct},
+                     message="objective = 1 - VAF/100 (fraction of output variance unexplained)")
+
+
 def identify_lumped(session: Path, progress: Progress = _quiet) -> dict[str, Any]:
     """Step 2: the linear and Wiener models of the stochastic records, stored as fits."""
-    from skinkit.pipelines.demo import _fit
     from skinkit.sysid import identify_linear, identify_wiener
 
     progress("lumped: K, B, I; Wiener", 0.0)
@@ -142,11 +154,11 @@ def identify_lumped(session: Path, progress: Progress = _quiet) -> dict[str, Any
     wie = identify_wiener(wie_rec)
     ld, wd = lin.to_dict(), wie.to_dict()
     with open_experiment(session, "a") as exp:
-        exp.write_fit("linear", _fit("linear", {
+        exp.write_fit("linear", _sysid_fit("linear", {
             "K": (ld["K_N_per_m"], "N/m", ld["K_se_N_per_m"]),
             "B": (ld["B_Ns_per_m"], "N s/m", ld["B_se_Ns_per_m"]),
             "I": (ld["I_kg"], "kg", ld["I_se_kg"])}, ld["vaf_linear_pct"], lin_rec.n_samples))
-        exp.write_fit("wiener", _fit("wiener", {
+        exp.write_fit("wiener", _sysid_fit("wiener", {
             "C1": (wd["C1_m"], "m", wd["C1_se_m"]), "C2": (wd["C2_per_N"], "1", wd["C2_se_per_N"]),
             "Is": (wd["Is_s2"], "1", wd["Is_se_s2"]), "Bs": (wd["Bs_s"], "s", wd["Bs_se_s"])},
             wd["vaf_wiener_pct"], wie_rec.n_samples))

@@ -9,6 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from skinkit.cli import cli
+from tests.core._cli import one_error
 
 MODEL = """[model]
 kind = "lumped"
@@ -36,7 +37,7 @@ WANTED = "preconditioning,normal_indentation"
 def session(tmp_path_factory):
     from skinkit.lab.lumped import LumpedTruth, stochastic_session
     from skinkit.lab.session import make_session
-    from skinkit.pipelines.demo import stream_records
+    from skinkit.pipelines.acquire import stream_records
 
     d = tmp_path_factory.mktemp("protocols")
     model = d / "relax.toml"
@@ -48,17 +49,11 @@ def session(tmp_path_factory):
     return model, s
 
 
-def _one_line(res, *words):
-    lines = [ln for ln in res.output.splitlines() if ln.strip()]
-    assert res.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error:"), res.output
-    assert all(w in lines[0] for w in words), lines[0]
-
-
 def test_predict_and_fit_read_only_the_named_records(session, tmp_path):
     model, s = session
     run = CliRunner().invoke
     # every record read: the stochastic one is not this model's and cannot be read as a session of it
-    _one_line(run(cli, ["predict", str(model), str(s)]), "stochastic_linear")
+    one_error(run(cli, ["predict", str(model), str(s)]), "stochastic_linear")
     res = run(cli, ["predict", str(model), str(s), "--protocols", WANTED, "--json"])
     assert res.exit_code == 0, res.output
     assert set(json.loads(res.output)["protocols"]) == {"preconditioning", "normal_indentation"}
@@ -77,4 +72,4 @@ def test_a_record_the_file_lacks_is_named(session):
     model, s = session
     run = CliRunner().invoke
     for cmd in (["predict"], ["fit"], ["gap", "diagnose"]):
-        _one_line(run(cli, [*cmd, str(model), str(s), "--protocols", "nope"]), "nope", "normal_indentation")
+        one_error(run(cli, [*cmd, str(model), str(s), "--protocols", "nope"]), "nope", "normal_indentation")
