@@ -12,15 +12,7 @@ from click.testing import CliRunner
 from skinkit.cli import cli
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit.store import create_experiment
-
-
-def _one_error(r, *needles: str) -> str:
-    assert r.exit_code == 2, (r.exit_code, r.output)
-    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
-    for n in needles:
-        assert n in lines[0], (n, lines[0])
-    return lines[0]
+from tests.core._cli import one_error
 
 
 def _run(*args: str):
@@ -46,7 +38,7 @@ def _tree(root) -> dict:
 ])
 def test_robot_run_refuses_and_leaves_no_file(tmp_path, args, needles):
     out = tmp_path / "r.h5"
-    _one_error(_run("robot", "run", "normal_indentation", *args, "--out", str(out)), *needles)
+    one_error(_run("robot", "run", "normal_indentation", *args, "--out", str(out)), *needles)
     assert not out.exists() and list(tmp_path.iterdir()) == []
 
 
@@ -56,9 +48,9 @@ def test_robot_run_refusal_keeps_existing_file(tmp_path):
     assert _run("robot", "run", "preconditioning", "--param", "hold=0.2", "--out", str(out),
                 "--json").exit_code == 0
     before = _tree(tmp_path)
-    _one_error(_run("robot", "run", "normal_indentation", "--param", "peak_to_peak=1",
+    one_error(_run("robot", "run", "normal_indentation", "--param", "peak_to_peak=1",
                     "--out", str(out)), "travel limit")
-    _one_error(_run("robot", "run", "preconditioning", "--out", str(out)), "already holds")
+    one_error(_run("robot", "run", "preconditioning", "--out", str(out)), "already holds")
     assert _tree(tmp_path) == before
 
 
@@ -70,7 +62,7 @@ def test_robot_run_refusal_keeps_existing_file(tmp_path):
     (["--skin", "rubber"], "'--skin'"),
 ])
 def test_robot_emulate_options_out_of_range(args, option):
-    _one_error(_run("robot", "emulate", *args), option)
+    one_error(_run("robot", "emulate", *args), option)
 
 
 @pytest.mark.needs_plugins
@@ -79,7 +71,7 @@ def test_robot_emulate_busy_can_port():
         s.bind(("127.0.0.1", 0))
         s.listen(1)
         port = s.getsockname()[1]
-        _one_error(_run("robot", "emulate", "--can", "--port", str(port)), f"--port {port}", "in use")
+        one_error(_run("robot", "emulate", "--can", "--port", str(port)), f"--port {port}", "in use")
 
 
 def _experiment(path, n=400):
@@ -91,9 +83,9 @@ def _experiment(path, n=400):
 
 def test_recover_into_missing_folder_or_onto_a_file(tmp_path):
     src = _experiment(tmp_path / "a.h5")
-    _one_error(_run("recover", str(src), str(tmp_path / "missing" / "b.h5")), "OUT", "does not exist")
-    _one_error(_run("recover", str(src), str(src / "b.h5")), "OUT")
-    _one_error(_run("recover", str(src), str(src)), "already exists")
+    one_error(_run("recover", str(src), str(tmp_path / "missing" / "b.h5")), "OUT", "does not exist")
+    one_error(_run("recover", str(src), str(src / "b.h5")), "OUT")
+    one_error(_run("recover", str(src), str(src)), "already exists")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.h5"]
     ok = _run("recover", str(src), str(tmp_path / "b.h5"))
     assert ok.exit_code == 0, ok.output
@@ -105,7 +97,7 @@ def test_recover_refuses_an_impossible_committed_count(tmp_path):
     src = _experiment(tmp_path / "a.h5")
     with h5py.File(src, "a") as f:
         f["records/normal_indentation/committed"][0] = 10**9
-    _one_error(_run("recover", str(src), str(tmp_path / "b.h5")), "committed")
+    one_error(_run("recover", str(src), str(tmp_path / "b.h5")), "committed")
     assert not (tmp_path / "b.h5").exists()
 
 
@@ -115,15 +107,15 @@ def test_import_csv_refuses_path_like_record_names(tmp_path, name):
     csv.write_text("time_s,force_N\n0,0\n0.01,1\n0.02,2\n")
     exp = _experiment(tmp_path / "e.h5")
     before = _tree(tmp_path)
-    _one_error(_run("import-csv", str(csv), str(exp), "--protocol", name), "--protocol")
-    _one_error(_run("import-csv", str(csv), str(tmp_path / "new.h5"), "--protocol", name), "--protocol")
+    one_error(_run("import-csv", str(csv), str(exp), "--protocol", name), "--protocol")
+    one_error(_run("import-csv", str(csv), str(tmp_path / "new.h5"), "--protocol", name), "--protocol")
     assert _tree(tmp_path) == before
 
 
 def test_import_csv_bad_csv_creates_no_experiment(tmp_path):
     csv = tmp_path / "r.csv"
     csv.write_text("time_s,force_N\n0,0\n0.01,oops\n")
-    _one_error(_run("import-csv", str(csv), str(tmp_path / "new.h5")), "oops")
+    one_error(_run("import-csv", str(csv), str(tmp_path / "new.h5")), "oops")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
 
 
@@ -135,7 +127,7 @@ def test_import_csv_bad_csv_creates_no_experiment(tmp_path):
 ])
 def test_sysid_physical_options(tmp_path, args, option):
     rec = _experiment(tmp_path / "a.h5")
-    _one_error(_run("sysid", str(rec), *args), option)
+    one_error(_run("sysid", str(rec), *args), option)
 
 
 @pytest.mark.parametrize(("args", "option"), [
@@ -145,4 +137,4 @@ def test_sysid_physical_options(tmp_path, args, option):
     (["sysid", "--repeat", "0"], "'--repeat'"), (["fit", "--seed", "-1"], "'--seed'"),
 ])
 def test_bench_bad_counts(args, option):
-    _one_error(_run("bench", *args), option)
+    one_error(_run("bench", *args), option)

@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from skinkit.cli import cli
 from skinkit.fem.errors import ModelError
 from skinkit.fem.model import build_model, estimate_size, layer_table
+from tests.core._cli import one_error
 
 from ._model_files import base_spec, write
 
@@ -22,15 +23,6 @@ pytestmark = pytest.mark.needs_plugins
 
 def _run(*args: str, env: dict | None = None):
     return CliRunner().invoke(cli, list(args), env=env)
-
-
-def _one_error(r, *needles: str) -> str:
-    assert r.exit_code == 2, (r.exit_code, r.output)
-    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
-    for n in needles:
-        assert n in lines[0], (n, lines[0])
-    return lines[0]
 
 
 def _tree(root) -> dict:
@@ -119,7 +111,7 @@ def test_bad_entry_is_one_line_naming_it(tmp_path, mutate, entry, words):
     # and through the CLI: one line, exit 2, nothing written
     path = write(spec, tmp_path / "m.toml")
     before = _tree(tmp_path)
-    _one_error(_run("solve", str(path)), entry)
+    one_error(_run("solve", str(path)), entry)
     assert _tree(tmp_path) == before
 
 
@@ -147,16 +139,16 @@ def test_huge_mesh_is_refused_fast_with_estimate_and_override(tmp_path):
     spec["layers"][1]["elements"] = 40
     path = write(spec, tmp_path / "m.toml")
     t0 = time.process_time()
-    line = _one_error(_run("solve", str(path)), "geometry:", "unknowns", "GB",
+    line = one_error(_run("solve", str(path)), "geometry:", "unknowns", "GB",
                       "max_unknowns", "SKINKIT_MAX_UNKNOWNS")
     assert time.process_time() - t0 < 10  # refused from the estimate, not built
     assert "80,000 elements" not in line and "over the limit of 300,000" in line
     # the environment variable moves the limit both ways
     small = write(base_spec(), tmp_path / "s.toml")
-    _one_error(_run("solve", str(small), env={"SKINKIT_MAX_UNKNOWNS": "100"}), "over the limit of 100")
+    one_error(_run("solve", str(small), env={"SKINKIT_MAX_UNKNOWNS": "100"}), "over the limit of 100")
     spec = base_spec()
     spec["solver"]["max_unknowns"] = 100
-    _one_error(_run("solve", str(write(spec, tmp_path / "t.toml"))), "over the limit of 100")
+    one_error(_run("solve", str(write(spec, tmp_path / "t.toml"))), "over the limit of 100")
 
 
 @pytest.mark.parametrize(("content", "words"), [
@@ -167,14 +159,14 @@ def test_huge_mesh_is_refused_fast_with_estimate_and_override(tmp_path):
 def test_binary_latin1_and_broken_files(tmp_path, content, words):
     path = tmp_path / "m.toml"
     path.write_bytes(content)
-    _one_error(_run("solve", str(path)), str(path), words)
+    one_error(_run("solve", str(path)), str(path), words)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.toml"]
 
 
 def test_model_path_without_toml(tmp_path):
     path = tmp_path / "model"
     path.write_text((tmp_path / "x").name)
-    _one_error(_run("solve", str(path)), "MODEL_FILE", ".toml")
+    one_error(_run("solve", str(path)), "MODEL_FILE", ".toml")
     assert path.is_file() and path.read_text() == "x"
 
 
@@ -182,12 +174,12 @@ def test_out_that_is_a_file_under_a_file_or_a_symlink(tmp_path):
     model = write(base_spec(), tmp_path / "m.toml")
     f = tmp_path / "afile"
     f.write_text("keep")
-    _one_error(_run("solve", str(model), "--out", str(f)), "--out")
-    _one_error(_run("solve", str(model), "--out", str(f / "sub")), "--out", "not a directory")
+    one_error(_run("solve", str(model), "--out", str(f)), "--out")
+    one_error(_run("solve", str(model), "--out", str(f / "sub")), "--out", "not a directory")
     target = tmp_path / "elsewhere"
     target.mkdir()
     (tmp_path / "link").symlink_to(target)
-    _one_error(_run("solve", str(model), "--out", str(tmp_path / "link")), "--out", "symbolic link")
+    one_error(_run("solve", str(model), "--out", str(tmp_path / "link")), "--out", "symbolic link")
     assert f.read_text() == "keep" and not any(target.iterdir())
 
 
@@ -211,12 +203,12 @@ def test_failed_solve_keeps_existing_output_and_leaves_nothing(tmp_path):
 @pytest.mark.parametrize("levels", ["0", "-1", "99"])
 def test_convergence_levels_out_of_range(tmp_path, levels):
     model = write(base_spec(), tmp_path / "m.toml")
-    _one_error(_run("convergence", str(model), "--levels", levels), "'--levels'", "1<=x<=8")
+    one_error(_run("convergence", str(model), "--levels", levels), "'--levels'", "1<=x<=8")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.toml"]
 
 
 def test_convergence_refuses_a_finest_level_too_large_before_solving(tmp_path):
     model = write(base_spec(), tmp_path / "m.toml")
     r = _run("convergence", str(model), "--levels", "3", env={"SKINKIT_MAX_UNKNOWNS": "5000"})
-    _one_error(r, "over the limit of 5,000")
+    one_error(r, "over the limit of 5,000")
     assert "level 1" not in r.stderr and sorted(os.listdir(tmp_path)) == ["m.toml"]

@@ -23,6 +23,7 @@ from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SchemaError, SkinkitError
 from skinkit.schemas import CameraModel, CameraRig, ImageSequence, Protocol, RobotRecord, SurfaceProfile
 from skinkit.store import create_experiment, open_experiment
+from tests.core._cli import one_error
 
 from ._model_files import base_spec, write
 
@@ -30,13 +31,7 @@ pytestmark = pytest.mark.needs_plugins
 
 
 def _one_error(r, *needles: str) -> str:
-    assert r.exit_code == 2, (r.exit_code, r.output)
-    assert "Traceback" not in r.output
-    lines = [ln for ln in r.stderr.splitlines() if ln.strip() and not ln.startswith("warning:")]
-    assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
-    for n in needles:
-        assert n in lines[0], (n, lines[0])
-    return lines[0]
+    return one_error(r, *needles, warnings_ok=True)
 
 
 def _tree(root: Path) -> dict[str, int]:
