@@ -161,12 +161,17 @@ def window_offsets(window_m: float) -> np.ndarray:
     return np.column_stack([X.ravel(), Y.ravel(), np.zeros(9)])
 
 
+def window_weights() -> np.ndarray:
+    """``(9,)`` weights of the points of :func:`window_offsets` (summing to 1): the window's mean."""
+    return np.outer(_GAUSS3[1], _GAUSS3[1]).ravel() / 4.0
+
+
 def window_mean(points: np.ndarray, d_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Positions ``(n, P, 3)`` of windowed points from their Gauss points' ``(n, 9 P, 3)``: the
     centre's rest position plus the window's mean displacement; derivatives ``(n, 9 P, 3, p)``
     likewise (rest positions do not depend on the parameters)."""
     n = points.shape[0]
-    w = np.outer(_GAUSS3[1], _GAUSS3[1]).ravel() / 4.0
+    w = window_weights()
     q = points.reshape(n, -1, 9, 3)
     mean_u = np.einsum("q,npqc->npc", w, q - q[:1])
     dq = d_points.reshape(n, q.shape[1], 9, 3, d_points.shape[-1])

@@ -255,33 +255,43 @@ def _profile_error(out: Path, curved: bool) -> float:
     return float(np.sqrt(np.mean((p[:, 2] - z) ** 2)))
 
 
-def _track_error(out: Path, windowed: bool) -> float | None:
-    """RMS [m] of the 3D error of every tracked displacement against the truth's surface motion,
-    at the tracked point or (``windowed``) averaged over its subset's footprint."""
-    from skinkit.forward.fe import _GAUSS3, window_offsets
+def tracked_against_truth(out: Path, windowed: bool) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per track of ``out``'s session: every valid tracked displacement ``(n, 3)`` [m] from the
+    protocol's start (its rest state) and the truth's ``(n, 3)`` [m] at the tracked point or
+    (``windowed``) averaged over the subset's footprint, as the forward model predicts it."""
+    from skinkit.forward.fe import window_offsets, window_weights
     from skinkit.lab.imaging import displacement_field
 
     field = _truth_field(out)
-    errs = []
+    pairs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     with open_experiment(out / SESSION) as exp:
         for name in exp.track_names():
             key = f"followed_{name}"
-            if key not in field:
+            if key not in field.files:
                 continue
             tr = exp.read_track(name)
             w = exp.track_attrs(name).get("window_m") if windowed else None
-            off = window_offsets(w) if w else np.zeros((1, 3))
-            wq = np.outer(_GAUSS3[1], _GAUSS3[1]).ravel() / 4 if w else np.ones(1)
+            off, wq = (window_offsets(w), window_weights()) if w else (np.zeros((1, 3)), np.ones(1))
             ref = tr.points[:, 0]
-            for f in range(1, tr.time_s.size):   # motion from the protocol's start (its rest state)
+            meas, true = [], []
+            for f in range(1, tr.time_s.size):
                 moved = field[key][:, f] - field[key][:, 0]
                 u = displacement_field(field["grid_m"], field["points_m"], moved)
                 pred = sum(wq[q] * u(ref[:, 0] + off[q, 0], ref[:, 1] + off[q, 1]) for q in range(len(wq)))
-                d = tr.points[:, f] - ref - pred
-                errs.append(d[tr.valid[:, f]])
-    if not errs:
+                ok = tr.valid[:, f]
+                meas.append(tr.points[ok, f] - ref[ok])
+                true.append(pred[ok])
+            pairs[name] = (np.concatenate(meas), np.concatenate(true))
+    return pairs
+
+
+def _track_error(out: Path, windowed: bool) -> float | None:
+    """RMS [m] of the 3D error of every tracked displacement against the truth's surface motion,
+    at the tracked point or (``windowed``) averaged over its subset's footprint."""
+    pairs = tracked_against_truth(out, windowed)
+    if not pairs:
         return None
-    e = np.concatenate(errs)
+    e = np.concatenate([m - t for m, t in pairs.values()])
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
 
 

@@ -23,16 +23,13 @@ def truth_figure(out: Path, summary: dict[str, Any], table: list[dict[str, Any]]
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from skinkit.forward.fe import _GAUSS3, window_offsets
-    from skinkit.lab.imaging import displacement_field
+    from skinkit.pipelines.chain import SESSION, tracked_against_truth
 
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5), constrained_layout=True)
-    field = np.load(out / "truth-surface.npz")
-    with open_experiment(out / "session.h5") as exp:
+    with open_experiment(out / SESSION) as exp:
         names = exp.record_names()
         rec_name = "in_plane_000" if "in_plane_000" in names else names[0]
         rec = exp.read_record(rec_name)
-        tracks = {n: (exp.read_track(n), exp.track_attrs(n)) for n in exp.track_names()}
     a = ax[0, 0]
     axis = int(np.argmax(np.ptp(rec.tip_position, axis=0)))
     a.plot(rec.time_s, rec.tip_position[:, axis] * 1e3, lw=0.8, color="C0")
@@ -44,25 +41,9 @@ def truth_figure(out: Path, summary: dict[str, Any], table: list[dict[str, Any]]
     a.set_title(f"(a) robot record {rec_name} (robot frame)")
 
     a = ax[0, 1]
-    lim = 0.0
-    for k, (name, (tr, attrs)) in enumerate(tracks.items()):
-        key = f"followed_{name}"
-        if key not in field.files:
-            continue
-        w = attrs.get("window_m")
-        off = window_offsets(w) if w else np.zeros((1, 3))
-        wq = np.outer(_GAUSS3[1], _GAUSS3[1]).ravel() / 4 if w else np.ones(1)
-        ref = tr.points[:, 0]
-        meas, true = [], []
-        for f in range(1, tr.time_s.size):
-            u = displacement_field(field["grid_m"], field["points_m"], field[key][:, f] - field[key][:, 0])
-            pred = sum(wq[q] * u(ref[:, 0] + off[q, 0], ref[:, 1] + off[q, 1]) for q in range(len(wq)))
-            ok = tr.valid[:, f]
-            meas.append((tr.points[ok, f] - ref[ok]).ravel())
-            true.append(pred[ok].ravel())
-        m, t = np.concatenate(meas) * 1e6, np.concatenate(true) * 1e6
+    for k, (name, (meas, true)) in enumerate(tracked_against_truth(out, windowed=True).items()):
+        m, t = meas.ravel() * 1e6, true.ravel() * 1e6
         a.plot(t, m - t, ".", ms=1.5, alpha=0.4, color=f"C{k}", label=name)
-        lim = max(lim, float(np.abs(t).max()))
     a.axhline(0, color="k", lw=0.8)
     a.set_xlabel("true displacement, subset mean [µm]")
     a.set_ylabel("tracked minus true [µm]")
