@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import json
 from pathlib import Path
 
@@ -108,19 +107,6 @@ def verify(as_json: bool, cases: tuple[str, ...]) -> None:
         raise SystemExit(1)
 
 
-def _refined(spec: dict, level: int) -> dict:
-    s = copy.deepcopy(spec)
-    g = s.setdefault("geometry", {})
-    if g.get("kind", "disc") == "disc":
-        g["n_inner"] = int(g.get("n_inner", 3)) * level
-        g["n_ring"] = int(g.get("n_ring", 3)) * level
-    else:
-        g["n"] = [int(x) * level for x in g.get("n", [4, 4])]
-    for L in s["layers"]:
-        L["elements"] = int(L.get("elements", 2)) * level
-    return s
-
-
 @click.command("convergence")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.option("--levels", type=click.IntRange(1, 8), default=3, show_default=True,
@@ -132,6 +118,7 @@ def _refined(spec: dict, level: int) -> dict:
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bool, as_json: bool) -> None:
     """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count."""
+    from skinkit.fem.discretisation import refined_spec as _refined
     from skinkit.fem.model import build_model, check_size, layer_table
     from skinkit.fem.run import solve_model
     path = _model_path(model_file)
