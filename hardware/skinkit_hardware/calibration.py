@@ -194,8 +194,7 @@ def simulate_force_constant_steps(
         cell = KelvinVoigtSkin(2e5, 2e5, 20.0, 20.0, glued=True)
         dev = Device(skin=cell, seed=seed)
         dev.skin_origin = forward(np.full(3, h), dev.geometry)
-        dev.x, dev.xf = [float(h)] * 3, [float(h)] * 3  # the load cell sits on the arms
-        dev._refresh_kinematics()
+        dev.place_arms([float(h)] * 3)  # the load cell sits on the arms
         level = []
         prev = 0.0
         for i in np.asarray(currents_A, float):
@@ -233,8 +232,7 @@ def simulate_spring_run(
     )
     dev.skin_origin = dev.tip_home.copy()
     h = dev.geometry.home_m
-    dev.x, dev.xf = [h] * 3, [h] * 3
-    dev._refresh_kinematics()
+    dev.place_arms([h] * 3)
     p = dev.params
     hold = p.mass_kg * p.gravity_m_s2 + p.stiffness_N_per_m * (h - p.spring_rest_m)
     n = int(round(duration_s * 1000)) + 1

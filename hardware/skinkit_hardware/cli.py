@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from skinkit.cli._types import FiniteFloat
+from skinkit.cli.commandkit import FiniteFloat
 
 
 @click.command("emulate")

@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from skinkit.schemas.robot import (
+from skinkit.acquisition import (
     FLAG_CAMERA_TRIGGER,
     FLAG_CONTACT,
     FLAG_ESTOP,
@@ -263,6 +263,14 @@ class Device:
         if self.mode != FAULTED:
             self.mode = IDLE
         self.streaming = False
+
+    def place_arms(self, q_m: Sequence[float]) -> None:
+        """Put the arms at rest at positions ``q_m`` ``(3,)`` [m] without simulating the way
+        there: a fixture that starts loaded (a load cell or spring sitting on the arms)."""
+        self.x = [float(q) for q in q_m]
+        self.xf = list(self.x)
+        self.v = [0.0, 0.0, 0.0]
+        self._refresh_kinematics()
 
     # -- internals ----------------------------------------------------------------------
     def _run_time(self) -> float:

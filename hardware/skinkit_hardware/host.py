@@ -17,11 +17,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from skinkit.acquisition import Programme, programme_for
+from skinkit.acquisition import FLAG_SAMPLES_LOST, Programme, programme_for
 from skinkit.errors import SkinkitError
 from skinkit.schemas import Protocol as MeasurementProtocol
 from skinkit.schemas import RobotRecord
-from skinkit.schemas.robot import FLAG_SAMPLES_LOST
 from skinkit_hardware import faults as F
 from skinkit_hardware.device import Event
 from skinkit_hardware.kinematics import Geometry, forward, inverse

@@ -77,6 +77,11 @@ class Geometry:
         """``(3, 3)`` unit radial directions of the arms (rows) in the platform frame."""
         return self._u
 
+    @property
+    def guide_normals(self) -> np.ndarray:
+        """``(3, 3)`` unit in-plane normals ``e_z x radial`` of the arms' guide lines (rows)."""
+        return self._w
+
     def pins_xy(self) -> np.ndarray:
         """``(3, 2)`` horizontal pin positions [m]."""
         return self.base_radius_m * self._u[:, :2]
@@ -99,8 +104,8 @@ def _rotation(r: np.ndarray) -> np.ndarray:
 
 def _leg_residual(g: Geometry, p: np.ndarray, rot: np.ndarray, q: np.ndarray) -> np.ndarray:
     """``(..., 6)`` distances [m] of each pin from its platform line (two components each)."""
-    w = g._w
-    xy = g.base_radius_m * g._u[:, :2]
+    w = g.guide_normals
+    xy = g.pins_xy()
     a = np.empty(q.shape[:-1] + (3, 3))
     a[..., :2] = xy
     a[..., 2] = q

@@ -134,7 +134,7 @@ def check_law(law: Any, p: Mapping[str, Any] | None = None, n: int = 12,
             CC_fd[..., K, L] = CC_fd[..., L, K] = 2 * dS
         how = "vs central differences of the stress"
     else:
-        CC_fd = lawkit._energy_hessian(law, C, p)
+        CC_fd = lawkit.energy_hessian(law, C, p)
         how = "vs second differences of the energy"
     err = _rel(CC, CC_fd, scale_CC)
     rep.checks.append(CheckResult("tangent", err <= DERIVATIVE_RTOL, err, DERIVATIVE_RTOL, how))

@@ -1,4 +1,10 @@
-"""Law machinery: stress and tangent of any :class:`skinkit.protocols.Law`, from its energy if need be.
+"""The stable API for authors of constitutive laws (``skinkit.laws``): law machinery and the
+tensor and hyperelastic building blocks a law is written with.
+
+Everything in ``__all__`` is public and kept stable; the modules it re-exports from
+(:mod:`skinkit.fem.hyper`, :mod:`skinkit.fem.tensors`) are engine internals that may change.
+
+Law machinery: stress and tangent of any :class:`skinkit.protocols.Law`, from its energy if need be.
 
 Conventions (all batched over leading axes):
 
@@ -33,7 +39,21 @@ from typing import Any
 import numpy as np
 
 from skinkit.fem.errors import ModelError
-from skinkit.fem.tensors import VOIGT, sym_direction
+from skinkit.fem.hyper import (
+    VOLUMETRIC_KINDS,
+    b2,
+    b4,
+    check_volumetric,
+    iso_hessian,
+    iso_I1,
+    iso_I2,
+    iso_I4,
+    kinematics,
+    volumetric_energy,
+    volumetric_stress,
+    volumetric_tangent,
+)
+from skinkit.fem.tensors import I3, VOIGT, det3, inv3, outer, sym_direction, sym_product, trace
 
 #: complex-step size: the derivative is Im f(x + ih)/h, free of subtraction error
 _CS_STEP = 1e-30
@@ -162,8 +182,10 @@ def _stress_is_complex_safe(law: Any) -> bool:
 _FD2_STEP = 1e-4
 
 
-def _energy_hessian(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
-    """CC = 4 ∂²W/∂C∂C by second central differences of a real-only energy."""
+def energy_hessian(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+    """``(..., 3, 3, 3, 3)`` CC = 4 ∂²W/∂C∂C [Pa] by second central differences of the
+    energy alone (``C`` ``(..., 3, 3)``), whatever stress or tangent the law has of its own:
+    an independent reference for checking them."""
     C = np.asarray(C, dtype=float)
     CC = np.zeros(C.shape + (3, 3), dtype=float)
     h = _FD2_STEP
@@ -188,7 +210,7 @@ def tangent_from_stress(law: Any, C: np.ndarray, p: Mapping[str, Any]) -> np.nda
     energy are used instead: differencing a differenced stress would square the rounding.
     """
     if not has_own(law, "stress") and not is_complex_safe(law):
-        return _energy_hessian(law, C, p)
+        return energy_hessian(law, C, p)
     C = np.asarray(C, dtype=float)
     CC = np.zeros(C.shape + (3, 3), dtype=float)
     cs = _stress_is_complex_safe(law)
@@ -268,3 +290,46 @@ def broadcast_param(v: Any, shape: Sequence[int]) -> Any:
     """A parameter value ready to broadcast against a batch of ``shape``."""
     a = np.asarray(v)
     return a if a.ndim == 0 else a.reshape(a.shape + (1,) * (len(shape) - a.ndim))
+
+
+__all__ = [
+    # law machinery
+    "bounds_text",
+    "broadcast_param",
+    "check_parameters",
+    "default_parameters",
+    "energy_hessian",
+    "has_own",
+    "inadmissible",
+    "is_complex_safe",
+    "parameter_names",
+    "parameter_step",
+    "require_positive",
+    "response",
+    "stress",
+    "stress_parameter_derivative",
+    "tangent",
+    "tangent_from_stress",
+    # batched 3x3 tensor algebra (skinkit.fem.tensors)
+    "I3",
+    "VOIGT",
+    "det3",
+    "inv3",
+    "outer",
+    "sym_direction",
+    "sym_product",
+    "trace",
+    # hyperelastic building blocks (skinkit.fem.hyper)
+    "VOLUMETRIC_KINDS",
+    "b2",
+    "b4",
+    "check_volumetric",
+    "iso_I1",
+    "iso_I2",
+    "iso_I4",
+    "iso_hessian",
+    "kinematics",
+    "volumetric_energy",
+    "volumetric_stress",
+    "volumetric_tangent",
+]

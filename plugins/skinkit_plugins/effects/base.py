@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from skinkit.errors import EffectError, SkinkitError
-from skinkit.fem.model import quantity as _quantity
+from skinkit.forward.effectkit import quantity as _quantity
 from skinkit.schemas import Parameter
 from skinkit.units import to_si
 

@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.hyper import (
+from skinkit.fem.lawkit import (
+    I3,
     b2,
     b4,
     check_volumetric,
@@ -27,12 +28,12 @@ from skinkit.fem.hyper import (
     iso_I1,
     iso_I4,
     kinematics,
+    outer,
+    require_positive,
     volumetric_energy,
     volumetric_stress,
     volumetric_tangent,
 )
-from skinkit.fem.lawkit import require_positive
-from skinkit.fem.tensors import I3, outer
 from skinkit.schemas import Parameter
 
 

@@ -7,15 +7,15 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.hyper import (
+from skinkit.fem.lawkit import (
     check_volumetric,
     iso_I1,
     iso_I2,
     kinematics,
+    require_positive,
     volumetric_energy,
     volumetric_stress,
 )
-from skinkit.fem.lawkit import require_positive
 from skinkit.schemas import Parameter
 
 

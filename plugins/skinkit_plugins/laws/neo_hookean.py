@@ -14,15 +14,17 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.hyper import (
+from skinkit.fem.lawkit import (
+    I3,
     check_volumetric,
     iso_I1,
     kinematics,
+    outer,
+    require_positive,
+    sym_product,
     volumetric_energy,
     volumetric_stress,
 )
-from skinkit.fem.lawkit import require_positive
-from skinkit.fem.tensors import I3, outer, sym_product
 from skinkit.schemas import Parameter
 
 

@@ -11,8 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.hyper import check_volumetric, volumetric_energy
-from skinkit.fem.lawkit import require_positive
+from skinkit.fem.lawkit import (
+    check_volumetric,
+    require_positive,
+    volumetric_energy,
+)
 from skinkit.schemas import Parameter
 
 #: smallest admissible |αᵢ|: the energy 2μ/α² (λ̄^α - 1) is singular at α = 0

@@ -28,11 +28,16 @@ from matplotlib.path import Path
 
 from skinkit import registry
 from skinkit.schemas import CameraRig, ImageSequence, SurfaceProfile
-from skinkit.vision import VisionError
-from skinkit.vision.matching import seed_matches
-from skinkit.vision.subsets import edge_reason, ncc_integer, subset_origin
-from skinkit.vision.tracking3d import camera_order
-from skinkit.vision.triangulation import triangulate
+from skinkit.vision.trackerkit import (
+    VisionError,
+    camera_order,
+    edge_reason,
+    ncc_integer,
+    project,
+    seed_matches,
+    subset_origin,
+    triangulate,
+)
 
 
 @dataclass
@@ -252,8 +257,6 @@ class PatchworkProfiler:
                 errs = []
                 for c, cam in enumerate(rig.cameras):
                     if np.all(np.isfinite(obs[i, c])):
-                        from skinkit.vision.camera import project
-
                         errs.append((np.linalg.norm(project(cam, tri.points[i:i + 1])[0] - obs[i, c]), c))
                 errs.sort()
                 obs[i, errs[-1][1]] = np.nan

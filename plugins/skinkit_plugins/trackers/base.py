@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.vision.subsets import (
+from skinkit.vision.trackerkit import (
     MIN_USABLE,
     IntegerMatch,
     TrackResult,

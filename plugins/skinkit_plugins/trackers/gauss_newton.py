@@ -15,8 +15,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter
 
-from skinkit.vision import VisionError
-from skinkit.vision.subsets import IntegerMatch
+from skinkit.vision.trackerkit import IntegerMatch, VisionError
 from skinkit_plugins.trackers.base import SubsetTracker
 
 
