@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import click
+import numpy as np
 
 from skinkit.cli._paths import check_result_dir, staged_dir
 from skinkit.errors import SkinkitError
@@ -56,21 +57,40 @@ def _progress(total: float, label: str):
 @click.option("--overwrite", is_flag=True, help="replace an earlier result in --out")
 @click.option("--json", "as_json", is_flag=True, help="print the JSON summary")
 @click.option("--no-vtu", is_flag=True, help="skip the VTU series")
-def solve(model_file: str, out_dir: str | None, overwrite: bool, as_json: bool, no_vtu: bool) -> None:
-    """Solve MODEL_FILE (TOML); write result.h5, summary.json and a VTU series."""
+@click.option("--error-estimate", is_flag=True,
+              help="also solve on a mesh refined 2x (3x too with --error-levels 3) and report the "
+                   "estimated discretisation error of tip force, tip motion and tracked points "
+                   "(Richardson extrapolation)")
+@click.option("--error-levels", type=click.IntRange(2, 3), default=2, show_default=True,
+              help="meshes for --error-estimate: 2 (1x, 2x; order 1 assumed) or 3 (1x, 2x, 3x; "
+                   "order measured, about 27x the unknowns)")
+def solve(model_file: str, out_dir: str | None, overwrite: bool, as_json: bool, no_vtu: bool,
+          error_estimate: bool, error_levels: int) -> None:
+    """Solve MODEL_FILE (TOML); write result.h5, summary.json and a VTU series.
+
+    With --error-estimate, or when the file's [solver] sets discretisation_tolerance or
+    point_tolerance (then the mesh is refined until the estimate meets it), the estimated
+    discretisation error is reported beside the result."""
     from skinkit.fem.model import build_model
-    from skinkit.fem.run import solve_model, write_outputs
+    from skinkit.fem.run import solve_model, solve_with_estimate, write_outputs
     # outputs go where the user is, never beside the model file (which may be in the package/docs)
     out = check_result_dir(Path(out_dir) if out_dir else Path.cwd() / _model_path(model_file).stem, "--out",
                            overwrite=overwrite, owned=SOLVE_FILES, command="skinkit solve")
-    model = build_model(_fe_spec(_model_path(model_file)))
+    spec = _fe_spec(_model_path(model_file))
+    model = build_model(spec)
     times = model.load.times
     # rich formats the label: braces of the model's name are text, not fields
     name = model.name.replace("{", "{{").replace("}", "}}")
+    controlled = model.discretisation_tolerance is not None or model.point_tolerance is not None
     prog = _progress(float(times[-1]), f"solving {name} ({model.mesh.n_dof} dofs)")
     with prog:
         task = prog.add_task("solve", total=float(times[-1]))
-        sol, info = solve_model(model, progress=lambda t: prog.update(task, completed=t))
+        if error_estimate or controlled:
+            model, sol, info = solve_with_estimate(
+                spec, error_levels, progress=lambda t: prog.update(task, completed=t),
+                log=None if as_json else (lambda m: prog.console.print(m, markup=False)))
+        else:
+            sol, info = solve_model(model, progress=lambda t: prog.update(task, completed=t))
     with staged_dir(out) as tmp:  # nothing appears at --out unless every file is written
         files = write_outputs(model, sol, info, tmp, vtu=not no_vtu)
         info["files"] = {k: str(out / Path(v).relative_to(tmp)) for k, v in files.items()}
@@ -82,7 +102,33 @@ def solve(model_file: str, out_dir: str | None, overwrite: bool, as_json: bool, 
                f"{info['newton_iterations']} Newton iterations, {info['wall_s']:.2f} s")
     if last["tip_force_N"] is not None:
         click.echo(f"final tip displacement {last['tip_displacement_m']} m, force {last['tip_force_N']} N")
+    if "discretisation" in info:
+        click.echo(_error_line(info["discretisation"]))
     click.echo(f"wrote {out}")
+
+
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100 * x:.2g} %"
+
+
+def _error_line(d: dict) -> str:
+    """One line: the estimated discretisation error of a solve (its ``discretisation`` block)."""
+    order = "n/a" if d["order"] is None else f"{d['order']:.2g}"
+    how = "assumed" if d["order_assumed"] else "observed"
+    parts = [f"tip force {_pct(d['tip_force_relative_error'])}",
+             f"tip motion {_pct(d['tip_displacement_relative_error'])}"]
+    if d["points_max_error_m"] is not None:
+        parts.append(f"points {1e6 * d['points_max_error_m']:.3g} µm")
+    meshes = ", ".join(f"{f}x" for f in d["factors"])
+    dof = d["dof"][d["factors"].index(d["factor"])]
+    line = (f"estimated discretisation error on the {d['factor']}x mesh ({dof:,} unknowns): "
+            f"{', '.join(parts)} (Richardson over {meshes}, order {order} {how})")
+    if "met" in d:
+        tol = [f"{_pct(d['tolerance'])} on the tip" if d["tolerance"] is not None else "",
+               f"{1e6 * d['point_tolerance']:.3g} µm on points" if d["point_tolerance"] is not None else ""]
+        line += (f"; tolerance {' and '.join(t for t in tol if t)} met, "
+                 f"{d['unknowns_solved']:,} unknowns solved in all")
+    return line
 
 
 @click.command("verify")
@@ -115,9 +161,16 @@ def verify(as_json: bool, cases: tuple[str, ...]) -> None:
               help="directory for convergence.json and convergence.png (default: <model file name>"
                    "_convergence in the current directory)")
 @click.option("--overwrite", is_flag=True, help="replace an earlier result in --out")
+@click.option("--order", type=click.FloatRange(0, min_open=True), default=None,
+              help="convergence order to assume (default: measured from the three finest levels; "
+                   "1 with two levels)")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
-def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bool, as_json: bool) -> None:
-    """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count."""
+def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bool, order: float | None,
+                as_json: bool) -> None:
+    """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count.
+
+    With two levels or more, each level's estimated discretisation error (Richardson
+    extrapolation: the extrapolated value and the observed order) is reported."""
     from skinkit.fem.discretisation import refined_spec as _refined
     from skinkit.fem.model import build_model, check_size, layer_table
     from skinkit.fem.run import solve_model
@@ -145,14 +198,49 @@ def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bo
     finest = rows[-1][key]
     for r in rows:
         if r[key] is not None and finest is not None:
-            r["change_vs_finest"] = abs(r[key][2] - finest[2]) / max(abs(finest[2]), 1e-300)
+            # the size of the vector: a pull along x (twopad) is not its z component
+            r["change_vs_finest"] = float(np.linalg.norm(np.subtract(r[key], finest))
+                                          / max(float(np.linalg.norm(finest)), 1e-300))
     res = {"model": spec.get("model", {}).get("name", "model"), "quantity": key, "levels": rows}
+    res.update(_estimate_levels(rows, key, order))
     with staged_dir(out) as tmp:
         _write_convergence(res, rows, key, tmp)
     if as_json:
         click.echo(json.dumps(res, indent=2))
-    else:
-        click.echo(f"wrote {out / 'convergence.json'} and {out / 'convergence.png'}")
+        return
+    for r in rows:
+        if r.get("relative_error") is not None:
+            click.echo(f"level {r['level']}: {r['dof']:,} unknowns, "
+                       f"estimated error {_pct(r['relative_error'])}")
+    if res["extrapolated"] is not None:
+        how = "assumed" if res["order_assumed"] else "observed"
+        o = "n/a" if res["order"] is None else f"{res['order']:.3g}"
+        click.echo(f"extrapolated {key} {res['extrapolated']} (order {o} {how})")
+    click.echo(f"wrote {out / 'convergence.json'} and {out / 'convergence.png'}")
+
+
+def _estimate_levels(rows: list[dict], key: str, order: float | None) -> dict:
+    """Richardson over the levels' final ``key`` vectors: adds to each row ``estimated_error``
+    (3,) and ``relative_error`` (its length over the extrapolated value's), and returns
+    ``extrapolated``, ``observed_order``, ``order``, ``order_assumed`` (None with one level)."""
+    from skinkit.fem.discretisation import ASSUMED_ORDER, richardson
+    none = {"extrapolated": None, "observed_order": None, "order": None, "order_assumed": None}
+    vals = [r[key] for r in rows]
+    if len(rows) < 2 or any(v is None or None in v for v in vals):
+        return none
+    assumed = order is None and len(rows) < 3
+    est = richardson([np.array(v, float) for v in vals], [r["level"] for r in rows],
+                     ASSUMED_ORDER if assumed else order)
+    ext = np.asarray(est["extrapolated"])
+    scale = float(np.linalg.norm(ext))
+    for r, e in zip(rows, est["errors"], strict=True):
+        r["estimated_error"] = e.tolist()
+        r["relative_error"] = float(np.linalg.norm(e)) / scale if scale > 0 else 0.0
+
+    def num(x: float) -> float | None:
+        return None if not np.isfinite(x) else float(x)
+    return {"extrapolated": ext.tolist(), "observed_order": num(est["observed_order"]),
+            "order": num(est["order"]), "order_assumed": assumed}
 
 
 def _write_convergence(res: dict, rows: list[dict], key: str, out: Path) -> None:
@@ -161,7 +249,17 @@ def _write_convergence(res: dict, rows: list[dict], key: str, out: Path) -> None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(5, 3.5))
-    ax.plot([r["dof"] for r in rows], [abs(r[key][2]) for r in rows], "o-")
+    dof = [r["dof"] for r in rows]
+    ax.plot(dof, [float(np.linalg.norm(r[key])) for r in rows], "o-", label="solved")
+    if res.get("extrapolated") is not None:
+        errs = [float(np.linalg.norm(r["estimated_error"])) for r in rows]
+        ax.errorbar(dof, [float(np.linalg.norm(r[key])) for r in rows], yerr=errs, fmt="none",
+                    capsize=3, color="C0", label="± estimated error")
+        o = res["order"]
+        ax.axhline(float(np.linalg.norm(res["extrapolated"])), ls="--", color="C1",
+                   label=f"extrapolated (order {'n/a' if o is None else f'{o:.2g}'}"
+                         f"{', assumed' if res['order_assumed'] else ''})")
+        ax.legend(fontsize=7)
     ax.set_xlabel("degrees of freedom")
     ax.set_ylabel("|tip force| [N]" if key == "tip_force_N" else "|tip displacement| [m]")
     ax.set_xscale("log")

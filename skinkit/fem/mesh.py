@@ -90,8 +90,14 @@ def _near(a: np.ndarray, b: float, scale: float) -> np.ndarray:
     return np.abs(a - b) <= 1e-9 * max(scale, 1e-12)
 
 
-def _layer_coords(thicknesses: Sequence[float], n_layers: Sequence[int]) -> np.ndarray:
-    """z coordinates of element boundaries, top (z = 0) down, returned ascending."""
+def _layer_coords(thicknesses: Sequence[float], n_layers: Sequence[int], grading: float = 1.0) -> np.ndarray:
+    """z coordinates of element boundaries, top (z = 0) down, returned ascending.
+
+    ``grading`` >= 1: within each layer the k-th of n boundaries lies ``t (k/n)^grading``
+    below the layer's top, so elements are thinnest at the top of each layer (the surface,
+    where a bonded probe's edge concentrates the stress); 1 is uniform."""
+    if not grading >= 1:
+        raise ModelError("geometry.layer_grading", f"must be at least 1 (1 is uniform), got {grading}")
     zs = [0.0]
     if not len(thicknesses):
         raise ModelError("layers", "needs at least one [[layers]] table")
@@ -101,16 +107,18 @@ def _layer_coords(thicknesses: Sequence[float], n_layers: Sequence[int]) -> np.n
             raise ModelError(f"layers[{i}].thickness", f"must be positive, got {t} m")
         if int(n) != n or n < 1:
             raise ModelError(f"layers[{i}].elements", f"must be a whole number at least 1, got {n}")
-        zs.extend(list(zs[-1] - t * np.arange(1, n + 1) / n))
+        zs.extend(list(zs[-1] - t * (np.arange(1, n + 1) / n) ** grading))
     return np.array(sorted(zs))
 
 
 def block_mesh(size: Sequence[float] = (1.0, 1.0, 1.0), n: Sequence[int] = (2, 2, 2),
-               layers: Sequence[tuple[str, float, int]] | None = None) -> FEMesh:
+               layers: Sequence[tuple[str, float, int]] | None = None,
+               layer_grading: float = 1.0) -> FEMesh:
     """A box ``[0, Lx] x [0, Ly] x [-Lz, 0]`` of 27-node hexahedra (top face at z = 0).
 
     ``n`` elements per direction; ``layers`` optionally splits it through the thickness as
-    ``(name, thickness [m], element layers)`` from the top (thicknesses must sum to ``Lz``).
+    ``(name, thickness [m], element layers)`` from the top (thicknesses must sum to ``Lz``),
+    each layer's elements graded towards its top by ``layer_grading`` (1: uniform).
     Node sets: ``top``, ``bottom``, ``xmin``, ``xmax``, ``ymin``, ``ymax``, ``sides``.
     """
     Lx, Ly, Lz = (float(v) for v in size)
@@ -124,7 +132,7 @@ def block_mesh(size: Sequence[float] = (1.0, 1.0, 1.0), n: Sequence[int] = (2, 2
         tot = sum(t for _, t, _ in layers)
         if abs(tot - Lz) > 1e-9 * Lz:
             raise ModelError("layers", f"layer thicknesses sum to {tot} m, not the block's height {Lz} m")
-        z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
+        z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers], layer_grading)
         names = [nm for nm, _, _ in layers]
     else:
         z = np.linspace(-Lz, 0.0, n[2] + 1)
@@ -147,7 +155,8 @@ def block_mesh(size: Sequence[float] = (1.0, 1.0, 1.0), n: Sequence[int] = (2, 2
 
 def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
               layers: Sequence[tuple[str, float, int]] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2)),
-              n_inner: int = 3, n_ring: int = 3, grading: float = 1.6) -> FEMesh:
+              n_inner: int = 3, n_ring: int = 3, grading: float = 1.6, inner_grading: float = 1.0,
+              layer_grading: float = 1.0) -> FEMesh:
     """The in vivo geometry: a layered disc under the support plate's hole.
 
     One square grid of ``n_inner + 2 n_ring`` elements across is mapped onto the disc so
@@ -155,8 +164,11 @@ def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
     exactly on the indenter's circle (the indenter footprint is resolved, not cut by
     elements), the central block fills the indenter disc, and the ``n_ring`` rings of
     elements outside it are circles graded towards the centre, ``r = a + (R - a) s^grading``.
-    Every node (edge, face and centre nodes too) is mapped, so element edges follow the
-    circles. Layers are ``(name, thickness [m], element layers)`` from the top (z = 0) down.
+    Inside, the central block's rings are graded towards the indenter's edge,
+    ``r = a (1 - (1 - s)^inner_grading)`` (1: uniform), where a bonded indenter's edge makes
+    the stress singular. Every node (edge, face and centre nodes too) is mapped, so element
+    edges follow the circles. Layers are ``(name, thickness [m], element layers)`` from the
+    top (z = 0) down, each graded towards its top by ``layer_grading`` (1: uniform).
 
     Node sets: ``top``, ``bottom``, ``outer`` (the rim, r = R), ``indenter`` (top nodes
     with r <= indenter radius).
@@ -168,12 +180,13 @@ def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
     if not 0 < a < R:
         raise ModelError("geometry.indenter_diameter", f"must be in (0, {diameter}) m (the disc's "
                          f"diameter), got {indenter_diameter} m")
-    if grading < 1:
-        raise ModelError("geometry.grading", f"must be at least 1 (1 is uniform), got {grading}")
+    for key, gv in (("grading", grading), ("inner_grading", inner_grading)):
+        if not gv >= 1:
+            raise ModelError(f"geometry.{key}", f"must be at least 1 (1 is uniform), got {gv}")
     for key, v in (("n_inner", n_inner), ("n_ring", n_ring)):
         if int(v) != v or v < 1:
             raise ModelError(f"geometry.{key}", f"must be a whole number at least 1, got {v}")
-    z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
+    z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers], layer_grading)
     n = n_inner + 2 * n_ring
     s = np.linspace(-1.0, 1.0, n + 1)
     m = MeshHex.init_tensor(s, s, z)
@@ -187,7 +200,7 @@ def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
     inner = rho <= rho_c + 1e-12
     # inside: squares morph into the indenter's circle; outside: graded circles
     wgt = np.where(inner, rho / rho_c, 1.0)
-    r = np.where(inner, a * rho / rho_c,
+    r = np.where(inner, a * (1.0 - (1.0 - np.clip(rho / rho_c, 0, 1)) ** inner_grading),
                  a + (R - a) * np.clip((rho - rho_c) / (1 - rho_c), 0, 1) ** grading)
     xy = r[:, None] * ((1 - wgt)[:, None] * d + wgt[:, None] * c)
     xy[rho == 0] = 0.0

@@ -172,6 +172,11 @@ class Model:
     point_depth: float = 0.0
     sensitivities: bool = False
     fields: list = None  # type: ignore[assignment]
+    #: ``[solver] discretisation_tolerance``: relative error allowed on the tip force
+    #: (displacement control) or tip motion (force control); None: not controlled
+    discretisation_tolerance: float | None = None
+    #: ``[solver] point_tolerance`` [m]: position error allowed on tracked points; None: not controlled
+    point_tolerance: float | None = None
 
 
 def read_model(path: str | Path) -> dict[str, Any]:
@@ -373,29 +378,41 @@ def check_thinness(mesh: FEMesh) -> None:
                          "thickness is far too small next to the others")
 
 
+#: accepted grading exponents (``geometry.grading``, ``inner_grading``, ``layer_grading``,
+#: ``pad_grading``): 1 is uniform; beyond 10 the finest element is a sliver of the coarsest
+GRADING_RANGE = (1.0, 10.0)
+
+
+def _grading(g: Mapping[str, Any], key: str, default: float = 1.0) -> float:
+    """A grading exponent of ``[geometry]`` in :data:`GRADING_RANGE` (default: ``default``)."""
+    return bounded(g.get(key, default), "1", f"geometry.{key}", *GRADING_RANGE, lo_open=False)
+
+
 def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tuple[FEMesh, float | None]:
     g = _geometry(spec)
     kind = g.get("kind", "disc")
     lo, hi = LENGTH_RANGE
     if kind == "disc":
-        _check_keys(g, {"kind", "diameter", "indenter_diameter", "n_inner", "n_ring", "grading"}, "geometry")
+        _check_keys(g, {"kind", "diameter", "indenter_diameter", "n_inner", "n_ring", "grading",
+                        "inner_grading", "layer_grading"}, "geometry")
         D = bounded(g.get("diameter", 0.040), "m", "geometry.diameter", lo, hi)
         d = bounded(g.get("indenter_diameter", 0.004), "m", "geometry.indenter_diameter", lo, hi)
         if d >= D:
             raise ModelError("geometry.indenter_diameter", f"must be smaller than the disc's diameter "
                              f"{D:g} m, got {d:g} m")
-        grading = bounded(g.get("grading", 1.6), "1", "geometry.grading", 1.0, 10.0, lo_open=False)
-        mesh = disc_mesh(D, d, layers, _count(g, "n_inner", 3), _count(g, "n_ring", 3), grading)
+        grading = _grading(g, "grading", 1.6)
+        mesh = disc_mesh(D, d, layers, _count(g, "n_inner", 3), _count(g, "n_ring", 3), grading,
+                         _grading(g, "inner_grading"), _grading(g, "layer_grading"))
         return mesh, None
     if kind == "block":
-        _check_keys(g, {"kind", "size", "n", "indenter_diameter"}, "geometry")
+        _check_keys(g, {"kind", "size", "n", "indenter_diameter", "layer_grading"}, "geometry")
         size = vector(_get(g, "size", "geometry"), "m", "geometry.size", 2)
         for i, v in enumerate(size):
             if not lo < v <= hi:
                 raise ModelError(f"geometry.size[{i}]", f"must be in ({lo:g}, {hi:g}] m, got {v:g}")
         n = _block_n(g)
         H = sum(t for _, t, _ in layers)
-        mesh = block_mesh((size[0], size[1], H), (n[0], n[1], 1), layers)
+        mesh = block_mesh((size[0], size[1], H), (n[0], n[1], 1), layers, _grading(g, "layer_grading"))
         d = g.get("indenter_diameter")
         if d is not None:
             r = 0.5 * bounded(d, "m", "geometry.indenter_diameter", 0.0, float(min(size)))
@@ -526,9 +543,12 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         raise ModelError("layers", "layer names must be unique")
     sol = table(spec.get("solver", {}), "solver")
     _check_keys(sol, {"linear", "rtol", "atol", "max_iter", "max_cuts", "line_search", "intorder",
-                      "max_unknowns"}, "solver")
+                      "max_unknowns", "discretisation_tolerance", "point_tolerance"}, "solver")
     intorder = integer(sol.pop("intorder", 4), "solver.intorder", *INTORDER_RANGE)
+    if "max_unknowns" in sol:
+        max_unknowns(spec)  # a bad limit is refused here, with the other [solver] entries
     sol.pop("max_unknowns", None)
+    disc_tol, point_tol = _discretisation_tolerances(sol)
     options = _solver_options(sol)
     if mesh is None:
         check_size(spec, layers)  # before building: a huge mesh is refused, not attempted
@@ -566,7 +586,7 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         points = np.array([vector(p, "m", f"output.points[{i}]") for i, p in enumerate(raw)])
     depth = bounded(outp.get("point_depth", 0.0), "m", "output.point_depth", 0.0, extent, lo_open=False)
     return Model(name, spec, mesh, problem, bc, load, options, intorder, fixed, points, depth,
-                 flag(outp.get("sensitivities", False), "output.sensitivities"), fields)
+                 flag(outp.get("sensitivities", False), "output.sensitivities"), fields, disc_tol, point_tol)
 
 
 def _indenter_and_load(spec: Mapping[str, Any], mesh: FEMesh, fixed: list[str],
@@ -603,8 +623,25 @@ RTOL_RANGE, ATOL_RANGE = (0.0, 0.1), (0.0, 1e3)
 MAX_ITER_RANGE, MAX_CUTS_RANGE = (1, 1000), (0, 60)
 
 
+#: accepted ``[solver] discretisation_tolerance`` (relative) and ``point_tolerance`` [m]
+DISCRETISATION_TOLERANCE_RANGE, POINT_TOLERANCE_RANGE = (0.0, 0.5), (0.0, 0.01)
+
+
+def _discretisation_tolerances(sol: dict[str, Any]) -> tuple[float | None, float | None]:
+    """``[solver] discretisation_tolerance`` (relative, e.g. 0.05) and ``point_tolerance``
+    (a length), checked and removed from ``sol``; None where absent."""
+    tol = sol.pop("discretisation_tolerance", None)
+    ptol = sol.pop("point_tolerance", None)
+    if tol is not None:
+        tol = bounded(tol, "1", "solver.discretisation_tolerance", *DISCRETISATION_TOLERANCE_RANGE)
+    if ptol is not None:
+        ptol = bounded(ptol, "m", "solver.point_tolerance", *POINT_TOLERANCE_RANGE)
+    return tol, ptol
+
+
 def _solver_options(sol: Mapping[str, Any]) -> SolverOptions:
-    """``[solver]`` entries (``intorder`` and ``max_unknowns`` removed), checked."""
+    """``[solver]`` entries (``intorder``, ``max_unknowns`` and the discretisation tolerances
+    removed), checked."""
     kw: dict[str, Any] = {}
     if "rtol" in sol:
         kw["rtol"] = bounded(sol["rtol"], "1", "solver.rtol", *RTOL_RANGE)

@@ -25,7 +25,8 @@ from skinkit.fem.mesh import FEMesh, _from_linear, _layer_coords, _near, _region
 #: default layers (name, thickness [m], element layers), top down
 DEFAULT_LAYERS: tuple[tuple[str, float, int], ...] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2))
 
-_KEYS = {"kind", "size", "pad_size", "gap", "n_pad", "n_gap", "n_outer", "n_side", "grading"}
+_KEYS = {"kind", "size", "pad_size", "gap", "n_pad", "n_gap", "n_outer", "n_side", "grading",
+         "pad_grading", "layer_grading"}
 
 
 def _graded(a: float, b: float, n: int, grading: float, fine: str) -> np.ndarray:
@@ -45,16 +46,21 @@ def _graded(a: float, b: float, n: int, grading: float, fine: str) -> np.ndarray
     return a + (b - a) * w
 
 
-def _axis(breaks: Sequence[float], counts: Sequence[int], fines: Sequence[str], grading: float) -> np.ndarray:
+def _axis(breaks: Sequence[float], counts: Sequence[int], fines: Sequence[str], grading: float,
+          pad_grading: float = 1.0) -> np.ndarray:
     # each segment without its end point, then the last break: every break appears exactly once
-    # (a + (b - a) * 1 may differ from b by rounding, which would make a sliver element)
-    parts = [_graded(breaks[i], breaks[i + 1], counts[i], grading, fines[i])[:-1] for i in range(len(counts))]
+    # (a + (b - a) * 1 may differ from b by rounding, which would make a sliver element);
+    # "edges" is a pad: finer at both ends by pad_grading (uniform at 1, as before)
+    parts = [(_graded(breaks[i], breaks[i + 1], counts[i], pad_grading, "both") if fines[i] == "edges"
+              else _graded(breaks[i], breaks[i + 1], counts[i], grading, fines[i]))[:-1]
+             for i in range(len(counts))]
     return np.concatenate(parts + [[breaks[-1]]])
 
 
 def twopad_mesh(size: Sequence[float] = (0.100, 0.050), pad_size: float = 0.008, gap: float = 0.032,
                 layers: Sequence[tuple[str, float, int]] = DEFAULT_LAYERS, n_pad: int = 2, n_gap: int = 6,
-                n_outer: int = 3, n_side: int = 3, grading: float = 1.6) -> FEMesh:
+                n_outer: int = 3, n_side: int = 3, grading: float = 1.6, pad_grading: float = 1.0,
+                layer_grading: float = 1.0) -> FEMesh:
     """The two-pad extension geometry (module docstring).
 
     Args:
@@ -68,6 +74,9 @@ def twopad_mesh(size: Sequence[float] = (0.100, 0.050), pad_size: float = 0.008,
         n_side: elements along y from the pads' band to each far side (finer at the band).
         grading: spacing exponent >= 1 (1: uniform); a segment of ``n`` elements has
             boundaries at ``(k/n)^grading`` of its length from its fine end.
+        pad_grading: exponent >= 1 grading the elements across each pad towards the pad's
+            edges (where the bonded pad makes the stress singular); 1: uniform.
+        layer_grading: exponent >= 1 grading each layer's elements towards its top; 1: uniform.
 
     Returns:
         A :class:`FEMesh` with regions named after ``layers`` and node sets ``top``,
@@ -84,18 +93,21 @@ def twopad_mesh(size: Sequence[float] = (0.100, 0.050), pad_size: float = 0.008,
         raise ModelError("geometry.size", f"Lx = {Lx} m must exceed gap + 2 pads = {g + 2 * a} m")
     if a >= Ly:
         raise ModelError("geometry.size", f"Ly = {Ly} m must exceed the pad size {a} m")
-    if grading < 1:
-        raise ModelError("geometry.grading", f"must be at least 1 (1 is uniform), got {grading}")
+    for key, gv in (("grading", grading), ("pad_grading", pad_grading), ("layer_grading", layer_grading)):
+        if not gv >= 1:
+            raise ModelError(f"geometry.{key}", f"must be at least 1 (1 is uniform), got {gv}")
     for key, n in (("n_pad", n_pad), ("n_gap", n_gap), ("n_outer", n_outer), ("n_side", n_side)):
         if int(n) != n or n < 1:
             raise ModelError(f"geometry.{key}", f"must be a whole number at least 1, got {n}")
     if not layers:
         raise ModelError("layers", "needs at least one [[layers]] table")
     h, e = 0.5 * g, 0.5 * g + a
+    # the pads' segments are graded towards both their edges ("edges"), the others by grading
     xs = _axis([-0.5 * Lx, -e, -h, h, e, 0.5 * Lx], [n_outer, n_pad, n_gap, n_pad, n_outer],
-               ["b", "none", "both", "none", "a"], grading)
-    ys = _axis([-0.5 * Ly, -0.5 * a, 0.5 * a, 0.5 * Ly], [n_side, n_pad, n_side], ["b", "none", "a"], grading)
-    z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers])
+               ["b", "edges", "both", "edges", "a"], grading, pad_grading)
+    ys = _axis([-0.5 * Ly, -0.5 * a, 0.5 * a, 0.5 * Ly], [n_side, n_pad, n_side], ["b", "edges", "a"],
+               grading, pad_grading)
+    z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers], layer_grading)
     nodes, t, el = _from_linear(MeshHex.init_tensor(xs, ys, z))
     ifaces = list(np.cumsum([-th for _, th, _ in layers])[:-1])
     region = _region_by_z(nodes, el, ifaces)
@@ -129,9 +141,9 @@ def twopad_from_spec(g: Mapping[str, Any], layers: Sequence[tuple[str, float, in
 
     Keys (all optional): ``size = [Lx, Ly]`` (100 mm, 50 mm), ``pad_size`` (8 mm), ``gap``
     (32 mm), ``n_pad`` (2), ``n_gap`` (6), ``n_outer`` (3), ``n_side`` (3), ``grading``
-    (1.6); see :func:`twopad_mesh`. ``layers``: ``(name, thickness [m], element layers)``
-    top down. An unknown key or a bad value raises :class:`ModelError` naming
-    ``geometry.<key>``.
+    (1.6), ``pad_grading`` (1), ``layer_grading`` (1); see :func:`twopad_mesh`. ``layers``:
+    ``(name, thickness [m], element layers)`` top down. An unknown key or a bad value raises
+    :class:`ModelError` naming ``geometry.<key>``.
     """
     from skinkit.fem.model import quantity, vector
 
@@ -139,11 +151,15 @@ def twopad_from_spec(g: Mapping[str, Any], layers: Sequence[tuple[str, float, in
     if extra:
         raise ModelError(f"geometry.{extra[0]}",
                          f"unknown key for kind 'twopad'; allowed are {sorted(_KEYS)}")
+    from skinkit.fem.model import _grading
+
     size = vector(g.get("size", [0.100, 0.050]), "m", "geometry.size", 2)
-    grading = g.get("grading", 1.6)
-    if isinstance(grading, bool) or not isinstance(grading, (int, float)):
-        raise ModelError("geometry.grading", f"must be a number at least 1, got {grading!r}")
+    for key in ("grading", "pad_grading", "layer_grading"):
+        v = g.get(key, 1.0)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ModelError(f"geometry.{key}", f"must be a number at least 1, got {v!r}")
     return twopad_mesh(size, quantity(g.get("pad_size", 0.008), "m", "geometry.pad_size"),
                        quantity(g.get("gap", 0.032), "m", "geometry.gap"), layers,
                        _count(g, "n_pad", 2), _count(g, "n_gap", 6), _count(g, "n_outer", 3),
-                       _count(g, "n_side", 3), float(grading))
+                       _count(g, "n_side", 3), _grading(g, "grading", 1.6), _grading(g, "pad_grading"),
+                       _grading(g, "layer_grading"))

@@ -1,0 +1,229 @@
+"""Discretisation error (issue 14, item 1): Richardson extrapolation, refined model descriptions,
+the estimate in ``skinkit convergence`` / ``skinkit solve``, ``[solver] discretisation_tolerance``,
+the grading keys, and the example meshes meeting 5 % on the tip force at their documented loads."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from skinkit.cli import cli
+from skinkit.fem.discretisation import refined_spec, richardson
+from skinkit.fem.errors import ModelError
+from skinkit.fem.model import build_mesh, estimate_size, layer_table, read_model
+
+MODELS = Path(__file__).resolve().parents[2] / "docs" / "models"
+
+#: a small disc (7 x 7 elements, 2 layers of 1 element: ~1,200 unknowns) indented 0.3 mm in
+#: one static step, with two tracked surface points: cheap enough to refine 3x in a test
+TINY = """
+[model]
+name = "tiny"
+[geometry]
+kind = "disc"
+n_inner = 1
+n_ring = 2
+grading = 2.5
+inner_grading = 1.5
+layer_grading = 1.5
+[[layers]]
+name = "skin"
+thickness = "1.5 mm"
+elements = 1
+law = "neo-hookean-ni"
+[layers.parameters]
+mu = "15 kPa"
+K = "500 kPa"
+[[layers]]
+name = "subdermal"
+thickness = "3.5 mm"
+elements = 1
+law = "neo-hookean-enu"
+[layers.parameters]
+E = "10 kPa"
+nu = 0.45
+[indenter]
+mode = "displacement"
+[load]
+kind = "ramp"
+value = ["0 mm", "0 mm", "-0.3 mm"]
+steps = 1
+[output]
+points = [["4 mm", "0 mm", "0 mm"], ["0 mm", "6 mm", "0 mm"]]
+"""
+
+
+def _tiny(tmp_path: Path, solver: str = "") -> Path:
+    p = tmp_path / "tiny.toml"
+    p.write_text(TINY + (f"[solver]\n{solver}\n" if solver else ""))
+    return p
+
+
+# --- Richardson -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("factors", [[1, 2, 4], [1, 2, 3], [2, 3, 5]])
+@pytest.mark.parametrize("p", [1.3, 2.0, 3.0])
+def test_richardson_recovers_order_and_limit_exactly(factors, p):
+    # v(h) = v* + C h^p is what Richardson assumes: the order and the limit come back to
+    # rounding (a constant ratio in closed form, any other by bisection on p)
+    vstar, C = 0.0561, 0.04
+    vals = [vstar + C * (1.0 / f) ** p for f in factors]
+    r = richardson(vals, factors)
+    assert r["observed_order"] == pytest.approx(p, rel=1e-8)
+    assert r["extrapolated"] == pytest.approx(vstar, rel=1e-9)
+    for v, e in zip(vals, r["errors"], strict=True):
+        assert e == pytest.approx(abs(v - vstar), rel=1e-7, abs=1e-15)
+    assert r["monotone"]
+
+
+def test_richardson_vectorised_one_order_from_norms():
+    # a (steps, M, 3) history converging at order 2 with an array-valued constant (some
+    # components not changing at all): one order, the exact limit componentwise
+    rng = np.random.default_rng(0)
+    vstar = rng.normal(size=(4, 2, 3))
+    C = rng.normal(size=(4, 2, 3))
+    C[:, :, 0] = 0.0
+    vals = [vstar + C * (1.0 / f) ** 2 for f in (1, 2, 3)]
+    r = richardson(vals, [1, 2, 3])
+    assert r["observed_order"] == pytest.approx(2.0, rel=1e-8)
+    np.testing.assert_allclose(r["extrapolated"], vstar, atol=1e-12)
+    np.testing.assert_allclose(r["errors"][0], np.abs(C), atol=1e-12)
+
+
+def test_richardson_two_levels_needs_the_order():
+    with pytest.raises(ValueError, match="order must be given"):
+        richardson([1.0, 0.5], [1, 2])
+    # with the order given, the limit of an exact order-1 sequence
+    r = richardson([1.0 + 0.3, 1.0 + 0.15], [1, 2], order=1.0)
+    assert r["extrapolated"] == pytest.approx(1.0) and np.isnan(r["observed_order"])
+    with pytest.raises(ValueError, match="increasing"):
+        richardson([1.0, 2.0, 3.0], [1, 3, 2])
+
+
+def test_richardson_not_monotone_is_conservative():
+    # an oscillating sequence has no order: the finest value, and errors that bound the spread
+    r = richardson([1.0, 0.8, 0.9], [1, 2, 3])
+    assert np.isnan(r["observed_order"]) and not r["monotone"]
+    assert r["extrapolated"] == 0.9 and r["errors"][-1] == pytest.approx(0.1)
+
+
+# --- refined descriptions ------------------------------------------------------------------------
+
+def _spec(kind: str) -> dict:
+    s = read_model(MODELS / {"disc": "invivo_goh_qlv.toml", "block": "phantom_membrane_gel.toml",
+                             "twopad": "extension_dic_twopad.toml"}[kind])
+    return s
+
+
+@pytest.mark.parametrize("kind", ["disc", "block", "twopad"])
+def test_refined_spec_multiplies_every_count(kind):
+    s = _spec(kind)
+    before = copy.deepcopy(s)
+    g = s["geometry"]
+    r = refined_spec(s, 2)
+    assert s == before  # a copy: the description given is untouched
+    if kind == "disc":
+        keys = ["n_inner", "n_ring"]
+    elif kind == "twopad":
+        keys = ["n_pad", "n_gap", "n_outer", "n_side"]
+    else:
+        keys = []
+        assert r["geometry"]["n"] == [2 * k for k in g["n"]]
+    for k in keys:
+        assert r["geometry"][k] == 2 * g[k]
+    assert [L["elements"] for L in r["layers"]] == [2 * L["elements"] for L in s["layers"]]
+    # gradings and lengths are kept: the same mapped geometry, h halved
+    assert {k: v for k, v in r["geometry"].items() if not k.startswith("n")} == \
+        {k: v for k, v in g.items() if not k.startswith("n")}
+    # unknowns: (2 nx + 1)(2 ny + 1)(2 nz + 1) x 3 nodes of 27-node hexahedra, nx, ny, nz doubled
+    e1, e2 = estimate_size(s, layer_table(s)), estimate_size(r, layer_table(r))
+    assert e2["elements"] == 8 * e1["elements"]
+    assert build_mesh(r).n_dof == e2["unknowns"] and build_mesh(s).n_dof == e1["unknowns"]
+
+
+@pytest.mark.parametrize("kind,absent,default", [("disc", "n_ring", 3), ("twopad", "n_gap", 6),
+                                                  ("block", "n", [4, 4])])
+def test_refined_spec_uses_the_builders_defaults(kind, absent, default):
+    s = _spec(kind)
+    s["geometry"].pop(absent)
+    del s["layers"][0]["elements"]
+    r = refined_spec(s, 3)
+    assert r["geometry"][absent] == ([3 * k for k in default] if isinstance(default, list) else 3 * default)
+    assert r["layers"][0]["elements"] == 6
+    # and the refined mesh is what the builder makes of those counts
+    assert build_mesh(r).n_elements == estimate_size(r, layer_table(r))["elements"]
+
+
+def test_refined_spec_refuses_bad_counts():
+    s = _spec("disc")
+    s["geometry"]["n_inner"] = "two"
+    with pytest.raises(ModelError, match=r"geometry.n_inner: must be a whole number"):
+        refined_spec(s, 2)
+    with pytest.raises(ModelError, match="refinement factor"):
+        refined_spec(_spec("disc"), 0)
+
+
+# --- grading keys -----------------------------------------------------------------------------
+
+def test_grading_keys_refine_towards_the_probe_edge():
+    s = _spec("disc")
+    s["geometry"].update(n_inner=4, inner_grading=2.0, layer_grading=2.0)
+    m = build_mesh(s)
+    a = 0.002
+    r = np.unique(np.round(np.hypot(*m.nodes[m.node_sets["top"]][:, :2].T), 12))
+    inner = r[r <= a * (1 + 1e-9)]
+    # along the x axis the central block's vertices lie at a (1 - (1 - k/2)^2), k = 0, 1, 2:
+    # the ring next to the edge (0.5 a wide uniform) is 0.25 a wide
+    x, y, z = m.nodes.T
+    on_axis = np.sort(x[(np.abs(y) < 1e-12) & (z == 0) & (x >= 0)])
+    assert on_axis[0] == 0 and np.isclose(inner.max(), a)
+    verts = on_axis[on_axis <= a + 1e-12][::2]  # quadratic elements: every other node is a vertex
+    np.testing.assert_allclose(verts, a * (1 - (1 - np.arange(3) / 2) ** 2), atol=1e-12)
+    zs = np.unique(np.round(z, 12))[::-1]
+    zv = zs[::2]  # vertices, top down: skin 1.5 mm in 2 elements graded (k/2)^2
+    np.testing.assert_allclose(zv[:3], [0.0, -0.0015 / 4, -0.0015], atol=1e-12)
+    # defaults (absent keys) are today's uniform meshes
+    assert np.array_equal(build_mesh(_spec("disc")).nodes, build_mesh(_spec("disc")).nodes)
+
+
+@pytest.mark.parametrize("entry,value,needle", [
+    ("geometry.inner_grading", 0.5, "geometry.inner_grading: must be in [1, 10]"),
+    ("geometry.layer_grading", "x", "geometry.layer_grading: expected '<number> <unit>'"),
+    ("geometry.layer_grading", True, "geometry.layer_grading: expected a quantity"),
+    ("solver.discretisation_tolerance", -0.05, "solver.discretisation_tolerance: must be in (0, 0.5]"),
+    ("solver.discretisation_tolerance", "5 mm", "solver.discretisation_tolerance: inconsistent units"),
+    ("solver.point_tolerance", "2 s", "solver.point_tolerance: inconsistent units"),
+    ("solver.point_tolerance", 0.5, "solver.point_tolerance: must be in (0, 0.01] m"),
+])
+def test_bad_values_refused_in_one_line(tmp_path, entry, value, needle):
+    from tests.core._cli import one_error
+    table, key = entry.split(".")
+    p = _tiny(tmp_path)
+    text = p.read_text()
+    val = json.dumps(value) if not isinstance(value, bool) else str(value).lower()
+    if table == "geometry":
+        text = text.replace("[geometry]\n", f"[geometry]\n{key} = {val}\n", 1)
+        text = text.replace(f"{key} = 1.5\n", "", 1)
+    else:
+        text += f"[solver]\n{key} = {val}\n"
+    p.write_text(text)
+    r = CliRunner().invoke(cli, ["solve", str(p), "--no-vtu", "--out", str(tmp_path / "out")])
+    one_error(r, needle)
+
+
+def test_twopad_pad_grading():
+    s = _spec("twopad")
+    s["geometry"].update(n_pad=4, pad_grading=2.0)
+    m = build_mesh(s)
+    p = m.nodes[m.node_sets["pad_moving"]]
+    xs = np.unique(np.round(p[:, 0], 12))[::2]  # vertices across the pad, 4 elements
+    h = np.diff(xs)
+    assert h[0] < h[1] and h[-1] < h[-2] and np.isclose(h[0], h[-1])  # finer at both edges
+    with pytest.raises(ModelError, match="geometry.pad_grading: must be in"):
+        s["geometry"]["pad_grading"] = 0.9
+        build_mesh(s)
