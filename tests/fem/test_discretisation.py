@@ -227,3 +227,76 @@ def test_twopad_pad_grading():
     with pytest.raises(ModelError, match="geometry.pad_grading: must be in"):
         s["geometry"]["pad_grading"] = 0.9
         build_mesh(s)
+
+
+# --- the estimate in the commands ----------------------------------------------------------------
+
+def test_convergence_json_carries_the_estimate(tmp_path):
+    r = CliRunner().invoke(cli, ["convergence", str(_tiny(tmp_path)), "--levels", "3",
+                                 "--out", str(tmp_path / "conv"), "--json"])
+    assert r.exit_code == 0, r.output
+    res = json.loads(r.output)
+    rows = res["levels"]
+    F = [np.array(x["tip_force_N"]) for x in rows]
+    # the estimate is Richardson's over the three levels (checked against the function), the
+    # order is that of a graded mesh (above the ~1.3 of uniform refinement at a punch edge)
+    ref = richardson(F, [1, 2, 3])
+    assert res["observed_order"] == pytest.approx(ref["observed_order"]) and res["observed_order"] > 1.3
+    assert not res["order_assumed"]
+    np.testing.assert_allclose(res["extrapolated"], ref["extrapolated"])
+    rel = [x["relative_error"] for x in rows]
+    assert rel[0] > rel[1] > rel[2] > 0
+    for x, e in zip(rows, ref["errors"], strict=True):
+        np.testing.assert_allclose(x["estimated_error"], e)
+        assert x["relative_error"] == pytest.approx(np.linalg.norm(e) / np.linalg.norm(ref["extrapolated"]))
+    # the existing keys are kept
+    assert {"change_vs_finest", "dof", "tip_force_N", "tip_displacement_m"} <= set(rows[0])
+    saved = json.loads((tmp_path / "conv" / "convergence.json").read_text())
+    assert saved["observed_order"] == res["observed_order"]
+
+
+def test_solve_error_estimate_beside_the_result(tmp_path):
+    out = tmp_path / "out"
+    r = CliRunner().invoke(cli, ["solve", str(_tiny(tmp_path)), "--no-vtu", "--out", str(out),
+                                 "--error-estimate"])
+    assert r.exit_code == 0, r.output
+    assert "estimated discretisation error on the 1x mesh" in r.output and "order 1 assumed" in r.output
+    info = json.loads((out / "summary.json").read_text())
+    d = info["discretisation"]
+    assert d["factors"] == [1, 2] and d["factor"] == 1 and d["dof"][0] == info["dof"] < d["dof"][1]
+    st = info["steps"][-1]
+    F, eF = np.array(st["tip_force_N"]), np.array(st["tip_force_error_N"])
+    # order 1 assumed with two meshes: the 1x error is twice the change from 1x to 2x
+    # (v* = v2 + (v2 - v1)), and the prescribed tip motion has none
+    F2 = np.array(d["extrapolated"]["tip_force_N"])  # v* of the final step
+    np.testing.assert_allclose(eF, np.abs(F - F2), rtol=1e-9, atol=1e-15)
+    assert d["tip_force_relative_error"] == pytest.approx(np.linalg.norm(eF) / np.linalg.norm(F2))
+    assert st["tip_displacement_error_m"] == [0.0, 0.0, 0.0] and d["tip_displacement_relative_error"] == 0
+    assert len(st["points_error_m"]) == 2
+    assert d["points_max_error_m"] == pytest.approx(max(st["points_error_m"]))
+
+
+def test_discretisation_tolerance_refines_until_met(tmp_path):
+    out = tmp_path / "out"
+    r = CliRunner().invoke(cli, ["solve", str(_tiny(tmp_path, "discretisation_tolerance = 0.1")), "--no-vtu",
+                                 "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    info = json.loads((out / "summary.json").read_text())
+    d = info["discretisation"]
+    assert d["met"] and d["tip_force_relative_error"] <= 0.1
+    # the result written is the finest mesh's, which met it; the file's 1x mesh did not
+    assert d["factor"] == d["factors"][-1] >= 2 and info["dof"] == d["dof"][-1]
+    assert d["unknowns_solved"] > info["dof"]
+    assert "tolerance 10 % on the tip met" in r.output
+
+
+def test_discretisation_tolerance_refused_at_the_size_limit(tmp_path):
+    from tests.core._cli import one_error
+    # the 2x mesh (11,907 unknowns) fits, the 3x one (37,479) does not: refused, with the
+    # estimate reached and nothing written
+    p = _tiny(tmp_path, "discretisation_tolerance = 0.01\nmax_unknowns = 20000")
+    r = CliRunner().invoke(cli, ["solve", str(p), "--no-vtu", "--out", str(tmp_path / "out")])
+    line = one_error(r, "solver.discretisation_tolerance: not met before the size limit",
+                     "at 11,907 unknowns (refined 2x)", "refining 3x")
+    assert "estimated force error" in line
+    assert not (tmp_path / "out").exists()
