@@ -34,6 +34,11 @@ class Driver(Protocol):
     Lifecycle: ``connect`` -> ``home`` -> ``run`` (any number) -> ``disconnect``.
     ``emergency_stop`` may be called at any time, from any thread, and must leave the robot
     de-energised.
+
+    Optional, for ``skinkit bench robot``: ``wire_bits_per_sample`` (bits a streamed sample
+    costs on the link, framing included [bit]) and ``line_rate_option`` (the ``connect``
+    option that sets the link's rate [bit/s or baud]); without them the link's capacity is
+    reported as unknown.
     """
 
     name: str
@@ -78,7 +83,13 @@ class Tracker(Protocol):
 
 @runtime_checkable
 class Profiler(Protocol):
-    """A surface profiler (``skinkit.profilers``): undeformed views -> :class:`SurfaceProfile`."""
+    """A surface profiler (``skinkit.profilers``): undeformed views -> :class:`SurfaceProfile`.
+
+    Optional: ``options``, a mapping keyword -> one-line description (with its unit) of the
+    keyword options the profiler's constructor accepts; ``skinkit vision profile`` passes its
+    ``--spacing`` (``spacing_px``) and ``--subset`` (``subset_px``) only to a profiler that
+    declares them, and refuses them, when given, for one that does not.
+    """
 
     name: str
 
@@ -98,6 +109,11 @@ class Law(Protocol):
     ``energy(C, p)``: ``C`` is ``(..., 3, 3)`` right Cauchy-Green tensor [1], ``p`` a mapping
     parameter name -> SI value (arrays broadcastable against ``C[..., 0, 0]`` allowed);
     returns ``(...)`` strain-energy density [Pa = J/m³].
+
+    Optional: ``verification_cases()`` (callable on the registered object, so a static or
+    class method when a class is registered): the cases ``skinkit verify`` runs for the law,
+    a list of mappings with ``name``, ``options``, ``parameters``, ``checks`` and
+    ``prestress`` (see :mod:`skinkit.fem.verify`).
     """
 
     name: str

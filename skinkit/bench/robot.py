@@ -5,9 +5,11 @@ runs in real time in its own process (started through ``skinkit robot emulate``,
 core imports no hardware code) and streams a normal indentation at a chosen decimation of
 its 10 kHz control loop. The device's control loop never waits for the link: samples go
 into its bounded transmit buffer and a full buffer drops them with their indices consumed,
-so the host counts every loss. The peer figure is the link's theoretical sample capacity
-(serial: 10 bits per byte, 30-byte samples in 32-sample frames of 16 bytes overhead; CAN:
-five 8-byte frames of ~125 bits per sample); the ratio is sustained / min(offered, capacity).
+so the host counts every loss. The peer figure is the link's theoretical sample capacity, the
+line rate over the bits a sample costs on the wire as the driver declares them (its
+``wire_bits_per_sample``; ``line_rate_option`` names the ``connect`` option that sets the
+rate); the ratio is sustained / min(offered, capacity). A driver that does not declare its
+wire cost gets capacity "unknown" and the ratio sustained / offered.
 The device buffer is set to 8 KiB so that a link slower than the offered rate shows
 counted losses within a few seconds rather than a long drain. "Sustained" is samples
 received per second of host wall time, from the start command to the end of the run; the
@@ -29,8 +31,14 @@ import click
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
-SERIAL_SAMPLE_BYTES = 30 + 16 / 32
-CAN_SAMPLE_BITS = 5 * 125
+
+def link_capacity_hz(driver: Any, line_rate: float) -> float | None:
+    """Samples per second a link at ``line_rate`` [bit/s or baud] carries for ``driver``, from
+    the bits per sample it declares (``wire_bits_per_sample``); None when it declares none."""
+    bits = getattr(driver, "wire_bits_per_sample", None)
+    if isinstance(bits, bool) or not isinstance(bits, (int, float)) or not bits > 0:
+        return None
+    return line_rate / float(bits)
 
 
 def _emulator(link: str, speed_arg: list[str]) -> tuple[subprocess.Popen[str], str]:
@@ -68,19 +76,14 @@ def measure(link: str, rate_param: int, stream_hz: float, duration_s: float) -> 
 
     decimation = max(1, int(round(10_000 / stream_hz)))
     offered = 10_000 / decimation
-    if link == "serial":
-        proc, port = _emulator("serial", ["--baud", str(rate_param)])
-        capacity = rate_param / 10 / SERIAL_SAMPLE_BYTES
-    else:
-        proc, port = _emulator("can", ["--bitrate", str(rate_param)])
-        capacity = rate_param / CAN_SAMPLE_BITS
+    driver = registry.create("skinkit.drivers", link)
+    capacity = link_capacity_hz(driver, rate_param)
+    opts: dict[str, Any] = {"decimation": decimation}
+    rate_option = getattr(driver, "line_rate_option", None)
+    if isinstance(rate_option, str) and rate_option:
+        opts[rate_option] = rate_param
+    proc, opts["port"] = _emulator(link, ["--baud" if link == "serial" else "--bitrate", str(rate_param)])
     try:
-        driver = registry.create("skinkit.drivers", link)
-        opts: dict[str, Any] = {"port": port, "decimation": decimation}
-        if link == "serial":
-            opts["baudrate"] = rate_param
-        else:
-            opts["bitrate"] = rate_param
         driver.connect(**opts)
         driver.home()
         proto = make_protocol("normal_indentation", frequency=1.0 / duration_s, periods=1)
@@ -91,11 +94,14 @@ def measure(link: str, rate_param: int, stream_hz: float, duration_s: float) -> 
             n += block.n_samples
             t_dev = float(block.time_s[-1])
         wall = time.monotonic() - t0
-        stats = driver.last_run
+        # a driver's own accounting of the run, when it keeps one (skinkit-hardware's do)
+        stats = getattr(driver, "last_run", None)
         driver.disconnect()
     finally:
         proc.terminate()
         proc.wait(5)
+    rt = min(1.0, t_dev / max(wall, 1e-9))
+    peer = offered * rt if capacity is None else min(offered * rt, capacity)
     return {
         "link": link,
         "rate": rate_param,
@@ -104,12 +110,12 @@ def measure(link: str, rate_param: int, stream_hz: float, duration_s: float) -> 
         "capacity_hz": capacity,
         "sustained_hz": n / max(wall, 1e-9),
         "received": n,
-        "lost": stats.lost,
-        "generated": stats.generated,
+        "lost": getattr(stats, "lost", None),
+        "generated": getattr(stats, "generated", None),
         "device_s": t_dev,
         "wall_s": wall,
         "realtime_factor": t_dev / max(wall, 1e-9),
-        "ratio": (n / max(wall, 1e-9)) / min(offered * min(1.0, t_dev / max(wall, 1e-9)), capacity),
+        "ratio": (n / max(wall, 1e-9)) / peer,
     }
 
 
@@ -143,10 +149,10 @@ def bench_robot(duration: float, as_json: bool) -> None:
             r["link"],
             f"{r['rate']} {r['unit']}",
             f"{r['offered_hz']:.0f}",
-            f"{r['capacity_hz']:.0f}",
+            "unknown" if r["capacity_hz"] is None else f"{r['capacity_hz']:.0f}",
             f"{r['sustained_hz']:.0f}",
             f"{r['realtime_factor']:.2f}",
-            f"{r['lost']}/{r['generated']}",
+            "unknown" if r["lost"] is None else f"{r['lost']}/{r['generated']}",
             f"{r['ratio']:.2f}",
         )
     Console().print(t)

@@ -5,8 +5,11 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Collection, Mapping
+from typing import Any
 
 import click
+from click.core import ParameterSource
 
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -187,6 +190,26 @@ def _dot_grid(size: tuple[int, int], pitch_mm: float, fiducials_text: str, asymm
                    fiducial_kind=kind, asymmetric=asymmetric)
 
 
+#: profiler options ``skinkit vision profile`` has flags for: keyword -> flag
+PROFILE_FLAGS = {"spacing_px": "--spacing", "subset_px": "--subset"}
+
+
+def profiler_kwargs(profiler: Any, values: Mapping[str, Any],
+                    explicit: Collection[str] = ()) -> dict[str, Any]:
+    """The options of ``values`` (keyword -> value) that ``profiler`` (a plugin class or object)
+    declares in its optional ``options`` mapping (keyword -> description); a keyword in
+    ``explicit`` (given on the command line) that it does not declare is refused naming the flag."""
+    declared = getattr(profiler, "options", None)
+    accepted = set(declared) if isinstance(declared, Mapping) else set()
+    refused = [k for k in explicit if k not in accepted]
+    if refused:
+        flags = ", ".join(PROFILE_FLAGS.get(k, k) for k in refused)
+        name = getattr(profiler, "name", profiler)
+        raise SkinkitError(f"{flags}: profiler {name!r} does not take {', '.join(refused)} "
+                           f"(its options: {', '.join(sorted(accepted)) or 'none'})")
+    return {k: v for k, v in values.items() if k in accepted}
+
+
 @vision.command("profile")
 @click.argument("experiment", type=click.Path(dir_okay=False))
 @click.option("--images", "images_name", default=None, help="image sequence to profile")
@@ -219,7 +242,11 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
                                "or --overwrite to replace it")
         rig = exp.read_rig()
         seq = _images(exp, images_name, of_skin=True)
-    kwargs = {"spacing_px": spacing_px, "subset_px": subset_px} if profiler_name == "patchwork" else {}
+    ctx = click.get_current_context()
+    explicit = [k for k in PROFILE_FLAGS
+                if ctx.get_parameter_source(k) in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)]
+    kwargs = profiler_kwargs(registry.load("skinkit.profilers", profiler_name),
+                             {"spacing_px": spacing_px, "subset_px": subset_px}, explicit)
     prof = registry.create("skinkit.profilers", profiler_name, **kwargs)
     from rich.console import Console
 

@@ -3,12 +3,29 @@
 Every case returns ``{"name", "passed", "error", "tolerance", "note"}``; tolerances are
 derived in each case's docstring from what limits the agreement (Newton tolerance for
 cases whose exact solution lies in the finite-element space, discretisation otherwise).
+
+The engine's own cases (patch test, pre-stretch, QLV relaxation, Sneddon) are defined here;
+the per-law cases come from the laws themselves: every law in ``skinkit.laws`` may declare
+``verification_cases()`` (see :class:`skinkit.protocols.Law`), each case a mapping with
+
+* ``name`` the case's suffix, unique over all laws (``"ogden-2"`` gives ``uniaxial-ogden-2``,
+  ``equibiaxial-ogden-2`` and ``sensitivities-ogden-2``);
+* ``options`` constructor keywords of the law (default none);
+* ``parameters`` name -> SI value (default: the declared defaults);
+* ``checks`` which of :data:`CHECKS` to run (default both): ``"homogeneous"`` (uniaxial and
+  equibiaxial stretch against the material-point solution) and ``"sensitivities"`` (direct
+  differentiation against central differences of full re-solves);
+* ``prestress`` ``(λ1, λ2, angle [rad])`` of a pre-stretch, for the sensitivities only.
+
+A law that fails to load or declares a malformed case gives a failed case ``cases-<law>``
+naming the problem; the other laws' cases still run.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -28,7 +45,10 @@ _RTOL = 1e-11
 #: limits the agreement: 1e-7 relative leaves a factor 100 of margin
 EXACT_TOL = 1e-7
 
+#: the engine's own cases, name -> function (the laws' cases are found at run time)
 _CASES: dict[str, Callable[[], dict[str, Any]]] = {}
+#: engine cases that run after the laws' sensitivity cases
+_LATE_CASES = ("sensitivities-qlv-history",)
 
 
 def case(name: str):
@@ -78,24 +98,113 @@ def _homogeneous_case(name: str, law: Any, p: dict[str, Any] | None, stretch: fl
     return _result(name, err, EXACT_TOL, f"P_xx {fe['P']:.6g} Pa vs {ref['P'][0, 0]:.6g} Pa")
 
 
-_HOMOGENEOUS_LAWS: dict[str, tuple[str, dict[str, Any], dict[str, Any] | None]] = {
-    "neo-hookean": ("neo-hookean", {}, None),
-    "neo-hookean-ni": ("neo-hookean-ni", {}, None),
-    "mooney-rivlin": ("mooney-rivlin", {}, None),
-    "ogden-2": ("ogden", {"terms": 2}, None),
-    "goh-along": ("goh", {}, {"c": 2e4, "k1": 5e4, "k2": 5.0, "kappa": 0.1, "gamma": 0.0, "k": 5e5}),
-    "goh-30deg": ("goh", {}, {"c": 2e4, "k1": 5e4, "k2": 5.0, "kappa": 0.1,
-                              "gamma": np.pi / 6, "k": 5e5}),
-    "goh-across": ("goh", {}, {"c": 2e4, "k1": 5e4, "k2": 5.0, "kappa": 0.1,
-                               "gamma": np.pi / 2, "k": 5e5}),
-}
+#: the checks a law's verification case may ask for
+CHECKS = ("homogeneous", "sensitivities")
+#: the homogeneous check's states: mode -> stretch [1]
+_HOMOGENEOUS_STATES = (("uniaxial", 1.25), ("equibiaxial", 1.15))
+_CASE_KEYS = {"name", "options", "parameters", "checks", "prestress"}
 
-for _key, (_lname, _opts, _p) in _HOMOGENEOUS_LAWS.items():
-    for _mode, _stretch in (("uniaxial", 1.25), ("equibiaxial", 1.15)):
-        def _f(_lname=_lname, _opts=_opts, _p=_p, _mode=_mode, _stretch=_stretch, _key=_key):
-            """Homogeneous stretch against the material-point solution (exact in the FE space)."""
-            return _homogeneous_case(f"{_mode}-{_key}", _law(_lname, **_opts), _p, _stretch, _mode)
-        case(f"{_mode}-{_key}")(_f)
+
+@dataclass(frozen=True)
+class LawCase:
+    """One verification case a law declares (module docstring); ``law`` is its registry name."""
+
+    law: str
+    name: str
+    options: dict[str, Any]
+    parameters: dict[str, Any] | None
+    checks: tuple[str, ...]
+    prestress: tuple[float, float, float] | None
+
+
+def _law_case(law: str, entry: Any) -> LawCase:
+    """A declared case, checked; ValueError naming what is wrong."""
+    if not isinstance(entry, Mapping):
+        raise ValueError(f"a verification case must be a mapping, got {entry!r}")
+    unknown = sorted(set(entry) - _CASE_KEYS)
+    if unknown:
+        raise ValueError(f"unknown key(s) {unknown} in a verification case; keys are {sorted(_CASE_KEYS)}")
+    name = entry.get("name")
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"a verification case needs a non-empty 'name', got {name!r}")
+    checks = tuple(entry.get("checks", CHECKS))
+    if not checks or set(checks) - set(CHECKS):
+        raise ValueError(f"case {name!r}: checks must be among {CHECKS}, got {checks}")
+    pre = entry.get("prestress")
+    if pre is not None:
+        pre = tuple(float(v) for v in pre)
+        if len(pre) != 3:
+            raise ValueError(f"case {name!r}: prestress must be (l1, l2, angle), got {pre}")
+    params = entry.get("parameters")
+    return LawCase(law, name, dict(entry.get("options") or {}),
+                   None if params is None else dict(params), checks, pre)
+
+
+def law_cases() -> tuple[list[LawCase], dict[str, str]]:
+    """The cases every law in ``skinkit.laws`` declares, and ``{law: problem}`` for each law
+    that failed to load or to declare its cases (a case name used twice is a problem of the
+    second law that uses it)."""
+    cases: list[LawCase] = []
+    problems: dict[str, str] = {}
+    owner: dict[str, str] = {}
+    for law in registry.names("skinkit.laws"):
+        try:
+            fn = getattr(registry.load("skinkit.laws", law), "verification_cases", None)
+            declared = [_law_case(law, e) for e in (fn() if callable(fn) else ())]
+        except Exception as exc:  # a third-party law may fail in any way; report, run the others
+            problems[law] = f"{type(exc).__name__}: {exc}"
+            continue
+        mine = [c.name for c in declared]
+        taken = sorted({n for n in mine if n in owner or mine.count(n) > 1})
+        if taken:
+            by = sorted({owner.get(n, law) for n in taken})
+            problems[law] = f"case name(s) {taken} declared twice (also by law(s) {by})"
+            continue
+        owner.update({c.name: law for c in declared})
+        cases += declared
+    return cases, problems
+
+
+def _homogeneous_fn(c: LawCase, mode: str, stretch: float) -> Callable[[], dict[str, Any]]:
+    def run() -> dict[str, Any]:
+        """Homogeneous stretch against the material-point solution (exact in the FE space)."""
+        return _homogeneous_case(f"{mode}-{c.name}", _law(c.law, **c.options), c.parameters, stretch, mode)
+    return run
+
+
+def _sensitivity_fn(c: LawCase) -> Callable[[], dict[str, Any]]:
+    def run() -> dict[str, Any]:
+        """Sensitivities of every parameter against central finite differences (SENS_TOL)."""
+        r = sensitivity_check(c.law, c.options, c.parameters, c.prestress)
+        return _result(f"sensitivities-{c.name}", r["error"], SENS_TOL,
+                       f"{r['n']} parameters: {', '.join(r['names'])}")
+    return run
+
+
+def _problem_fn(law: str, problem: str) -> Callable[[], dict[str, Any]]:
+    def run() -> dict[str, Any]:
+        return {"name": f"cases-{law}", "passed": False, "error": float("nan"),
+                "tolerance": float("nan"), "note": f"law {law!r}: {problem}"}
+    return run
+
+
+def _all_cases() -> dict[str, Callable[[], dict[str, Any]]]:
+    """Every case in suite order: the laws' homogeneous cases, the engine's cases, the laws'
+    sensitivity cases, then the engine's history sensitivities."""
+    declared, problems = law_cases()
+    out: dict[str, Callable[[], dict[str, Any]]] = {}
+    for c in declared:
+        if "homogeneous" in c.checks:
+            for mode, stretch in _HOMOGENEOUS_STATES:
+                out[f"{mode}-{c.name}"] = _homogeneous_fn(c, mode, stretch)
+    out.update({k: f for k, f in _CASES.items() if k not in _LATE_CASES})
+    for c in declared:
+        if "sensitivities" in c.checks:
+            out[f"sensitivities-{c.name}"] = _sensitivity_fn(c)
+    out.update({k: _CASES[k] for k in _LATE_CASES})
+    for law, problem in problems.items():
+        out[f"cases-{law}"] = _problem_fn(law, problem)
+    return out
 
 
 @case("patch-test")
@@ -250,22 +359,23 @@ def sneddon() -> dict[str, Any]:
 
 
 def names() -> list[str]:
-    """Names of the verification cases."""
-    return list(_CASES)
+    """Names of the verification cases (the laws' declared cases included)."""
+    return list(_all_cases())
 
 
 def run(selected: list[str] | None = None, progress: Callable[[str], None] | None = None
         ) -> dict[str, Any]:
     """Run the cases (all by default); returns ``{"cases": [...], "passed": bool}``."""
+    cases = _all_cases()
     out = []
-    for name in selected or names():
-        if name not in _CASES:
-            raise KeyError(f"no verification case {name!r}; cases are {names()}")
+    for name in selected or list(cases):
+        if name not in cases:
+            raise KeyError(f"no verification case {name!r}; cases are {list(cases)}")
         if progress is not None:
             progress(name)
         t0 = time.perf_counter()
         try:
-            r = _CASES[name]()
+            r = cases[name]()
         except Exception as exc:  # a case that crashes is a failed case, reported as such
             r = {"name": name, "passed": False, "error": float("nan"), "tolerance": float("nan"),
                  "note": f"{type(exc).__name__}: {exc}"}
@@ -336,25 +446,6 @@ def sensitivity_check(law_name: str, opts: dict[str, Any] | None = None,
 #: truncation ~(1e-5)² and solver noise ~1e-12/1e-5 = 1e-7 of the response, stress
 #: derivatives by differences (Ogden, pre-stretch) ~1e-9: 1e-5 leaves a factor 100
 SENS_TOL = 1e-5
-
-_SENS_LAWS: dict[str, tuple[str, dict[str, Any], dict[str, Any] | None, Any]] = {
-    "neo-hookean": ("neo-hookean", {}, None, None),
-    "neo-hookean-ni": ("neo-hookean-ni", {}, None, None),
-    "neo-hookean-enu": ("neo-hookean-enu", {}, None, None),
-    "mooney-rivlin": ("mooney-rivlin", {}, None, None),
-    "ogden-2": ("ogden", {"terms": 2}, None, None),
-    "goh": ("goh", {}, {"c": 2e4, "k1": 5e4, "k2": 5.0, "kappa": 0.1, "gamma": 0.3, "k": 5e5}, None),
-    "prestretch": ("neo-hookean-ni", {}, None, (1.08, 1.03, 0.4)),
-}
-
-for _key, (_lname, _opts, _p, _pre) in _SENS_LAWS.items():
-    def _g(_lname=_lname, _opts=_opts, _p=_p, _pre=_pre, _key=_key):
-        """Sensitivities of every parameter against central finite differences (SENS_TOL)."""
-        r = sensitivity_check(_lname, _opts, _p, _pre)
-        return _result(f"sensitivities-{_key}", r["error"], SENS_TOL,
-                       f"{r['n']} parameters: {', '.join(r['names'])}")
-    case(f"sensitivities-{_key}")(_g)
-
 
 def qlv_history_sensitivity_check() -> dict[str, Any]:
     """Indenter force over a ramp-and-hold history of a QLV block: direct differentiation

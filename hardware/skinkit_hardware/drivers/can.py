@@ -74,6 +74,10 @@ class CanDriver(HostDriver):
     ``bus=`` an open python-can bus."""
 
     name = "can"
+    #: link cost of a sample (read by ``skinkit bench robot``): bits per sample on the bus, and
+    #: the ``connect`` option that sets the bit rate [bit/s]
+    wire_bits_per_sample = C.WIRE_BITS_PER_SAMPLE
+    line_rate_option = "bitrate"
 
     def _open(self, **options: Any) -> CanTransport:
         bus = options.pop("bus", None)

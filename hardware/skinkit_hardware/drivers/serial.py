@@ -95,6 +95,10 @@ class SerialDriver(HostDriver):
     """``connect(port="/dev/ttyUSB0", baudrate=921600, heartbeat_thread=True, decimation=10)``."""
 
     name = "serial"
+    #: link cost of a sample (read by ``skinkit bench robot``): bits per sample on the line, and
+    #: the ``connect`` option that sets the line rate [baud]
+    wire_bits_per_sample = S.WIRE_BITS_PER_SAMPLE
+    line_rate_option = "baudrate"
 
     def _open(self, **options: Any) -> SerialTransport:
         port = options.pop("port", None)

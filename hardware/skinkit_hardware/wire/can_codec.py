@@ -38,6 +38,11 @@ EVENT_NAMES = {v: k for k, v in EVENT_KINDS.items()}
 POSITION_UNIT_M = 5e-7
 FORCE_UNIT_N = 1e-3
 FRAME_BITS = 125  # 8-byte standard frame: 111 bits + worst-case-ish bit stuffing
+#: the frames of one sample, the tick frame (which completes it) last
+SAMPLE_FRAMES = ("ROBOT_SAMPLE_POSITION", "ROBOT_SAMPLE_CURRENT", "ROBOT_SAMPLE_FORCE",
+                 "ROBOT_SAMPLE_TORQUE", "ROBOT_SAMPLE_TICK")
+#: bits a streamed sample costs on the bus [bit]
+WIRE_BITS_PER_SAMPLE = len(SAMPLE_FRAMES) * FRAME_BITS
 
 
 @lru_cache(maxsize=1)

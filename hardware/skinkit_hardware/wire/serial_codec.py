@@ -62,6 +62,11 @@ SAMPLE_DTYPE = np.dtype(
     ]
 )
 SAMPLES_PER_FRAME = 32
+#: bytes of a SAMPLES frame besides its samples: sync, header, samples head, CRC
+SAMPLES_FRAME_OVERHEAD = len(SYNC) + HEADER.size + SAMPLES_HEAD.size + CRC.size
+#: bits a streamed sample costs on the line [bit]: 8N1 sends 10 bits per byte, and a full
+#: frame shares its overhead among SAMPLES_PER_FRAME samples
+WIRE_BITS_PER_SAMPLE = 10 * (SAMPLE_DTYPE.itemsize + SAMPLES_FRAME_OVERHEAD / SAMPLES_PER_FRAME)
 SETPOINTS_PER_FRAME = 64
 POSITION_UNIT_M = 1e-9
 FORCE_UNIT_N = 1e-6

@@ -36,6 +36,9 @@ from skinkit.fem.lawkit import (
 )
 from skinkit.schemas import Parameter
 
+#: fibres stiff against the matrix, fibre dispersion kappa = 0.1: the verification parameters [SI]
+_VERIFY_P = {"c": 2e4, "k1": 5e4, "k2": 5.0, "kappa": 0.1, "k": 5e5}
+
 
 class GOH:
     """Parameters ``c``, ``k1``, ``k`` [Pa], ``k2`` [1], ``kappa`` [1] in [0, 1/3], ``gamma`` [rad].
@@ -61,6 +64,14 @@ class GOH:
             raise ValueError(f"frame_angle must be a finite angle in rad, got {frame_angle!r}")
         self.frame_angle = float(frame_angle)
         self.volumetric = volumetric
+
+    @staticmethod
+    def verification_cases() -> list[dict[str, Any]]:
+        """The cases ``skinkit verify`` runs for this law (keys: :mod:`skinkit.fem.verify`):
+        stretched along, at 30 degrees to and across the fibres."""
+        return [{"name": f"goh-{key}", "parameters": dict(_VERIFY_P, gamma=gamma), "checks": ("homogeneous",)}
+                for key, gamma in (("along", 0.0), ("30deg", np.pi / 6), ("across", np.pi / 2))] + \
+            [{"name": "goh", "parameters": dict(_VERIFY_P, gamma=0.3), "checks": ("sensitivities",)}]
 
     def parameters(self) -> list[Parameter]:
         return [Parameter("c", 2e4, "Pa", 0.0, np.inf),

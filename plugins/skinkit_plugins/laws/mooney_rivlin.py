@@ -33,6 +33,11 @@ class MooneyRivlin:
         check_volumetric(volumetric)
         self.volumetric = volumetric
 
+    @staticmethod
+    def verification_cases() -> list[dict[str, Any]]:
+        """The cases ``skinkit verify`` runs for this law (keys: :mod:`skinkit.fem.verify`)."""
+        return [{"name": "mooney-rivlin"}]
+
     def parameters(self) -> list[Parameter]:
         return [Parameter("c1", 4e3, "Pa", 0.0, np.inf),
                 Parameter("c2", 1e3, "Pa", 0.0, np.inf),

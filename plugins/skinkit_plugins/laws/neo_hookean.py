@@ -40,6 +40,11 @@ class NeoHookean:
     name = "neo-hookean"
     complex_safe = True
 
+    @staticmethod
+    def verification_cases() -> list[dict[str, Any]]:
+        """The cases ``skinkit verify`` runs for this law (keys: :mod:`skinkit.fem.verify`)."""
+        return [{"name": "neo-hookean"}]
+
     def parameters(self) -> list[Parameter]:
         return [Parameter("mu", 1e4, "Pa", 0.0, np.inf),
                 Parameter("lam", 4e4, "Pa", 0.0, np.inf)]
@@ -79,6 +84,13 @@ class NeoHookeanNI:
     def __init__(self, volumetric: str = "quadratic") -> None:
         check_volumetric(volumetric)
         self.volumetric = volumetric
+
+    @staticmethod
+    def verification_cases() -> list[dict[str, Any]]:
+        """The cases ``skinkit verify`` runs for this law (keys: :mod:`skinkit.fem.verify`), the
+        pre-stretch derivatives included."""
+        return [{"name": "neo-hookean-ni"},
+                {"name": "prestretch", "checks": ("sensitivities",), "prestress": (1.08, 1.03, 0.4)}]
 
     def parameters(self) -> list[Parameter]:
         return [Parameter("mu", 1e4, "Pa", 0.0, np.inf),
@@ -138,6 +150,11 @@ class NeoHookeanEnu(NeoHookeanNI):
     """The uncoupled neo-Hookean given by ``E`` [Pa] and ``nu`` [1] (thesis Eqs 7.8-7.10)."""
 
     name = "neo-hookean-enu"
+
+    @staticmethod
+    def verification_cases() -> list[dict[str, Any]]:
+        """The cases ``skinkit verify`` runs for this law (keys: :mod:`skinkit.fem.verify`)."""
+        return [{"name": "neo-hookean-enu", "checks": ("sensitivities",)}]
 
     def parameters(self) -> list[Parameter]:
         # ν < 0.5 strictly: K = E / (3 (1 - 2ν)) is infinite at 0.5

@@ -46,6 +46,11 @@ class Ogden:
         self.terms = int(terms)
         self.volumetric = volumetric
 
+    @staticmethod
+    def verification_cases() -> list[dict[str, Any]]:
+        """The cases ``skinkit verify`` runs for this law (keys: :mod:`skinkit.fem.verify`): two terms."""
+        return [{"name": "ogden-2", "options": {"terms": 2}}]
+
     def parameters(self) -> list[Parameter]:
         out = []
         for i in range(1, self.terms + 1):

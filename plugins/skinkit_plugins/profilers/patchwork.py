@@ -73,6 +73,21 @@ class PatchworkProfiler:
     """
 
     name = "patchwork"
+    #: the keyword options the constructor accepts (read by ``skinkit vision profile``)
+    options = {
+        "tracker": "tracker plugin name for the subpixel match",
+        "subset_px": "subset side [px]",
+        "spacing_px": "grid step in the reference view [px]",
+        "isu_split_px": "split a patch while its mean ISU exceeds this [px]",
+        "min_patch_px": "do not split patches smaller than this [px]",
+        "max_reprojection_px": "drop views whose RMS reprojection error exceeds this [px]",
+        "outlier_neighbours": "neighbours of the statistical outlier removal",
+        "outlier_std": "standard deviations of the statistical outlier removal",
+        "masks": "(C, H, W) bool arrays of usable pixels, in image camera order",
+        "search_px": "integer search radius of the tracker [px]",
+        "min_views": "views a point needs",
+        "min_peak": "correlation a match needs [1]",
+    }
 
     def __init__(self, tracker: str = "pcc", subset_px: int = 31, spacing_px: int = 12,
                  isu_split_px: float = 5.0, min_patch_px: int = 48, max_reprojection_px: float = 0.5,
