@@ -3,7 +3,7 @@
 The public API is what this package and its documented submodules export:
 
 - :mod:`skinkit.schemas`   typed, validated records in SI units
-- :mod:`skinkit.protocols` the interfaces plugins implement
+- :mod:`skinkit.interfaces` the interfaces plugins implement
 - :mod:`skinkit.registry`  discovery and lazy loading of plugins by entry point
 - :mod:`skinkit.store`     the HDF5 experiment file
 - :mod:`skinkit.units`     unit conversion at the edges (mm, kPa, ...)

@@ -47,7 +47,7 @@ class OptionError(RefusedError, ValueError):
 
 
 class PluginError(SkinkitError):
-    """A plugin could not be found, imported, or does not satisfy its protocol."""
+    """A plugin could not be found, imported, or does not satisfy its interface."""
 
 
 class EffectError(SkinkitError):

@@ -2,7 +2,7 @@
 
 Listing reads only distribution metadata; a plugin's module is imported the first time it
 is loaded. A plugin that fails to import, or does not provide the members of its group's
-protocol, is reported with its error and never stops the others from loading.
+interface, is reported with its error and never stops the others from loading.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from typing import Any
 
 from skinkit.errors import PluginError
 
-#: the plugin groups, in the order of :data:`skinkit.protocols.GROUPS` (which maps each to
-#: its protocol); named here so that listing plugins imports neither the protocols nor numpy
+#: the plugin groups, in the order of :data:`skinkit.interfaces.GROUPS` (which maps each to
+#: its interface); named here so that listing plugins imports neither the interfaces nor numpy
 GROUP_NAMES: tuple[str, ...] = ("skinkit.drivers", "skinkit.trackers", "skinkit.profilers",
                                 "skinkit.laws", "skinkit.optimisers", "skinkit.effects")
 
@@ -88,10 +88,10 @@ _cache: dict[tuple[str, str], Any] = {}
 
 
 def load(group: str, name: str) -> Any:
-    """Import and return the object registered as ``name`` in ``group``, protocol-checked.
+    """Import and return the object registered as ``name`` in ``group``, interface-checked.
 
     Raises :class:`PluginError` naming the plugin when it is unknown, fails to import, or
-    lacks members of its protocol.
+    lacks members of its interface.
     """
     key = (group, name)
     if key in _cache:
@@ -111,13 +111,13 @@ def load(group: str, name: str) -> Any:
             f"plugin {name!r} in {group} (from {info.dist}, {info.value}) failed to import: "
             f"{type(exc).__name__}: {exc}"
         ) from exc
-    from skinkit.protocols import GROUPS, missing_members
+    from skinkit.interfaces import GROUPS, missing_members
 
     missing = missing_members(obj, GROUPS[group])
     if missing:
         raise PluginError(
             f"plugin {name!r} in {group} (from {info.dist}, {info.value}) does not satisfy the "
-            f"{GROUPS[group].__name__} protocol: missing {', '.join(missing)}"
+            f"{GROUPS[group].__name__} interface: missing {', '.join(missing)}"
         )
     _cache[key] = obj
     return obj

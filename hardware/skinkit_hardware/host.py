@@ -2,7 +2,7 @@
 sample accounting and conversion to :class:`~skinkit.schemas.RobotRecord` blocks.
 
 A driver differs only in its :class:`Transport` (in-process device, serial link, CAN bus).
-Members beyond :class:`skinkit.protocols.Driver`: ``run_programme`` (run a
+Members beyond :class:`skinkit.interfaces.Driver`: ``run_programme`` (run a
 :class:`~skinkit.acquisition.Programme` directly), ``hold`` (energise in position mode),
 ``status`` (link and device state), ``last_run`` (a :class:`RunStats`), and camera
 triggers, which arrive as ``FLAG_CAMERA_TRIGGER`` on the sample taken at the trigger.
@@ -11,16 +11,16 @@ triggers, which arrive as ``FLAG_CAMERA_TRIGGER`` on the sample taken at the tri
 from __future__ import annotations
 
 import time
+import typing
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from skinkit.acquisition import FLAG_SAMPLES_LOST, Programme, programme_for
 from skinkit.errors import SkinkitError
-from skinkit.schemas import Protocol as MeasurementProtocol
-from skinkit.schemas import RobotRecord
+from skinkit.schemas import Protocol, RobotRecord
 from skinkit_hardware import faults as F
 from skinkit_hardware.device import Event
 from skinkit_hardware.kinematics import Geometry, forward, inverse
@@ -30,7 +30,7 @@ from skinkit_hardware.safety import check_programme
 CHANNELS = ["motor_position", "motor_current", "motor_force", "tip_position", "tip_force", "tip_torque"]
 
 
-class Transport(Protocol):
+class Transport(typing.Protocol):
     """A link to a device. ``receive`` returns ``(samples (n, 15), events)`` (see
     :data:`skinkit_hardware.device.COLUMNS`) and raises :class:`DeviceFault` when the link dies."""
 
@@ -102,7 +102,7 @@ class HostDriver:
         #: force constant used to convert measured currents to motor forces [N/A] (calibration)
         self.force_constant = self.params.force_constant
 
-    # -- Driver protocol -----------------------------------------------------------------
+    # -- Driver interface ----------------------------------------------------------------
     def connect(self, **options: Any) -> None:
         """Open the link; ``decimation`` (control ticks per streamed sample) is common to all."""
         self.decimation = int(options.pop("decimation", self.decimation))
@@ -167,12 +167,12 @@ class HostDriver:
             "last_run": self.last_run.to_dict() if self.last_run else None,
         }
 
-    def run(self, protocol: MeasurementProtocol) -> Iterator[RobotRecord]:
+    def run(self, protocol: Protocol) -> Iterator[RobotRecord]:
         """Run a built-in protocol (see :mod:`skinkit.acquisition.library`)."""
         return self.run_programme(programme_for(protocol), protocol)
 
     # -- programmes ------------------------------------------------------------------------
-    def setpoints(self, prog: Programme, protocol: MeasurementProtocol) -> tuple[str, np.ndarray]:
+    def setpoints(self, prog: Programme, protocol: Protocol) -> tuple[str, np.ndarray]:
         """Device mode and ``(N, 3)`` setpoints for ``prog``; raises :class:`LimitRefused`."""
         if self.tip_zero is None:
             raise SkinkitError(f"{self.name} driver: home() first (the zero position is unknown)")
@@ -185,7 +185,7 @@ class HostDriver:
             raise F.LimitRefused(protocol.name, *bad)
         return mode, sp
 
-    def run_programme(self, prog: Programme, protocol: MeasurementProtocol) -> Iterator[RobotRecord]:
+    def run_programme(self, prog: Programme, protocol: Protocol) -> Iterator[RobotRecord]:
         """Check, load and run ``prog``; yield blocks as they arrive (generator).
 
         Refuses before motion (:class:`LimitRefused`); on a device fault or a dead link yields
@@ -195,7 +195,7 @@ class HostDriver:
         return self._stream(mode, sp, prog, protocol)
 
     def _stream(
-        self, mode: str, sp: np.ndarray, prog: Programme, protocol: MeasurementProtocol
+        self, mode: str, sp: np.ndarray, prog: Programme, protocol: Protocol
     ) -> Iterator[RobotRecord]:
         link = self._link()
         stats = RunStats(protocol=protocol.name)
@@ -278,7 +278,7 @@ class HostDriver:
         stats.received += rows.shape[0]
         return rows, int(nxt)
 
-    def _record(self, rows: np.ndarray, protocol: MeasurementProtocol) -> RobotRecord:
+    def _record(self, rows: np.ndarray, protocol: Protocol) -> RobotRecord:
         q = rows[:, 2:5]
         cur = rows[:, 5:8]
         tip = forward(q, self.geometry) - self.tip_zero

@@ -11,7 +11,7 @@ from skinkit import registry
 
 #: what the listing says when it has not imported the plugins
 NOT_LOADED_NOTE = ("listed from entry-point metadata, no plugin imported; "
-                   "--check imports each one and checks it against its group's protocol")
+                   "--check imports each one and checks it against its group's interface")
 
 
 @click.command()
@@ -19,14 +19,14 @@ NOT_LOADED_NOTE = ("listed from entry-point metadata, no plugin imported; "
 @click.option("--group", "groups", multiple=True, type=click.Choice(sorted(registry.GROUP_NAMES)),
               help="Only this group (repeatable).")
 @click.option("--check", is_flag=True,
-              help="Import every listed plugin and check it against its group's protocol "
+              help="Import every listed plugin and check it against its group's interface "
               "(slower: imports the engines); status ok or error with the message.")
 def plugins(as_json: bool, groups: tuple[str, ...], check: bool) -> None:
     """List installed plugins: group, name, target and distribution.
 
     The listing reads entry-point metadata only, so it is fast and no plugin code runs; its
     status is "unchecked". With --check each plugin is imported and checked against its
-    group's protocol: one that fails is listed with status "error" and its message, and the
+    group's interface: one that fails is listed with status "error" and its message, and the
     others still load.
     """
     wanted = list(groups) or None

@@ -4,7 +4,7 @@ tensor and hyperelastic building blocks a law is written with.
 Everything in ``__all__`` is public and kept stable; the modules it re-exports from
 (:mod:`skinkit.fem.hyper`, :mod:`skinkit.fem.tensors`) are engine internals that may change.
 
-Law machinery: stress and tangent of any :class:`skinkit.protocols.Law`, from its energy if need be.
+Law machinery: stress and tangent of any :class:`skinkit.interfaces.Law`, from its energy if need be.
 
 Conventions (all batched over leading axes):
 

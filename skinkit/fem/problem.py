@@ -34,7 +34,7 @@ class Material:
 
     Attributes:
         region: region name in the mesh.
-        law: a :class:`skinkit.protocols.Law` object.
+        law: a :class:`skinkit.interfaces.Law` object.
         params: parameter name -> SI value.
         F0: optional initial deformation gradient (pre-stress), ``(3, 3)`` or
             ``(n_el_region, n_q, 3, 3)``; the law sees ``C_e = F0ᵀ C F0``.

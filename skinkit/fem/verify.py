@@ -6,7 +6,7 @@ cases whose exact solution lies in the finite-element space, discretisation othe
 
 The engine's own cases (patch test, pre-stretch, QLV relaxation, Sneddon) are defined here;
 the per-law cases come from the laws themselves: every law in ``skinkit.laws`` may declare
-``verification_cases()`` (see :class:`skinkit.protocols.Law`), each case a mapping with
+``verification_cases()`` (see :class:`skinkit.interfaces.Law`), each case a mapping with
 
 * ``name`` the case's suffix, unique over all laws (``"ogden-2"`` gives ``uniaxial-ogden-2``,
   ``equibiaxial-ogden-2`` and ``sensitivities-ogden-2``);

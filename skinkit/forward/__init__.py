@@ -1,7 +1,7 @@
 """Forward models: a model file plus a session -> predictions of every measured channel.
 
 ``load(MODEL)`` reads a model file (or a parsed description), applies its ``[[effects]]``
-and returns a :class:`skinkit.protocols.ForwardModel`: the finite-element model
+and returns a :class:`skinkit.interfaces.ForwardModel`: the finite-element model
 (``[model] kind = "fe"``, the default; :mod:`skinkit.forward.fe`) or a lumped model
 (``kind = "lumped"``; :mod:`skinkit.forward.lumped`). ``read_observations(SESSION)`` reads
 what a session measured. Then::

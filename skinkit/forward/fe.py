@@ -191,7 +191,7 @@ def _cubic(t_knots: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 class FEForwardModel:
-    """A finite-element model file as a :class:`skinkit.protocols.ForwardModel` (module docstring)."""
+    """A finite-element model file as a :class:`skinkit.interfaces.ForwardModel` (module docstring)."""
 
     kind = "fe"
 

@@ -108,7 +108,7 @@ def _interp(t_to: np.ndarray, t_from: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 class LumpedForwardModel:
-    """A lumped model description as a :class:`skinkit.protocols.ForwardModel` (module docstring)."""
+    """A lumped model description as a :class:`skinkit.interfaces.ForwardModel` (module docstring)."""
 
     kind = "lumped"
 

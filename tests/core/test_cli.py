@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from skinkit.cli import cli
-from skinkit.protocols import GROUPS
+from skinkit.interfaces import GROUPS
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit.store import create_experiment
 

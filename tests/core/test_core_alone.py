@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from skinkit import registry
 from skinkit.cli import cli
 from skinkit.errors import PluginError
-from skinkit.protocols import GROUPS
+from skinkit.interfaces import GROUPS
 
 from ..conftest import HAVE_HARDWARE, HAVE_PLUGINS
 

@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: the core a plugin may import from
 CORE = ("skinkit", "skinkit.errors", "skinkit.units", "skinkit.schemas", "skinkit.registry",
-        "skinkit.protocols")
+        "skinkit.interfaces")
 #: plugin kind -> its kit (the stable API for that kind, with ``__all__``)
 KITS = {
     "skinkit.laws": "skinkit.fem.lawkit",

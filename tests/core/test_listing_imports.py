@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from skinkit import registry
-from skinkit.protocols import GROUPS
+from skinkit.interfaces import GROUPS
 
 _PROBE = """
 import contextlib, io, json, sys
@@ -31,7 +31,7 @@ def _run(args: list[str]) -> tuple[set[str], str]:
     return {m.split(".")[0] for m in data["modules"]} | set(data["modules"]), data["output"]
 
 
-def test_group_names_match_the_protocols():
+def test_group_names_match_the_interfaces():
     assert registry.GROUP_NAMES == tuple(GROUPS)
 
 
@@ -40,7 +40,7 @@ def test_plugins_listing_imports_no_plugin():
     listed = json.loads(out)["groups"]
     targets = {e["value"].split(":")[0] for entries in listed.values() for e in entries}
     assert not targets & mods, targets & mods
-    assert not {"numpy", "skinkit.protocols", "skinkit_plugins", "skinkit_hardware"} & mods
+    assert not {"numpy", "skinkit.interfaces", "skinkit_plugins", "skinkit_hardware"} & mods
     assert all(e["status"] == registry.UNCHECKED for v in listed.values() for e in v)
 
 

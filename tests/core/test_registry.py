@@ -10,7 +10,7 @@ import pytest
 
 from skinkit import registry
 from skinkit.errors import PluginError
-from skinkit.protocols import GROUPS, Law, missing_members, required_members
+from skinkit.interfaces import GROUPS, Law, missing_members, required_members
 
 from .thirdparty import build_wheel, make_env, pip_install
 

@@ -1,5 +1,5 @@
 """The built-in effect plugins (``skinkit.effects``) keep the contract of docs/effects.md: they load
-and satisfy the protocol, declare SI units, bounds, null and typical values, and ``apply`` makes
+and satisfy the interface, declare SI units, bounds, null and typical values, and ``apply`` makes
 exactly the documented edits to a copy of a model description. No solver runs here: null
 invariance and visibility of the predictions are tested with the forward model."""
 
@@ -18,7 +18,7 @@ from skinkit import registry
 from skinkit.errors import EffectError
 from skinkit.fem import lawkit
 from skinkit.fem.model import build_model, read_model
-from skinkit.protocols import Effect, missing_members
+from skinkit.interfaces import Effect, missing_members
 from skinkit.units import si_unit
 
 pytestmark = pytest.mark.needs_plugins

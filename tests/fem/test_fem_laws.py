@@ -10,7 +10,7 @@ from skinkit.fem import lawkit
 from skinkit.fem.conformance import check_law, sample_deformations
 from skinkit.fem.errors import ModelError
 from skinkit.fem.hyper import iso_I1, kinematics
-from skinkit.protocols import Law
+from skinkit.interfaces import Law
 from skinkit.schemas import Parameter
 
 pytestmark = pytest.mark.needs_plugins

@@ -28,7 +28,7 @@ _MESSAGES = {nlopt.SUCCESS: "success", nlopt.FTOL_REACHED: "ftol reached", nlopt
 
 
 class NloptOptimiser:
-    """An NLopt algorithm behind skinkit's optimiser protocol (``skinkit.protocols.Optimiser``).
+    """An NLopt algorithm behind skinkit's optimiser interface (``skinkit.interfaces.Optimiser``).
 
     ``fun`` may return a residual vector (φ = ½‖r‖²) or a scalar. ``options``: ``xtol_rel``
     (default 1e-8), ``ftol_rel`` (1e-12), ``maxeval`` (2000), ``population`` (CRS2 only).

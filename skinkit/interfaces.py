@@ -1,18 +1,21 @@
 """The interfaces plugins implement.
 
 A plugin is registered under one of the entry-point groups in :data:`GROUPS` and points at
-a class (or any object) that provides the members its protocol lists. The registry checks
-those members when it loads the plugin and reports what is missing. Protocols are
-structural (``typing.Protocol``): a plugin never needs to import or subclass anything from
-skinkit to satisfy one, although it may use the helpers skinkit offers.
+a class (or any object) that provides the members its interface lists. The registry checks
+those members when it loads the plugin and reports what is missing. Interfaces are
+structural (each is a ``typing.Protocol``): a plugin never needs to import or subclass
+anything from skinkit to satisfy one, although it may use the kits skinkit offers
+(``docs/plugin-authors.md``). In skinkit "protocol" alone means a measurement protocol
+(:class:`skinkit.schemas.Protocol`), which drivers run.
 
 Shapes and units follow the schemas: SI inside, arrays as numpy.
 """
 
 from __future__ import annotations
 
+import typing
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, runtime_checkable
 
 import numpy as np
 
@@ -21,14 +24,14 @@ from skinkit.schemas import (
     ImageSequence,
     Parameter,
     ParameterSet,
+    Protocol,
     RobotRecord,
     SurfaceProfile,
 )
-from skinkit.schemas.protocol import Protocol as MeasurementProtocol
 
 
 @runtime_checkable
-class Driver(Protocol):
+class Driver(typing.Protocol):
     """A robot driver (``skinkit.drivers``): talks to a device, real or simulated.
 
     Lifecycle: ``connect`` -> ``home`` -> ``run`` (any number) -> ``disconnect``.
@@ -49,7 +52,7 @@ class Driver(Protocol):
     def home(self, contact_force_N: float = 0.01) -> None:
         """Zero positions, then approach until the tip force reaches ``contact_force_N`` [N]."""
 
-    def run(self, protocol: MeasurementProtocol) -> Iterator[RobotRecord]:
+    def run(self, protocol: Protocol) -> Iterator[RobotRecord]:
         """Execute ``protocol``; yield its samples block by block as they arrive.
 
         Refuses, before any motion, a protocol that would exceed a safety limit.
@@ -63,7 +66,7 @@ class Driver(Protocol):
 
 
 @runtime_checkable
-class Tracker(Protocol):
+class Tracker(typing.Protocol):
     """A 2D subset tracker (``skinkit.trackers``).
 
     ``track(reference, current, points, subset_px, mask)`` with ``reference`` and
@@ -82,7 +85,7 @@ class Tracker(Protocol):
 
 
 @runtime_checkable
-class Profiler(Protocol):
+class Profiler(typing.Protocol):
     """A surface profiler (``skinkit.profilers``): undeformed views -> :class:`SurfaceProfile`.
 
     Optional: ``options``, a mapping keyword -> one-line description (with its unit) of the
@@ -98,7 +101,7 @@ class Profiler(Protocol):
 
 
 @runtime_checkable
-class Law(Protocol):
+class Law(typing.Protocol):
     """A constitutive law (``skinkit.laws``).
 
     A law declares its parameters and its strain-energy density; the finite-element engine
@@ -126,7 +129,7 @@ class Law(Protocol):
 
 
 @runtime_checkable
-class Optimiser(Protocol):
+class Optimiser(typing.Protocol):
     """An optimiser (``skinkit.optimisers``) for bound-constrained least squares or scalar goals.
 
     ``minimise(fun, x0, lower, upper, jac=None, options=None)``: ``fun(x)`` returns the
@@ -144,7 +147,7 @@ class Optimiser(Protocol):
 
 
 @runtime_checkable
-class Effect(Protocol):
+class Effect(typing.Protocol):
     """A candidate unmodelled effect (``skinkit.effects``) for the sim-to-real gap diagnosis.
 
     ``kinds``: the model kinds the effect applies to (``"fe"``, ``"lumped"``).
@@ -176,7 +179,7 @@ class Effect(Protocol):
 
 
 @runtime_checkable
-class ForwardModel(Protocol):
+class ForwardModel(typing.Protocol):
     """A model that predicts what a session measured (built by :func:`skinkit.forward.load`).
 
     ``parameters()``: every parameter of the model (law, pre-stretch, effect and lumped
@@ -199,7 +202,7 @@ class ForwardModel(Protocol):
         ...
 
 
-#: entry-point group -> protocol class
+#: entry-point group -> interface class
 GROUPS: dict[str, type] = {
     "skinkit.drivers": Driver,
     "skinkit.trackers": Tracker,
@@ -210,23 +213,23 @@ GROUPS: dict[str, type] = {
 }
 
 
-def required_members(protocol: type) -> list[str]:
-    """Names a plugin must provide to satisfy ``protocol`` (attributes and methods)."""
-    names = set(getattr(protocol, "__annotations__", {}))
-    for name, value in vars(protocol).items():
+def required_members(interface: type) -> list[str]:
+    """Names a plugin must provide to satisfy ``interface`` (attributes and methods)."""
+    names = set(getattr(interface, "__annotations__", {}))
+    for name, value in vars(interface).items():
         if callable(value) and not name.startswith("_"):
             names.add(name)
     return sorted(names)
 
 
-def missing_members(obj: Any, protocol: type) -> list[str]:
-    """Members of ``protocol`` that ``obj`` (a class or an instance) lacks, or has but cannot
-    call where the protocol defines a method (reported as ``"name (not callable)"``)."""
+def missing_members(obj: Any, interface: type) -> list[str]:
+    """Members of ``interface`` that ``obj`` (a class or an instance) lacks, or has but cannot
+    call where the interface defines a method (reported as ``"name (not callable)"``)."""
     out = []
-    for m in required_members(protocol):
+    for m in required_members(interface):
         if not hasattr(obj, m):
             out.append(m)
-        elif callable(vars(protocol).get(m)) and not callable(getattr(obj, m)):
+        elif callable(vars(interface).get(m)) and not callable(getattr(obj, m)):
             out.append(f"{m} (not callable)")
     return out
 
