@@ -67,14 +67,10 @@ def _attribute_chain(node: ast.Attribute) -> tuple[str, list[str]] | None:
     return (cur.id, attrs[::-1]) if isinstance(cur, ast.Name) else None
 
 
-def check_source(text: str, where: str, declared: frozenset[str] = DECLARED) -> list[str]:
-    """``"<where>:<line>: <what>"`` for every use of skinkit outside ``declared``: an import of
-    an undeclared module (module or function level, ``import`` or ``from``), an imported name
-    that is private or not in the module's ``__all__``, and an attribute ``x._name`` of a name
-    bound by a skinkit import."""
+def _check_imports(tree: ast.AST, where: str, declared: frozenset[str], bound: set[str]) -> list[str]:
+    """Offending ``import``/``from`` statements anywhere in ``tree``; adds the names they bind
+    to ``bound``."""
     out: list[str] = []
-    bound: set[str] = set()  # names bound to skinkit modules or objects
-    tree = ast.parse(text)
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for a in node.names:
@@ -98,11 +94,38 @@ def check_source(text: str, where: str, declared: frozenset[str] = DECLARED) -> 
                 elif a.name != "*" and exported is not None and a.name not in exported:
                     out.append(f"{where}:{node.lineno}: from {mod} import {a.name} "
                                f"(not in {mod}.__all__)")
+    return out
+
+
+def _check_attributes(tree: ast.AST, where: str, declared: frozenset[str], bound: set[str]) -> list[str]:
+    """``x._name`` on a name bound by a skinkit import, and ``skinkit.a.b`` reaching an
+    undeclared module after ``import skinkit...``."""
+    out: list[str] = []
+    inner = {id(n.value) for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
     for node in ast.walk(tree):
-        if isinstance(node, ast.Attribute):
-            chain = _attribute_chain(node)
-            if chain and chain[0] in bound and _private(chain[1][-1]):
-                out.append(f"{where}:{node.lineno}: {chain[0]}.{'.'.join(chain[1])} (private member)")
+        chain = _attribute_chain(node) if isinstance(node, ast.Attribute) else None
+        if not chain or chain[0] not in bound:
+            continue
+        if _private(chain[1][-1]):
+            out.append(f"{where}:{node.lineno}: {chain[0]}.{'.'.join(chain[1])} (private member)")
+        if chain[0] == "skinkit" and id(node) not in inner:  # import skinkit; skinkit.fem.hyper.b2
+            parts = ["skinkit", *chain[1]]
+            mods = [m for m in (".".join(parts[:k]) for k in range(2, len(parts) + 1)) if _source(m)]
+            if mods and mods[-1] not in declared:
+                out.append(f"{where}:{node.lineno}: {'.'.join(parts)} ({mods[-1]} is not in the "
+                           f"declared plugin API)")
+    return out
+
+
+def check_source(text: str, where: str, declared: frozenset[str] = DECLARED) -> list[str]:
+    """``"<where>:<line>: <what>"`` for every use of skinkit outside ``declared``: an import of
+    an undeclared module (module or function level, ``import`` or ``from``), an imported name
+    that is private or not in the module's ``__all__``, an attribute ``x._name`` of a name
+    bound by a skinkit import, and an undeclared module reached as ``skinkit.a.b``."""
+    tree = ast.parse(text)
+    bound: set[str] = set()  # names bound to skinkit modules or objects
+    out = _check_imports(tree, where, declared, bound)
+    out += _check_attributes(tree, where, declared, bound)
     return sorted(set(out), key=lambda s: (s.split(":")[0], int(s.split(":")[1]), s))
 
 
@@ -139,6 +162,11 @@ def f(law, C, p):
     from skinkit.cli._types import FiniteFloat
     S = stress(law, C, p) + lawkit.tangent(law, C, p)
     return lawkit._energy_gradient(law, C, p), registry._cache, np._private, FiniteFloat, S
+
+
+def g(C):
+    import skinkit.fem.lawkit
+    return skinkit.fem.hyper.b2(C), skinkit.fem.lawkit.b2(C)
 '''
 
 
@@ -151,14 +179,16 @@ def test_the_checker_names_every_offence(tmp_path):
     lines = [int(s.split(":")[1]) for s in found]
     # undeclared modules (2, 6, and 14 inside a function), a private name (7), a name the kit
     # does not export (8), private members of skinkit names (16: lawkit._energy_gradient and
-    # registry._cache; np._private is not skinkit's)
-    assert lines == [2, 6, 7, 8, 14, 16, 16], found
+    # registry._cache; np._private is not skinkit's), an undeclared module reached by
+    # attribute (21: skinkit.fem.hyper, not skinkit.fem.lawkit)
+    assert lines == [2, 6, 7, 8, 14, 16, 16, 21], found
     assert "skinkit.fem.hyper is not in the declared plugin API" in found[1]
     assert "import _show (private name)" in found[2]
     assert "not in skinkit.fem.lawkit.__all__" in found[3]
     assert "skinkit.cli._types is not in the declared plugin API" in found[4]
     assert {"lawkit._energy_gradient (private member)", "registry._cache (private member)"} == \
-        {s.split(": ", 1)[1] for s in found[5:]}
+        {s.split(": ", 1)[1] for s in found[5:7]}
+    assert found[7].endswith("skinkit.fem.hyper.b2 (skinkit.fem.hyper is not in the declared plugin API)")
 
 
 def test_a_throwaway_private_import_in_a_fixture_tree_fails(tmp_path):
