@@ -80,6 +80,9 @@ def _bound(item: str, params) -> tuple[str, float, float]:
               help="name of the fit stored in an experiment-file SESSION (default: fit-<model name>)")
 @click.option("--overwrite", is_flag=True,
               help="replace a fit of that name already stored in SESSION, and fit.json in --out")
+@click.option("--error-estimate", is_flag=True,
+              help="after the fit, solve once on a mesh refined 2x and report the discretisation error "
+                   "beside the residual and each parameter's bias from it (finite-element models)")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 # C901: a command of 19 options: each option is checked where it is used, in the order the
@@ -90,7 +93,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
         max_iterations: int, protocols: str | None,
         resume: bool, out_dir: str | None, plots: bool, fit_name: str | None, overwrite: bool,
-        workers: int | None, as_json: bool) -> None:
+        error_estimate: bool, workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
 
     Every evaluation is kept under --out until the fit ends, so a killed fit run again with
@@ -114,6 +117,11 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         raise SkinkitError(f"--optimiser {optimiser!r} is not installed; installed: "
                            f"{', '.join(registry.names('skinkit.optimisers'))}")
     model = load(model_file, workers=workers)
+    if error_estimate:
+        from skinkit.inverse.discretisation import has_mesh
+        if not has_mesh(model):
+            raise SkinkitError(f"--error-estimate: model {model.name!r} is lumped; it has no mesh whose "
+                               "discretisation error could be estimated")
     obs = read_session(model, session, holdout, segments, protocols=protocols)
     if until_s is not None:
         obs = obs.until(until_s)
@@ -219,6 +227,11 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         raise SkinkitError(f"every start of the fit failed; the first: {failures[0]}")
     best_result = min(results, key=lambda r: r.objective)
     best_result.starts = done
+    if error_estimate:
+        from skinkit.inverse.discretisation import attach, estimate
+        say = None if as_json else (lambda m: click.echo(f"  {m}", err=True))
+        attach(best_result, estimate(model, obs, best_result.parameters, names, weighting=weighting,
+                                     progress=say))
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:
@@ -258,6 +271,10 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         click.echo(f"  ! {pr['message']}")
     for p, v in best["held_out"].items():
         click.echo(f"  held out {p}: rms {v:.3g} noise levels")
+    if "discretisation" in best:
+        from skinkit.inverse.discretisation import describe
+        for line in describe(best["discretisation"]):
+            click.echo(f"  {line}")
     for p in best.get("plots", []):
         click.echo(f"  plot {p}")
     click.echo(f"wrote {out / 'fit.json'}")

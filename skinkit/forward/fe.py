@@ -503,6 +503,14 @@ class FEForwardModel:
         finally:
             client.close()
 
+    def refined(self, factor: int) -> FEForwardModel:
+        """The same model on a mesh with every element count multiplied by ``factor`` (same
+        effects, workers and scheduler): the discretisation check's model
+        (:mod:`skinkit.inverse.discretisation`)."""
+        from skinkit.fem.discretisation import refined_spec
+        return FEForwardModel(refined_spec(self.base, factor), self.effects, workers=self.workers,
+                              scheduler=self.scheduler)
+
     def close(self) -> None:
         """Shut the worker processes down (they are kept between predictions otherwise)."""
         if self._pool is not None:

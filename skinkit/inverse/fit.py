@@ -287,7 +287,8 @@ def fit_json(result: FitResult) -> dict[str, Any]:
             "residual_by_protocol": result.residual_by_protocol,
             "residual_by_channel": result.residual_by_channel, "starts": result.starts,
             "n_replayed": result.extra.get("n_replayed", 0),
-            "n_failed_solves": result.extra.get("n_failed_solves", 0)}
+            "n_failed_solves": result.extra.get("n_failed_solves", 0),
+            **{k: result.extra[k] for k in ("discretisation",) if k in result.extra}}
 
 
 __all__ = ["FitError", "aic", "fit", "fit_json", "free_set", "with_bounds"]
