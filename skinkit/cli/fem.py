@@ -263,6 +263,8 @@ def _write_convergence(res: dict, rows: list[dict], key: str, out: Path) -> None
     ax.set_xlabel("degrees of freedom")
     ax.set_ylabel("|tip force| [N]" if key == "tip_force_N" else "|tip displacement| [m]")
     ax.set_xscale("log")
+    from matplotlib.ticker import NullFormatter
+    ax.xaxis.set_minor_formatter(NullFormatter())  # minor labels of a short decade overlap
     ax.set_title("mesh convergence")
     fig.tight_layout()
     fig.savefig(out / "convergence.png", dpi=120)
