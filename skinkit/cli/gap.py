@@ -40,18 +40,23 @@ def gap() -> None:
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes (FE models)")
 @click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="diagnose only the session's first seconds [s] (e.g. the imaged part of a record)")
+@click.option("--no-error-estimate", "no_error_estimate", is_flag=True,
+              help="skip the discretisation check of a finite-element model (one solve on a mesh refined "
+                   "2x); without it a mesh error can be named as an effect")
 @click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,
                  candidates: int, free: str | None, out_dir: str | None, gap_name: str | None,
-                 overwrite: bool, workers: int | None, until_s: float | None, as_json: bool,
-                 protocols: str | None) -> None:
+                 overwrite: bool, workers: int | None, until_s: float | None, no_error_estimate: bool,
+                 as_json: bool, protocols: str | None) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
     then refits of the best), and how far the gap shrinks with it.
 
     An effect is named only when the gap is significant, its score test survives the
     correction for testing every effect, its refit lowers the AIC by more than 10 and does not
-    worsen the held-out residual. An experiment-file SESSION stores the report (/gaps/<name>).
+    worsen the held-out residual; for a finite-element model, also only when its score test
+    survives with the mesh's discretisation error (the calibrated model solved on a mesh
+    refined 2x) projected out. An experiment-file SESSION stores the report (/gaps/<name>).
     """
     from skinkit.forward import read_description
     from skinkit.gap.diagnose import diagnose, write_report
@@ -81,7 +86,8 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     report = diagnose(model_file, session, effects=wanted, holdout=split_names(holdout),
                       protocols=split_names(protocols) or None,
                       free=None if free is None else split_names(free), max_effects=max_effects,
-                      candidates=candidates, workers=workers, until=until_s, progress=progress)
+                      candidates=candidates, workers=workers, until=until_s, progress=progress,
+                      error_estimate=not no_error_estimate)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:

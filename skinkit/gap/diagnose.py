@@ -267,7 +267,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              free: Sequence[str] | None = None, max_effects: int = 2, candidates: int = 3,
              alpha: float = 0.05, workers: int | None = None, until: float | None = None,
              progress: Callable[[str], None] | None = None,
-             protocols: Sequence[str] | None = None) -> GapReport:
+             protocols: Sequence[str] | None = None, error_estimate: bool = True) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -277,11 +277,16 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     ``candidates``: refits per round; ``alpha``: the level of every test; ``workers``: worker
     processes of a finite-element model; ``until`` [s]: only the session's first seconds (e.g. the
     imaged part of a record); ``progress(line)``: what is being done; ``protocols``: read only
-    these records of a session path (e.g. leave out records another model describes).
+    these records of a session path (e.g. leave out records another model describes);
+    ``error_estimate``: for a finite-element model, once a candidate's score test is
+    significant, solve the calibrated model on a mesh refined 2x and test every candidate again
+    with the discretisation error's signature projected out: an effect that explains only what
+    a finer mesh would is neither refitted nor named (:mod:`skinkit.inverse.discretisation`).
     """
     from skinkit.forward import load, model_kind, read_description
     from skinkit.gap.where import cell_chi2, locate
     from skinkit.inverse import fit
+    from skinkit.inverse.discretisation import has_mesh
     from skinkit.inverse.fit import free_set
 
     t0 = time.perf_counter()
@@ -338,6 +343,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     first_candidates: list[EffectScore] = []
     loc0 = None
     remaining = list(cands)
+    disc: dict[str, Any] | None = None
     for rnd in range(max(max_effects, 1)):
         k = current["k"]
         say(f"round {rnd + 1}: locating the residual (χ²/ν {current['chi2'] / current['dof']:.4g})")
@@ -357,7 +363,11 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         from skinkit.gap.score import score_all
         tests = score_all(sens)
         ok = corrected(tests, alpha)
-        top = [t for t in tests if ok[t.effect]][:candidates]
+        if error_estimate and disc is None and any(ok.values()) and has_mesh(base):
+            disc = _discretisation(base, observations, values, state0["prediction"], sens, alpha, say)
+            n_forward += 1
+        mesh_only = _mesh_only(disc, sens, tests, ok, alpha)
+        top = [t for t in tests if ok[t.effect] and t.effect not in mesh_only][:candidates]
         seps = separability(sens, tests, alpha, [t.effect for t in top])
         states: dict[str, dict[str, Any]] = {}
         if max_effects > 0:
@@ -412,6 +422,13 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
                     reasons[c.effect] = why
                 elif winner is None or c.delta_aic < winner.delta_aic:
                     winner = c
+        for e in mesh_only:
+            reasons[e] = ("what it would explain is the mesh's discretisation error (its score test fails "
+                          "once that signature is projected out): refine the mesh (skinkit convergence)")
+        entry["explained_by_discretisation"] = mesh_only
+        if disc is not None:
+            disc.setdefault("explains", [])
+            disc["explains"] += [e for e in mesh_only if e not in disc["explains"]]
         entry["not_named"] = reasons
         rounds.append(entry)
         if winner is None or len(named) >= max_effects:
@@ -445,7 +462,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         held_out = _fraction(state0["held_chi2"] - state0["held_n"], final["held_chi2"] - final["held_n"]) \
             if named else 0.0
     loc_after = locate(observations, final["prediction"], n_params=final["k"], alpha=alpha) if named else None
-    messages = _messages(loc0, gap0, first_candidates, named, overall, separation, rounds, state0)
+    messages = _messages(loc0, gap0, first_candidates, named, overall, separation, rounds, state0, disc)
     fit_d = {"parameters": {n: float(r0.parameters[n]) for n in theta}, "chi2_per_dof": r0.chi2_per_dof,
              "n_forward": r0.n_forward, "se": {n: _num(r0.se.get(n)) for n in theta}, "aic": r0.aic,
              "held_out": r0.held_out, "converged": r0.converged, "free": list(theta)}
@@ -453,6 +470,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              "point_map_after": {} if loc_after is None else
              {k: [_num(x) for x in v] for k, v in loc_after.point_map.items()},
              "separation": separation, "rounds": rounds, "messages": messages,
+             "discretisation": None if disc is None else {k: v for k, v in disc.items() if k != "e"},
              "effects_tested": list(cands), "alpha": alpha,
              "chi2": {"before": state0["chi2"], "after": final["chi2"], "dof_before": state0["dof"],
                       "dof_after": final["dof"], "held_out_before": state0["held_chi2"],
@@ -467,6 +485,37 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
                      shrinkage={"overall": overall, "held_out": held_out, "cells": shrink_cells}, extra=extra)
 
 
+def _discretisation(model: Any, observations: Observations, values: Mapping[str, float], coarse: Prediction,
+                    sens: Any, alpha: float, say: Callable[[str], None]) -> dict[str, Any] | None:
+    """The calibrated model's discretisation error in the score step's residual space (``e``,
+    exact − coarse, whitened) with the residual figures of
+    :func:`skinkit.inverse.discretisation.residual_check`; None (said) when it cannot be made."""
+    from skinkit.inverse.discretisation import error_in_residual, residual_check
+    try:
+        e, summary, _ = error_in_residual(model, observations, dict(values), coarse, progress=say)
+    except SkinkitError as exc:
+        say(f"discretisation check not made: {exc}")
+        return None
+    if e.size != sens.z.size:
+        say("discretisation check not made: its residual does not match the score step's")
+        return None
+    chk = residual_check(sens.z, sens.J_theta, e)
+    return {**summary, **{k: v for k, v in chk.items() if k != "bias"}, "e": e, "explains": []}
+
+
+def _mesh_only(disc: Mapping[str, Any] | None, sens: Any, tests: Sequence[ScoreTest], ok: Mapping[str, bool],
+               alpha: float) -> list[str]:
+    """The candidates significant on the residual but no longer once the discretisation error's
+    signature ``e`` is projected out beside the fitted parameters' (at any size: the estimate's
+    size rests on an assumed order, its shape does not): what they would explain, a finer mesh
+    would explain too."""
+    if disc is None or not np.any(disc["e"]):
+        return []
+    from skinkit.gap.score import score_all
+    ok_exact = corrected(score_all(sens, nuisance=disc["e"][:, None]), alpha)
+    return [t.effect for t in tests if ok[t.effect] and not ok_exact.get(t.effect, False)]
+
+
 def _num(x: Any) -> float | None:
     try:
         v = float(x)
@@ -477,9 +526,19 @@ def _num(x: Any) -> float | None:
 
 def _messages(loc: Any, gap: Mapping[str, Any], cands: Sequence[EffectScore], named: Sequence[str],
               overall: float | None, separation: Sequence[dict[str, Any]], rounds: Sequence[dict[str, Any]],
-              state0: dict[str, Any]) -> list[str]:
+              state0: dict[str, Any], disc: Mapping[str, Any] | None = None) -> list[str]:
     """The verdict in plain sentences."""
     out = []
+    if disc is not None:
+        frac = disc.get("explained_by_signature")
+        share = "" if frac is None else (f"; along its signature, at any size, a finer mesh would remove "
+                                         f"{100 * frac:.0f} % of the excess")
+        out.append(f"Discretisation (mesh refined {disc['factor']}x, {disc['unknowns']:,} -> "
+                   f"{disc['unknowns_refined']:,} unknowns): the error alone is χ² "
+                   f"{disc['chi2_discretisation']:.4g} against ν {disc['dof']}{share}.")
+        if disc.get("explains"):
+            out.append(f"Not named, because discretisation explains the residual along their signatures: "
+                       f"{', '.join(disc['explains'])}.")
     cpd = state0["chi2"] / state0["dof"]
     if not gap.get("significant", loc.significant):
         out.append(f"No significant gap: χ²/ν {cpd:.3g} is at the noise level; no effect named.")

@@ -420,9 +420,14 @@ def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns) -> ScoreTest:
                      dict(cols.held), absorbed, {n: cols.methods[n] for n in tested}, one_sided)
 
 
-def score_all(sens: Sensitivities) -> list[ScoreTest]:
-    """Every candidate's score test, most significant first (by log p, then the statistic)."""
-    U = fitted_basis(sens.J_theta)
+def score_all(sens: Sensitivities, nuisance: np.ndarray | None = None) -> list[ScoreTest]:
+    """Every candidate's score test, most significant first (by log p, then the statistic).
+
+    ``nuisance`` ``(m, r)``: further directions projected out beside the fitted parameters'
+    (the discretisation error's signature, of unknown size: what a candidate would explain
+    along it, a finer mesh would explain too)."""
+    J = sens.J_theta if nuisance is None else np.column_stack([sens.J_theta, nuisance])
+    U = fitted_basis(J)
     out = [score_test(sens.z, U, c) for c in sens.columns.values()]
     return sorted(out, key=lambda t: (t.log_p, -t.statistic))
 

@@ -105,9 +105,10 @@ def residual_check(z: np.ndarray, J: np.ndarray, e: np.ndarray, values: np.ndarr
                    positive: np.ndarray | None = None) -> dict[str, Any]:
     """The whitened residual ``z`` ``(m,)`` of a fit with Jacobian ``J`` ``(m, k)`` (∂z/∂θ, SI)
     against the discretisation error ``e`` ``(m,)`` (exact − coarse prediction, whitened):
-    ``chi2`` |z|², ``chi2_discretisation`` |e|², ``chi2_exact`` |(I − P_J)(z + e)|², the share
-    of the excess over ν that discretisation explains, and the parameter ``bias`` ``(k,)`` [SI]
-    (θ_coarse − θ_exact).
+    ``chi2`` |z|², ``chi2_discretisation`` |e|², ``chi2_exact`` |(I − P_J)(z + e)|² and the
+    share of the excess over ν it removes (``explained_fraction``: rests on the assumed order),
+    ``chi2_signature`` |(I − P_[J e]) z|² and its share (``explained_by_signature``: e's
+    direction at any size), and the parameter ``bias`` ``(k,)`` [SI] (θ_coarse − θ_exact).
 
     ``values`` ``(k,)`` [SI] and ``positive`` ``(k,)`` bool: parameters known positive (moduli)
     take the shift in ln θ, θ_exact = θ exp(−Δ): a modulus scales a force, so the shift is
@@ -131,11 +132,19 @@ def residual_check(z: np.ndarray, J: np.ndarray, e: np.ndarray, values: np.ndarr
             bias, *_ = np.linalg.lstsq(J, e, rcond=None)
     else:
         r_exact, bias = z + e, np.zeros(0)
-    chi2, chi2_x = float(z @ z), float(r_exact @ r_exact)
+    # scale-free: the residual left once the error's direction is free beside the parameters
+    # (what the gap diagnosis tests against; its size rests on the assumed order, its shape not)
+    A = np.column_stack([J, e]) if np.any(e) else J
+    r_sig = z - A @ np.linalg.lstsq(A, z, rcond=None)[0] if A.shape[1] else z
+    chi2, chi2_x, chi2_s = float(z @ z), float(r_exact @ r_exact), float(r_sig @ r_sig)
     excess = chi2 - nu
-    explained = None if excess <= 0 else float(min(max((chi2 - max(chi2_x, nu)) / excess, 0.0), 1.0))
+
+    def share(left: float) -> float | None:
+        return None if excess <= 0 else float(min(max((chi2 - max(left, nu)) / excess, 0.0), 1.0))
+
     return {"chi2": chi2, "dof": nu, "chi2_discretisation": float(e @ e), "chi2_exact": chi2_x,
-            "explained_fraction": explained, "bias": bias}
+            "explained_fraction": share(chi2_x), "chi2_signature": chi2_s,
+            "explained_by_signature": share(chi2_s), "bias": bias}
 
 
 def error_in_residual(model: Any, observations: Observations, params: ParameterSet | dict[str, float],
