@@ -4,7 +4,6 @@ experiment file holds (sections for what it lacks are left out and said so in th
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 from skinkit.errors import StoreError
@@ -76,13 +75,13 @@ def write_report(session_path: str | os.PathLike[str], out: str | os.PathLike[st
     text = render_report(session_path)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        # not mkstemp: its 0600 mode would survive the rename, and a report is made to be shared
+        tmp = target.parent / f".{target.name}.{os.getpid()}.tmp"
         try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                fh.write(text)
+            tmp.write_text(text, encoding="utf-8")
             os.replace(tmp, target)
         except BaseException:
-            Path(tmp).unlink(missing_ok=True)
+            tmp.unlink(missing_ok=True)
             raise
     except OSError as exc:
         raise StoreError(str(target), "", f"cannot write the report: {exc.strerror or exc}") from None

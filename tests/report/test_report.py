@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import html
+import os
 import re
 import shutil
 from pathlib import Path
@@ -217,6 +218,11 @@ def test_cli_default_out_refuses_to_overwrite(full_session, tmp_path, monkeypatc
     r = CliRunner().invoke(cli, ["report", str(full_session["path"]), "--overwrite"])
     assert r.exit_code == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["session-report.html", "x"]   # no temporary left
+    # a report is made to be shared: its mode follows the umask like any file the user writes
+    # (mkstemp's 0600 would survive the rename)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (out.stat().st_mode & 0o777) == (0o666 & ~umask)
 
 
 def _damaged(full_session, tmp_path: Path) -> dict[str, tuple[Path, str]]:
