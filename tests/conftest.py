@@ -19,6 +19,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     # asked for by name (pytest -m realtime), on a machine known to be idle
     run_realtime = "realtime" in (config.getoption("markexpr", "") or "")
     skip_rt = pytest.mark.skip(reason="asserts wall-clock behaviour: run with -m realtime on an idle machine")
+    # groups that share an expensive module fixture (xdist_group, run by one worker under
+    # --dist loadgroup) go first, so that they run beside the rest instead of after it
+    items.sort(key=lambda it: it.get_closest_marker("xdist_group") is None)
     for item in items:
         if "realtime" in item.keywords and not run_realtime:
             item.add_marker(skip_rt)

@@ -18,11 +18,13 @@ import pytest
 
 from skinkit import registry
 
-pytestmark = pytest.mark.skipif(
+pytestmark = [pytest.mark.skipif(
     any(n not in registry.names(g) for g, n in (("skinkit.laws", "goh"), ("skinkit.laws", "qlv"),
                                                   ("skinkit.profilers", "patchwork"),
                                                   ("skinkit.effects", "prestress"))),
-    reason="needs the built-in plugins (skinkit-plugins)")
+    reason="needs the built-in plugins (skinkit-plugins)"),
+    # one worker runs the whole module (its fixture is the demo: minutes), started first
+    pytest.mark.xdist_group("chain")]
 
 _OPENED: list[tuple[str, str]] = []
 _PHASE = ["before"]
