@@ -141,10 +141,12 @@ class RobotCalibration:
     robot: dict[str, float] = field(default_factory=dict)  # mass_kg, damping_Ns_per_m, stiffness_N_per_m
 
     def to_json(self) -> str:
+        """The calibration as canonical JSON (sorted keys)."""
         return json.dumps(asdict(self), sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> RobotCalibration:
+        """A calibration from :meth:`to_json`'s text; :class:`CalibrationError` when it is malformed."""
         try:
             return cls(**json.loads(text))
         except (TypeError, ValueError) as exc:
@@ -168,6 +170,7 @@ class RobotCalibration:
 
     @classmethod
     def load(cls, experiment: Any) -> RobotCalibration:
+        """The robot calibration stored in ``experiment``; :class:`CalibrationError` when it holds none."""
         if "robot" not in experiment.calibration_names():
             raise CalibrationError(f"{experiment.path}: no robot calibration stored")
         return cls.from_json(json.dumps(experiment.read_calibration("robot")))

@@ -48,12 +48,14 @@ def parse_loopback(channel: str) -> tuple[str, int]:
 
 
 def pack(msg: can.Message) -> bytes:
+    """One frame as a fixed-size bridge record (id, dlc, extended flag, 8 data bytes zero-padded)."""
     return RECORD.pack(
         msg.arbitration_id, msg.dlc, 1 if msg.is_extended_id else 0, bytes(msg.data).ljust(8, b"\0")
     )
 
 
 def unpack(buf: bytes) -> can.Message:
+    """The frame of one :func:`pack` record."""
     arb, dlc, flags, data = RECORD.unpack(buf)
     return can.Message(arbitration_id=arb, dlc=dlc, data=data[:dlc], is_extended_id=bool(flags & 1))
 
@@ -95,6 +97,7 @@ class LoopbackBus(can.BusABC):
         return None, False
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send ``msg`` to the bridge, waiting at most ``timeout`` [s] (default 5 s)."""
         data = pack(msg)
         self.sock.setblocking(True)
         try:
@@ -106,6 +109,7 @@ class LoopbackBus(can.BusABC):
             self.sock.setblocking(False)
 
     def shutdown(self) -> None:
+        """Close the connection to the bridge (idempotent)."""
         if not self.closed:
             self.closed = True
             try:
@@ -186,6 +190,7 @@ class BridgeServer:
             done.set()
 
     def close(self) -> None:
+        """Stop forwarding, close the listening socket and the virtual bus."""
         self._stop.set()
         self.thread.join(1.0)
         self.listener.close()

@@ -54,9 +54,11 @@ class CanLinkServer:
         self.dropped = self.corrupted = self.overflow = 0
 
     def backlog(self) -> float:
+        """Fraction of the transmit queue in use."""
         return len(self.tx) / self.capacity
 
     def poll(self, timeout: float) -> list[tuple[str, dict[str, Any]]]:
+        """The host commands ``[(command, args)]`` received within ``timeout`` [s]."""
         out = []
         msg = self.bus.recv(timeout)
         while msg is not None:
@@ -69,6 +71,7 @@ class CanLinkServer:
         return out
 
     def samples(self, rows: np.ndarray) -> None:
+        """Queue the frames of sample ``rows`` ``(n, 15)``; a sample that does not fit is lost (counted)."""
         for frames in C.encode_samples(rows, self.params):
             if len(self.tx) + len(frames) > self.capacity:
                 self.overflow += 1  # the index is consumed: the host sees the gap
@@ -83,12 +86,15 @@ class CanLinkServer:
                 self.tx.append(f)
 
     def event(self, ev: Event) -> None:
+        """Queue the frames of event ``ev`` (never dropped on purpose)."""
         self.tx.extend(C.encode_event(ev, self.params))
 
     def info(self, info: dict[str, Any]) -> None:
+        """Queue the device information frame of ``info``."""
         self.tx.extend(C.encode_info(info))
 
     def flush(self) -> None:
+        """Send as many queued frames as the bit rate allows since the last flush (all at rate 0)."""
         now = time.monotonic()
         if self.bitrate > 0:
             self.credit = min(self.credit + (now - self.t_last) * self.bitrate / C.FRAME_BITS, 256.0)
@@ -104,6 +110,7 @@ class CanLinkServer:
             self.credit -= sent
 
     def close(self) -> None:
+        """Stop the bridge, if any, and the virtual bus."""
         if self.bridge is not None:
             self.bridge.close()
         self.bus.shutdown()

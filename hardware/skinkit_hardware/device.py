@@ -310,6 +310,7 @@ class Device:
         return np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
 
     def take_events(self) -> list[Event]:
+        """The events raised since the last call, oldest first."""
         ev, self.events = self.events, []
         return ev
 

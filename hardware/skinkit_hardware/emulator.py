@@ -45,6 +45,8 @@ from skinkit_hardware.wire import serial_codec as S
 
 
 class LinkStats:
+    """What the serial link did: samples sent and lost to overflow, frames dropped and corrupted."""
+
     def __init__(self) -> None:
         self.sent_samples = 0
         self.overflow_samples = 0
@@ -86,6 +88,7 @@ class SerialLinkServer:
         return len(self.tx) / self.capacity
 
     def poll(self, timeout: float) -> list[tuple[str, dict[str, Any]]]:
+        """The host commands ``[(command, args)]`` read within ``timeout`` [s]."""
         r, _, _ = select.select([self.master], [], [], timeout)
         if not r:
             return []
@@ -155,6 +158,7 @@ class SerialLinkServer:
         self.tx += data
 
     def samples(self, rows: np.ndarray) -> None:
+        """Queue the frames of sample ``rows`` ``(n, 15)``; frames that do not fit are lost (counted)."""
         for n, f in S.encode_samples(self.send, rows, self.params):
             if len(self.tx) + len(f) > self.capacity:
                 self.stats.overflow_samples += n  # indices consumed: the host sees the gap
@@ -163,12 +167,15 @@ class SerialLinkServer:
             self._queue(f)
 
     def event(self, ev: Event) -> None:
+        """Queue the frame of event ``ev``."""
         self.tx += S.encode_event(self.send, ev)  # events are never dropped on purpose
 
     def info(self, info: dict[str, Any]) -> None:
+        """Queue the device information frame of ``info``."""
         self.tx += S.encode_info(self.send, info)
 
     def flush(self) -> None:
+        """Write as many queued bytes as the baud rate allows since the last flush (all at baud 0)."""
         now = time.monotonic()
         if self.baud > 0:
             self.credit = min(self.credit + (now - self.t_last) * self.baud / 10.0, 4096.0)
@@ -187,6 +194,7 @@ class SerialLinkServer:
             self.credit -= written
 
     def close(self) -> None:
+        """Close both ends of the pty."""
         for fd in (self.master, self.slave):
             try:
                 os.close(fd)
@@ -203,9 +211,11 @@ class LinkReadClock:
         self.t = time.monotonic()
 
     def mark(self) -> None:
+        """Record a read of the link now."""
         self.t = time.monotonic()
 
     def __call__(self) -> float:
+        """The monotonic time [s] of the latest read."""
         return self.t
 
 
@@ -291,11 +301,13 @@ def serve(
 
 
 def build_device(args: argparse.Namespace) -> Device:
+    """The emulated device the command line describes (skin, seed, injected faults), on the wall clock."""
     inj = Injection(stuck_motor=args.stuck_motor, stuck_after_s=args.stuck_after)
     return Device(skin=make_skin(args.skin), seed=args.seed, clock=wall_clock, injection=inj)
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m skinkit_hardware.emulator``: serve a device on a serial or CAN link; the exit code."""
     ap = argparse.ArgumentParser(
         prog="python -m skinkit_hardware.emulator",
         description="Emulate the microrobot behind its serial or CAN protocol.",

@@ -55,9 +55,11 @@ class Fault:
 
     @property
     def name(self) -> str:
+        """The fault's name (``fault code N`` for one this version does not know)."""
         return NAMES.get(self.code, f"fault code {self.code}")
 
     def message(self) -> str:
+        """The fault in one line: name, motor, value and limit in their units."""
         where = f" on motor {self.motor}" if self.motor else ""
         unit = UNITS.get(self.code, "")
         detail = ""

@@ -34,11 +34,14 @@ class Transport(typing.Protocol):
     """A link to a device. ``receive`` returns ``(samples (n, 15), events)`` (see
     :data:`skinkit_hardware.device.COLUMNS`) and raises :class:`DeviceFault` when the link dies."""
 
-    def send(self, command: str, **args: Any) -> None: ...
+    def send(self, command: str, **args: Any) -> None:
+        """Send one host ``command`` with its ``args``."""
 
-    def receive(self, timeout_s: float) -> tuple[np.ndarray, list[Event]]: ...
+    def receive(self, timeout_s: float) -> tuple[np.ndarray, list[Event]]:
+        """``(samples (n, 15), events)`` received within ``timeout_s`` [s]."""
 
-    def close(self) -> None: ...
+    def close(self) -> None:
+        """Close the link."""
 
 
 @dataclass
@@ -61,6 +64,7 @@ class RunStats:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The counts as a plain dict (JSON-ready)."""
         return {
             "protocol": self.protocol,
             "received": self.received,
@@ -160,6 +164,7 @@ class HostDriver:
             self.transport = None
 
     def status(self) -> dict[str, Any]:
+        """Driver name, connected, homed, and the last run's sample accounting."""
         return {
             "driver": self.name,
             "connected": self.transport is not None,

@@ -71,6 +71,7 @@ class RobotParameters:
 
     @property
     def pot_sigma_m(self) -> float:
+        """Standard deviation of the potentiometer noise [m] (peak-to-peak / 6)."""
         return self.pot_noise_pp_m / 6.0
 
     def force_constant(self, q: np.ndarray | float) -> np.ndarray | float:
@@ -108,6 +109,7 @@ class Limits:
     post_fault_s: float = 0.02
 
     def to_dict(self) -> dict[str, float]:
+        """The limits as a flat dict of SI floats."""
         return {
             "peak_force_N": self.peak_force_N,
             "continuous_force_N": self.continuous_force_N,

@@ -39,6 +39,7 @@ class KelvinVoigtSkin:
     glued: bool = False
 
     def reaction(self, u, v, dt):  # noqa: ANN001 - hot path, plain floats
+        """Force on the probe [N] for displacement ``u`` [m], velocity ``v`` [m/s]; none before contact."""
         if not self.glued:
             if u[2] <= 0.0:
                 return (0.0, 0.0, 0.0)
@@ -76,6 +77,7 @@ class WienerSkin:
         )
 
     def reaction(self, u, v, dt):  # noqa: ANN001 - hot path, plain floats
+        """Force on the probe [N] for displacement ``u`` [m] and velocity ``v`` [m/s] over step ``dt`` [s]."""
         if not self.glued:
             if u[2] <= 0.0:
                 return (0.0, 0.0, 0.0)
@@ -95,6 +97,7 @@ class NoSkin:
     glued: bool = False
 
     def reaction(self, u, v, dt):  # noqa: ANN001
+        """No force: ``(0, 0, 0)`` [N]."""
         return (0.0, 0.0, 0.0)
 
 
@@ -108,6 +111,7 @@ class SpringLoad:
     glued: bool = True
 
     def reaction(self, u, v, dt):  # noqa: ANN001
+        """The spring's force [N] along its axis for displacement ``u`` [m]."""
         f = [0.0, 0.0, 0.0]
         f[self.axis] = -self.k_N_per_m * u[self.axis]
         return (f[0], f[1], f[2])

@@ -39,6 +39,7 @@ class EmulatorProcess:
         return self
 
     def kill(self) -> None:
+        """Kill the emulator process if it is still running and wait for it."""
         if self.proc is not None and self.proc.poll() is None:
             self.proc.kill()
             self.proc.wait(5)

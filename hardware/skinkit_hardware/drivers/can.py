@@ -35,9 +35,11 @@ class CanTransport(LinkTransport):
 
     @property
     def info(self) -> dict[str, Any]:
+        """The device information the robot sent (rates, firmware)."""
         return self.asm.info
 
     def send(self, command: str, **args: Any) -> None:
+        """Send one host ``command`` with its ``args`` as CAN frames (DeviceFault if the bus fails)."""
         msgs = C.encode_command(command, **args)
         with self.lock:
             try:
@@ -50,6 +52,7 @@ class CanTransport(LinkTransport):
             self.last_sent = time.monotonic()
 
     def receive(self, timeout_s: float) -> tuple[np.ndarray, list[Event]]:
+        """``(samples (n, 15), events)`` received within ``timeout_s`` [s]; a heartbeat first when due."""
         if time.monotonic() - self.last_sent > self.heartbeat_s:
             self.send("heartbeat")
         msgs = []

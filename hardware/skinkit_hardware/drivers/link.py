@@ -39,9 +39,11 @@ class LinkTransport:
                 return
 
     def send(self, command: str, **args: Any) -> None:  # pragma: no cover - abstract
+        """Send one host ``command`` with its ``args`` to the device."""
         raise NotImplementedError
 
     def receive(self, timeout_s: float) -> Any:  # pragma: no cover - abstract
+        """``(samples (n, 15), events)`` received within ``timeout_s`` [s]."""
         raise NotImplementedError
 
     def _close_link(self) -> None:  # pragma: no cover - abstract
@@ -59,6 +61,7 @@ class LinkTransport:
             raise F.DeviceFault(no_answer)
 
     def close(self) -> None:
+        """Stop the heartbeat and close the link (errors of a dead link are ignored)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(1.0)

@@ -53,11 +53,13 @@ class SerialTransport(LinkTransport):
             self.last_sent = time.monotonic()
 
     def send(self, command: str, **args: Any) -> None:
+        """Send one host ``command`` with its ``args`` as a serial frame."""
         with self.lock:
             data = S.encode_command(self.send_frame, command, **args)
         self._write(data)
 
     def receive(self, timeout_s: float) -> tuple[np.ndarray, list[Event]]:
+        """``(samples (n, 15), events)`` received within ``timeout_s`` [s]; a heartbeat first when due."""
         import serial
 
         if time.monotonic() - self.last_sent > self.heartbeat_s:

@@ -20,6 +20,7 @@ class SimTransport:
         self.stats: dict[str, Any] = {}
 
     def send(self, command: str, **args: Any) -> None:
+        """Carry out one host ``command`` on the simulated device."""
         d = self.device
         if command == "load":
             d.load(args["mode"], args["rate_hz"], args["setpoints"], args.get("trigger_period_s", 0.0))
@@ -29,12 +30,14 @@ class SimTransport:
             getattr(d, command)(**args)
 
     def receive(self, timeout_s: float) -> tuple[np.ndarray, list[Event]]:
+        """Advance the simulated device one block: ``(samples (n, 15), events)``; ``timeout_s`` is unused."""
         d = self.device
         d.heartbeat()
         d.advance(self.block_ticks)
         return d.drain(), d.take_events()
 
     def close(self) -> None:
+        """Disable the simulated device's motors."""
         self.device.disable()
 
 

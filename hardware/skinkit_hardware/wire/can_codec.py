@@ -58,6 +58,7 @@ def _msg(name: str):  # noqa: ANN202
 
 
 def frame(name: str, **signals: Any) -> can.Message:
+    """The CAN frame of message ``name`` with raw (unscaled) ``signals``."""
     m = _msg(name)
     return can.Message(arbitration_id=m.frame_id, data=m.encode(signals, scaling=False), is_extended_id=False)
 
@@ -76,6 +77,7 @@ def decode(msg: can.Message) -> tuple[str, dict[str, Any]] | None:
 
 # -- host -> device -----------------------------------------------------------------------
 def encode_command(command: str, **args: Any) -> list[can.Message]:
+    """The frames of one host ``command`` (a programme upload is several); :class:`DeviceFault` if unknown."""
     if command == "configure":
         return [
             frame(
@@ -134,6 +136,7 @@ class CommandAssembler:
         self.load: dict[str, Any] | None = None
 
     def feed(self, name: str, s: dict[str, Any]) -> tuple[str, dict[str, Any]] | None:
+        """Feed one decoded frame; the ``(command, args)`` it completes, or None."""
         if name == "HOST_CMD":
             cmd = COMMAND_NAMES.get(int(s["Command"]))
             return (cmd, {}) if cmd else None
@@ -200,6 +203,7 @@ def encode_samples(rows: np.ndarray, p: RobotParameters) -> list[list[can.Messag
 
 
 def encode_event(ev: Event, p: RobotParameters) -> list[can.Message]:
+    """The frames of event ``ev`` (value, time, then position when it has one)."""
     f = ev.fault or F.Fault(0)
     out = [
         frame("ROBOT_EVENT_VALUE", Value=f.value, Limit=f.limit),
@@ -217,6 +221,7 @@ def encode_event(ev: Event, p: RobotParameters) -> list[can.Message]:
 
 
 def encode_info(info: dict[str, Any]) -> list[can.Message]:
+    """The device information frame of ``info``."""
     return [
         frame(
             "ROBOT_INFO",
@@ -247,10 +252,12 @@ class SampleAssembler:
         self.info: dict[str, Any] = {}
 
     def reset(self) -> None:
+        """Forget partial samples and the index unwrapping (a new run)."""
         self.pending.clear()
         self.base, self.last16 = 0, -1
 
     def feed(self, msgs: list[can.Message]) -> tuple[np.ndarray, list[Event]]:
+        """The complete sample rows ``(n, 15)`` and the events in ``msgs``."""
         rows: dict[str, list] = {k: [] for k in ("index", "tick", "pos", "cur", "force", "torque", "flags")}
         events = []
         for msg in msgs:

@@ -89,6 +89,7 @@ class FrameReader:
     _next_seq: int | None = None
 
     def feed(self, data: bytes) -> list[tuple[int, int, bytes]]:
+        """Append ``data``: the complete frames ``[(kind, seq, payload)]``, corrupt ones skipped (counted)."""
         self.buf += data
         out = []
         buf = self.buf
@@ -133,6 +134,7 @@ class Sender:
         self.seq = 0
 
     def __call__(self, kind: int, payload: bytes = b"") -> bytes:
+        """The frame of ``kind`` with ``payload``, numbered with the next sequence number."""
         f = frame(kind, self.seq, payload)
         self.seq = (self.seq + 1) & 0xFFFF
         return f
@@ -195,6 +197,7 @@ def encode_samples(send: Sender, rows: np.ndarray, p: RobotParameters) -> list[t
 
 
 def decode_samples(payload: bytes, p: RobotParameters) -> np.ndarray:
+    """The sample rows ``(n, 15)`` [SI] of one samples frame's payload."""
     first, n = SAMPLES_HEAD.unpack_from(payload)
     a = np.frombuffer(payload, SAMPLE_DTYPE, count=n, offset=SAMPLES_HEAD.size)
     c = {
@@ -210,6 +213,7 @@ def decode_samples(payload: bytes, p: RobotParameters) -> np.ndarray:
 
 
 def encode_event(send: Sender, ev: Event) -> bytes:
+    """The frame of event ``ev``."""
     f = ev.fault or F.Fault(0)
     q = ev.q or (0.0, 0.0, 0.0)
     return send(
@@ -221,6 +225,7 @@ def encode_event(send: Sender, ev: Event) -> bytes:
 
 
 def decode_event(payload: bytes) -> Event:
+    """The event of one event frame's payload."""
     kind, code, motor, value, limit, t, q1, q2, q3, generated, index = EVENT_S.unpack(payload)
     name = EVENT_NAMES.get(kind, "fault")
     fault = F.Fault(code, motor, value, limit, t) if code else None
@@ -230,4 +235,5 @@ def decode_event(payload: bytes) -> Event:
 
 
 def encode_info(send: Sender, info: dict[str, Any]) -> bytes:
+    """The device information frame of ``info`` (JSON)."""
     return send(INFO, json.dumps(info).encode())
