@@ -74,6 +74,7 @@ class GOH:
             [{"name": "goh", "parameters": dict(_VERIFY_P, gamma=0.3), "checks": ("sensitivities",)}]
 
     def parameters(self) -> list[Parameter]:
+        """Declared parameters: ``c``, ``k1``, ``k`` [Pa], ``k2``, ``kappa`` [1], ``gamma`` [rad]."""
         return [Parameter("c", 2e4, "Pa", 0.0, np.inf),
                 Parameter("k1", 1e4, "Pa", 0.0, np.inf),
                 Parameter("k2", 10.0, "1", 1e-6, 1e3),
@@ -110,6 +111,7 @@ class GOH:
             yield k1, k2, kap, E, dI4b, active
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Strain-energy density W (...) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         Cinv, J, I1 = kinematics(C)
         I1b, dI1b = iso_I1(C, Cinv, J, I1)
         W = 0.5 * p["c"] * (I1b - 3) + volumetric_energy(self.volumetric, p["k"], J)
@@ -146,6 +148,7 @@ class GOH:
         return S, CC
 
     def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Second Piola-Kirchhoff stress S (..., 3, 3) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         Cinv, J, I1 = kinematics(C)
         I1b, dI1b = iso_I1(C, Cinv, J, I1)
         S = np.asarray(p["c"])[..., None, None] * dI1b \

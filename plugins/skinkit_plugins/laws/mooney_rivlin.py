@@ -39,6 +39,7 @@ class MooneyRivlin:
         return [{"name": "mooney-rivlin"}]
 
     def parameters(self) -> list[Parameter]:
+        """Declared parameters: ``c1``, ``c2``, ``K`` [Pa]."""
         return [Parameter("c1", 4e3, "Pa", 0.0, np.inf),
                 Parameter("c2", 1e3, "Pa", 0.0, np.inf),
                 Parameter("K", 2.5e5, "Pa", 0.0, np.inf)]
@@ -53,6 +54,7 @@ class MooneyRivlin:
         return out + require_positive(p, ["K"], "the small-strain bulk modulus")
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Strain-energy density W (...) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         Cinv, J, I1 = kinematics(C)
         I1b, _ = iso_I1(C, Cinv, J, I1)
         I2b, _ = iso_I2(C, Cinv, J, I1)
@@ -60,6 +62,7 @@ class MooneyRivlin:
                 + volumetric_energy(self.volumetric, p["K"], J))
 
     def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Second Piola-Kirchhoff stress S (..., 3, 3) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         Cinv, J, I1 = kinematics(C)
         _, d1 = iso_I1(C, Cinv, J, I1)
         _, d2 = iso_I2(C, Cinv, J, I1)

@@ -46,6 +46,7 @@ class NeoHookean:
         return [{"name": "neo-hookean"}]
 
     def parameters(self) -> list[Parameter]:
+        """Declared parameters: ``mu``, ``lam`` [Pa] (Lamé)."""
         return [Parameter("mu", 1e4, "Pa", 0.0, np.inf),
                 Parameter("lam", 4e4, "Pa", 0.0, np.inf)]
 
@@ -55,16 +56,19 @@ class NeoHookean:
         return require_positive(p, ["mu"], "the small-strain shear modulus")
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Strain-energy density W (...) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         _, J, I1 = kinematics(C)
         lnJ = np.log(J)
         return 0.5 * p["mu"] * (I1 - 3) - p["mu"] * lnJ + 0.5 * p["lam"] * lnJ ** 2
 
     def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Second Piola-Kirchhoff stress S (..., 3, 3) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         Cinv, J, _ = kinematics(C)
         lnJ = np.log(J)
         return _b(p["mu"]) * (I3 - Cinv) + _b(p["lam"] * lnJ) * Cinv
 
     def tangent(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Material tangent 2 ∂S/∂C (..., 3, 3, 3, 3) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         Cinv, J, _ = kinematics(C)
         lnJ = np.log(J)
         a = np.asarray(p["lam"])[..., None, None, None, None]
@@ -93,6 +97,7 @@ class NeoHookeanNI:
                 {"name": "prestretch", "checks": ("sensitivities",), "prestress": (1.08, 1.03, 0.4)}]
 
     def parameters(self) -> list[Parameter]:
+        """Declared parameters: ``mu`` (shear) and ``K`` (bulk modulus) [Pa]."""
         return [Parameter("mu", 1e4, "Pa", 0.0, np.inf),
                 Parameter("K", 2.5e5, "Pa", 0.0, np.inf)]
 
@@ -105,12 +110,14 @@ class NeoHookeanNI:
                 + require_positive(p, ["K"], "the small-strain bulk modulus"))
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Strain-energy density W (...) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         mu, K = self._mu_K(p)
         Cinv, J, I1 = kinematics(C)
         I1b, _ = iso_I1(C, Cinv, J, I1)
         return 0.5 * mu * (I1b - 3) + volumetric_energy(self.volumetric, K, J)
 
     def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Second Piola-Kirchhoff stress S (..., 3, 3) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         mu, K = self._mu_K(p)
         Cinv, J, I1 = kinematics(C)
         _, dI1b = iso_I1(C, Cinv, J, I1)
@@ -143,6 +150,7 @@ class NeoHookeanNI:
         return S, X
 
     def tangent(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Material tangent 2 ∂S/∂C (..., 3, 3, 3, 3) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         return self.response(C, p, True)[1]
 
 
@@ -157,6 +165,7 @@ class NeoHookeanEnu(NeoHookeanNI):
         return [{"name": "neo-hookean-enu", "checks": ("sensitivities",)}]
 
     def parameters(self) -> list[Parameter]:
+        """Declared parameters: ``E`` [Pa] and ``nu`` [1] (below 0.5)."""
         # ν < 0.5 strictly: K = E / (3 (1 - 2ν)) is infinite at 0.5
         return [Parameter("E", 3e4, "Pa", 0.0, np.inf),
                 Parameter("nu", 0.48, "1", -0.99, 0.4999)]

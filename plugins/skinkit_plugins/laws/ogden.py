@@ -52,6 +52,7 @@ class Ogden:
         return [{"name": "ogden-2", "options": {"terms": 2}}]
 
     def parameters(self) -> list[Parameter]:
+        """Declared parameters: ``mu1, alpha1, ..., muN, alphaN`` ([Pa], [1]), then ``K`` [Pa]."""
         out = []
         for i in range(1, self.terms + 1):
             # μᵢ > 0 is Ogden's condition μᵢαᵢ > 0 in this form (see inadmissible)
@@ -86,6 +87,7 @@ class Ogden:
         return [(p[f"mu{i}"], p[f"alpha{i}"]) for i in range(1, self.terms + 1)]
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Strain-energy density W (...) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         c, _ = _principal(C)
         J = np.sqrt(np.prod(c, axis=-1))
         cb = c * J[..., None] ** (-2.0 / 3.0)
@@ -97,6 +99,7 @@ class Ogden:
         return W
 
     def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Second Piola-Kirchhoff stress S (..., 3, 3) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
         c, N = _principal(C)
         J = np.sqrt(np.prod(c, axis=-1))
         cb = c * J[..., None] ** (-2.0 / 3.0)

@@ -61,9 +61,11 @@ class QLV:
 
     @property
     def complex_safe(self) -> bool:  # type: ignore[override]
+        """True when the elastic law is complex-step safe and has its own stress."""
         return lawkit.is_complex_safe(self.elastic) and lawkit.has_own(self.elastic, "stress")
 
     def parameters(self) -> list[Parameter]:
+        """Declared parameters: the elastic law's, then ``g1..gN`` [1] and ``tau1..tauN`` [s]."""
         out = list(self.elastic.parameters())
         for i in range(1, self.terms + 1):
             out.append(Parameter(f"g{i}", 0.3 / self.terms, "1", 0.0, 0.999))
@@ -95,13 +97,17 @@ class QLV:
         return g, tau
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Instantaneous (elastic) strain-energy density W (...) [Pa] of ``C`` (..., 3, 3)."""
         return self.elastic.energy(C, self._elastic_p(p))
 
     def stress(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Instantaneous (elastic) stress S (..., 3, 3) [Pa] of ``C`` (..., 3, 3)."""
         return lawkit.stress(self.elastic, C, self._elastic_p(p))
 
     def tangent(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
+        """Instantaneous (elastic) tangent 2 ∂S/∂C (..., 3, 3, 3, 3) [Pa] of ``C`` (..., 3, 3)."""
         return lawkit.tangent(self.elastic, C, self._elastic_p(p))
 
     def response(self, C: np.ndarray, p: Mapping[str, Any], with_tangent: bool = True):
+        """``(S, CC)`` of the elastic law at ``C`` (``CC`` None without ``with_tangent``)."""
         return lawkit.response(self.elastic, C, self._elastic_p(p), with_tangent)

@@ -53,12 +53,14 @@ class GaussNewtonTracker(SubsetTracker):
         self.tol_px = float(tol_px)
 
     def prepare(self, ref: np.ndarray, cur: np.ndarray) -> Any:
+        """Spline coefficients of ``cur`` and the gradients of ``ref`` (each (H, W))."""
         gy, gx = np.gradient(ref)
         return spline_filter(cur, order=self.order, mode="mirror"), gx, gy
 
     def subpixel(self, state: Any, ref: np.ndarray, cur: np.ndarray, p: np.ndarray,
                  c0: int, r0: int, s: int, match: IntegerMatch,
                  mask: np.ndarray | None) -> tuple[np.ndarray, float, str, dict[str, Any]]:
+        """Gauss-Newton step: (displacement of ``p`` (2,) [px], correlation quality, reason or '', extras)."""
         coef, gx_all, gy_all = state
         affine = self.shape == "affine"
         centre = np.array([c0 + (s - 1) / 2, r0 + (s - 1) / 2])

@@ -81,11 +81,13 @@ class PhaseCorrelationTracker(SubsetTracker):
         return self._windows[s]
 
     def prepare(self, ref: np.ndarray, cur: np.ndarray) -> Any:
+        """Spline coefficients of ``cur`` for the iterated refinement (None for one iteration)."""
         return spline_filter(cur, order=3, mode="mirror") if self.iterations > 1 else None
 
     def subpixel(self, state: Any, ref: np.ndarray, cur: np.ndarray, p: np.ndarray,
                  c0: int, r0: int, s: int, match: IntegerMatch,
                  mask: np.ndarray | None) -> tuple[np.ndarray, float, str, dict[str, Any]]:
+        """Phase-correlation refinement: (displacement of ``p`` (2,) [px], quality, reason or '', extras)."""
         sx, sy = int(match.shift[0]), int(match.shift[1])
         f = ref[r0:r0 + s, c0:c0 + s]
         g = cur[r0 + sy:r0 + sy + s, c0 + sx:c0 + sx + s]
