@@ -1,3 +1,5 @@
+"""``python -m skinkit``: the ``skinkit`` command line."""
+
 from skinkit.cli import main
 
 main()

@@ -81,7 +81,7 @@ class Tracker(typing.Protocol):
 
     def track(self, reference: np.ndarray, current: np.ndarray, points: np.ndarray,
               subset_px: int = 64, mask: np.ndarray | None = None) -> Any:
-        ...
+        """Displacements of ``points`` (N, 2) [px] from ``reference`` to ``current`` (see the class)."""
 
 
 @runtime_checkable
@@ -97,7 +97,7 @@ class Profiler(typing.Protocol):
     name: str
 
     def profile(self, images: ImageSequence, rig: CameraRig, frame: int = 0) -> SurfaceProfile:
-        ...
+        """The surface of frame ``frame`` of ``images`` seen by ``rig``, in the rig's frame [m]."""
 
 
 @runtime_checkable
@@ -125,7 +125,7 @@ class Law(typing.Protocol):
         """Declared parameters with units, default values and admissible bounds."""
 
     def energy(self, C: np.ndarray, p: Mapping[str, Any]) -> np.ndarray:
-        ...
+        """Strain-energy density W (...) [Pa] of ``C`` (..., 3, 3) at parameters ``p``."""
 
 
 @runtime_checkable
@@ -143,7 +143,7 @@ class Optimiser(typing.Protocol):
     def minimise(self, fun: Callable[[np.ndarray], Any], x0: np.ndarray, lower: np.ndarray,
                  upper: np.ndarray, jac: Callable[[np.ndarray], np.ndarray] | None = None,
                  options: Mapping[str, Any] | None = None) -> Any:
-        ...
+        """Minimise ``fun`` from ``x0`` (n,) within ``[lower, upper]`` (see the class)."""
 
 
 @runtime_checkable
@@ -169,13 +169,13 @@ class Effect(typing.Protocol):
     kinds: tuple[str, ...]
 
     def parameters(self) -> Sequence[Parameter]:
-        ...
+        """Declared parameters, the typical magnitude as value, with units and admissible bounds."""
 
     def null(self) -> Mapping[str, float]:
-        ...
+        """The parameter values (name -> SI) at which the effect changes nothing."""
 
     def apply(self, model: Mapping[str, Any], p: Mapping[str, Any]) -> Mapping[str, Any]:
-        ...
+        """A copy of the description ``model`` with the effect added at parameters ``p`` (name -> SI)."""
 
 
 @runtime_checkable
@@ -196,10 +196,10 @@ class ForwardModel(typing.Protocol):
     kind: str
 
     def parameters(self) -> ParameterSet:
-        ...
+        """Every parameter of the model with units, bounds and the model file's values."""
 
     def predict(self, params: ParameterSet, observations: Any, sensitivities: Any = False) -> Any:
-        ...
+        """The predicted channels of every protocol of ``observations`` (with sensitivities on request)."""
 
 
 #: entry-point group -> interface class

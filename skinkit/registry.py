@@ -39,6 +39,7 @@ class PluginStatus:
     error: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The status as a plain dict (name, distribution, target, status, error)."""
         return {"name": self.info.name, "dist": self.info.dist, "value": self.info.value,
                 "status": self.status, "error": self.error}
 

@@ -85,6 +85,7 @@ class CameraRig:
 
     @property
     def names(self) -> list[str]:
+        """The cameras' names, in rig order."""
         return [c.name for c in self.cameras]
 
     def __len__(self) -> int:

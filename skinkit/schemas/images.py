@@ -46,6 +46,7 @@ class ImageSequence:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames."""
         return int(self.frames.shape[0])
 
     @property

@@ -114,14 +114,17 @@ class Channel:
 
     @property
     def unit(self) -> str:
+        """The channel's SI unit."""
         return CHANNELS[self.name][0]
 
     @property
     def is_points(self) -> bool:
+        """True for a channel of tracked points (values (P, T, k)) rather than one (T, k) series."""
         return CHANNELS[self.name][1] == 1
 
     @property
     def n_valid(self) -> int:
+        """Number of valid samples."""
         return int(self.valid.sum())
 
     def fit_mask(self, predicted: np.ndarray | None = None) -> np.ndarray:
@@ -182,10 +185,12 @@ class ProtocolObservations:
 
     @property
     def name(self) -> str:
+        """The protocol's name."""
         return self.protocol.name
 
     @property
     def duration_s(self) -> float:
+        """The last observed time [s] over the channels (0 with none)."""
         return max((float(c.time_s[-1]) for c in self.channels.values() if c.time_s.size), default=0.0)
 
     def channel(self, name: str) -> Channel:
@@ -232,6 +237,7 @@ class Observations:
 
     @property
     def names(self) -> list[str]:
+        """The protocols' names."""
         return list(self.protocols)
 
     def select(self, names: Sequence[str]) -> Observations:
@@ -264,10 +270,12 @@ class Observations:
         return Observations(out, self.profile, self.source)
 
     def fitted(self) -> Observations:
+        """The protocols that are fitted (not held out)."""
         return Observations({k: v for k, v in self.protocols.items() if not v.held_out},
                             self.profile, self.source)
 
     def held_out(self) -> Observations:
+        """The held-out protocols."""
         return Observations({k: v for k, v in self.protocols.items() if v.held_out},
                             self.profile, self.source)
 

@@ -80,6 +80,7 @@ class ParameterSet:
         return self.param(name).value
 
     def param(self, name: str) -> Parameter:
+        """The parameter ``name``; KeyError naming the ones there are."""
         try:
             return self._params[name]
         except KeyError:
@@ -103,10 +104,12 @@ class ParameterSet:
 
     @property
     def names(self) -> list[str]:
+        """Every parameter's name, in order."""
         return list(self._params)
 
     @property
     def free_names(self) -> list[str]:
+        """The free parameters' names, in order."""
         return [p.name for p in self if p.free]
 
     def values(self) -> dict[str, float]:

@@ -78,6 +78,7 @@ class Protocol:
         }
 
     def to_json(self) -> str:
+        """The protocol as canonical JSON (sorted keys)."""
         return json.dumps(self.to_dict(), sort_keys=True)
 
     @classmethod

@@ -82,6 +82,7 @@ class FitResult:
             self.correlation = as_array(self.correlation, "FitResult.correlation", (n, n), "1", {})
 
     def to_dict(self) -> dict[str, Any]:
+        """The fit result as a JSON-ready dict."""
         return {
             "model": self.model,
             "parameters": self.parameters.to_list(),
@@ -109,6 +110,7 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FitResult:
+        """The fit result of :meth:`to_dict`'s dict."""
         d = dict(d)
         d["parameters"] = ParameterSet.from_list(d["parameters"])
         return cls(**d)
@@ -192,6 +194,7 @@ class EffectScore:
         self.not_separable_from = [str(e) for e in self.not_separable_from]
 
     def to_dict(self) -> dict[str, Any]:
+        """The candidate as a JSON-ready dict (non-finite numbers as None, ``extra`` merged in)."""
         return _finite_or_none({
             "effect": self.effect, "score": self.score, "p_value": self.p_value, "dof": self.dof,
             "refitted": self.refitted, "delta_aic": self.delta_aic, "shrinkage": self.shrinkage,
@@ -200,6 +203,7 @@ class EffectScore:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> EffectScore:
+        """The candidate of :meth:`to_dict`'s dict (unknown keys into ``extra``)."""
         d = dict(d)
         known = {k: d.pop(k) for k in ("effect", "score", "p_value", "dof", "refitted", "delta_aic",
                                        "shrinkage", "parameters", "not_separable_from") if k in d}
@@ -282,6 +286,7 @@ class GapReport:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> GapReport:
+        """The report of :meth:`to_dict`'s dict (unknown keys into ``extra``)."""
         d = dict(d)
         core = {k: d.pop(k) for k in GAP_KEYS if k in d}
         core["candidates"] = [EffectScore.from_dict(c) for c in core.get("candidates", [])]

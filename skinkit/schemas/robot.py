@@ -97,6 +97,7 @@ class RobotRecord:
 
     @property
     def n_samples(self) -> int:
+        """Number of samples."""
         return int(self.time_s.shape[0])
 
     @property

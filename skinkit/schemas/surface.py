@@ -38,6 +38,7 @@ class SurfaceProfile:
 
     @property
     def n_points(self) -> int:
+        """Number of points."""
         return int(self.points.shape[0])
 
 
@@ -72,10 +73,12 @@ class SurfaceTrack:
 
     @property
     def n_points(self) -> int:
+        """Number of points P."""
         return int(self.points.shape[0])
 
     @property
     def n_frames(self) -> int:
+        """Number of frames F."""
         return int(self.points.shape[1])
 
     def displacements(self) -> np.ndarray:

@@ -248,6 +248,7 @@ class Experiment:
     # -- validation ------------------------------------------------------------------------
     @property
     def schema_version(self) -> str:
+        """The file's schema version."""
         return str(self._f.attrs["schema_version"])
 
     def _err(self, where: str, problem: str) -> StoreError:
@@ -338,6 +339,7 @@ class Experiment:
 
     @_reading
     def metadata(self) -> dict[str, Any]:
+        """The session's metadata (attributes as plain values; empty without a session group)."""
         if L.SESSION not in self._f:
             return {}
         return {k: (v.item() if hasattr(v, "item") else v) for k, v in self._f[L.SESSION].attrs.items()}
@@ -544,6 +546,7 @@ class Experiment:
 
     @_reading
     def camera_names(self) -> list[str]:
+        """The rig's camera names, in camera index order."""
         if L.RIG not in self._f:
             return []
         g = self._f[L.RIG]
@@ -623,10 +626,12 @@ class Experiment:
 
     @_reading
     def image_names(self) -> list[str]:
+        """The names of the stored image sequences."""
         return sorted(self._f[L.IMAGES]) if L.IMAGES in self._f else []
 
     @_reading
     def image_info(self, name: str) -> dict[str, Any]:
+        """Image sequence ``name`` without its pixels: frames, cameras, image size [px] and more."""
         g = self._group(f"{L.IMAGES}/{name}")
         frames = self._dataset(g, "frames", 4)
         return {"name": name,
@@ -638,6 +643,7 @@ class Experiment:
 
     @_reading
     def read_images(self, name: str) -> ImageSequence:
+        """The image sequence ``name`` (only the committed frames of one being written)."""
         g = self._group(f"{L.IMAGES}/{name}")
         frames = self._dataset(g, "frames", 4)
         n = self._count(g, frames.shape[0]) if "committed" in g else frames.shape[0]
@@ -659,6 +665,7 @@ class Experiment:
         return f.require_group(path)
 
     def write_profile(self, name: str, profile: SurfaceProfile) -> None:
+        """Store (replace) the surface profile ``name``: points (N, 3) [m], quality, uncertainty [px]."""
         g = self._replace_group(L.PROFILES, name)
         g.create_dataset("points", data=profile.points).attrs["unit"] = "m"
         g.create_dataset("quality", data=profile.quality)
@@ -669,10 +676,12 @@ class Experiment:
 
     @_reading
     def profile_names(self) -> list[str]:
+        """The names of the stored surface profiles."""
         return sorted(self._f[L.PROFILES]) if L.PROFILES in self._f else []
 
     @_reading
     def read_profile(self, name: str) -> SurfaceProfile:
+        """The surface profile ``name``."""
         g = self._group(f"{L.PROFILES}/{name}")
         try:
             return SurfaceProfile(
@@ -684,6 +693,7 @@ class Experiment:
             raise self._err(g.name, str(exc)) from None
 
     def write_track(self, name: str, track: SurfaceTrack) -> None:
+        """Store (replace) the surface track ``name``: points (P, F, 3) [m], valid (P, F), times (F,) [s]."""
         g = self._replace_group(L.TRACKS, name)
         g.create_dataset("points", data=track.points, chunks=True).attrs["unit"] = "m"
         g.create_dataset("valid", data=track.valid)
@@ -694,6 +704,7 @@ class Experiment:
 
     @_reading
     def track_names(self) -> list[str]:
+        """The names of the stored surface tracks."""
         return sorted(self._f[L.TRACKS]) if L.TRACKS in self._f else []
 
     def set_track_attrs(self, name: str, **items: Any) -> None:
@@ -709,6 +720,7 @@ class Experiment:
 
     @_reading
     def read_track(self, name: str) -> SurfaceTrack:
+        """The surface track ``name``."""
         g = self._group(f"{L.TRACKS}/{name}")
         try:
             return SurfaceTrack(
@@ -726,14 +738,17 @@ class Experiment:
         self._f.flush()
 
     def write_fit(self, name: str, fit: FitResult) -> None:
+        """Store (replace) the fit result ``name`` as JSON."""
         self._write_json(L.FITS, name, fit.to_dict())
 
     @_reading
     def fit_names(self) -> list[str]:
+        """The names of the stored fit results."""
         return sorted(self._f[L.FITS]) if L.FITS in self._f else []
 
     @_reading
     def read_fit(self, name: str) -> FitResult:
+        """The fit result ``name``."""
         g = self._group(f"{L.FITS}/{name}")
         try:
             return FitResult.from_dict(self._json_attr(g, "json", dict))
@@ -741,10 +756,12 @@ class Experiment:
             raise self._err(g.name, f"malformed fit result ({_one_line(exc)})") from None
 
     def write_gap(self, name: str, report: GapReport) -> None:
+        """Store (replace) the gap report ``name`` as JSON."""
         self._write_json(L.GAPS, name, report.to_dict())
 
     @_reading
     def gap_names(self) -> list[str]:
+        """The names of the stored gap reports."""
         return sorted(self._f[L.GAPS]) if L.GAPS in self._f else []
 
     @_reading
@@ -758,6 +775,7 @@ class Experiment:
 
     @_reading
     def calibration_names(self) -> list[str]:
+        """The names of the stored device calibrations."""
         return sorted(self._f[L.CALIBRATIONS]) if L.CALIBRATIONS in self._f else []
 
     @_reading
