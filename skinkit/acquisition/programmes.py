@@ -47,6 +47,7 @@ class Programme:
 
     @property
     def n(self) -> int:
+        """Number of setpoints."""
         return int(self.setpoints.shape[0])
 
     @property

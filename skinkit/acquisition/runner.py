@@ -39,6 +39,7 @@ class RunSummary:
     driver_stats: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The run's accounting as a plain dict (JSON-ready)."""
         return {
             "protocol": self.protocol,
             "samples": self.samples,

@@ -99,6 +99,7 @@ class BoundaryConditions:
         return self
 
     def compile(self) -> DofMap:
+        """The :class:`DofMap` of these constraints (free and prescribed dofs)."""
         return DofMap(self)
 
 

@@ -51,6 +51,7 @@ class CheckResult:
     detail: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """The check as a plain dict (JSON-ready)."""
         return {"name": self.name, "passed": self.passed, "error": self.error,
                 "tolerance": self.tolerance, "detail": self.detail}
 
@@ -64,9 +65,11 @@ class ConformanceReport:
 
     @property
     def passed(self) -> bool:
+        """True when every check passed."""
         return all(c.passed for c in self.checks)
 
     def to_dict(self) -> dict[str, Any]:
+        """The law's checks as a plain dict (JSON-ready)."""
         return {"law": self.law, "passed": self.passed, "checks": [c.to_dict() for c in self.checks]}
 
     def __str__(self) -> str:

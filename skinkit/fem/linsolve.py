@@ -76,6 +76,7 @@ class SuperLUSolver:
         self.lu = None
 
     def factor(self, K: sp.csr_matrix) -> None:
+        """Factorise the tangent ``K`` (n, n); :class:`SolverError` when it is singular."""
         # the pattern is symmetric: minimum degree on A^T + A gives the least fill
         try:
             self.lu = spla.splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A")
@@ -84,6 +85,7 @@ class SuperLUSolver:
                               "is the body held against rigid motion?") from exc
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        """``K⁻¹ b`` for ``b`` (n,) or (n, k) with the last factorisation."""
         return self.lu.solve(np.asarray(b, dtype=float))
 
 
@@ -147,6 +149,7 @@ class PardisoSolver:
         return np.ascontiguousarray(x) if b is not None else None
 
     def factor(self, K: sp.csr_matrix) -> None:
+        """Factorise the tangent ``K`` (n, n; upper triangle), reusing an unchanged pattern's analysis."""
         K = K if K.has_sorted_indices else K.sorted_indices()
         first = self._pattern is None or self._n != K.shape[0] or \
             not (np.array_equal(self._pattern[0], K.indptr) and np.array_equal(self._pattern[1], K.indices))
@@ -163,9 +166,11 @@ class PardisoSolver:
         self._K = K
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        """``K⁻¹ b`` for ``b`` (n,) or (n, k) with the last factorisation."""
         return self._call(33, self._K, np.asarray(b, dtype=float))
 
     def free(self) -> None:
+        """Release PARDISO's memory (the next :meth:`factor` analyses again)."""
         if self._pattern is not None and self._K is not None:
             try:
                 self._call(-1, self._K)

@@ -41,14 +41,17 @@ class FEMesh:
 
     @property
     def n_nodes(self) -> int:
+        """Number of nodes."""
         return int(self.nodes.shape[0])
 
     @property
     def n_elements(self) -> int:
+        """Number of elements."""
         return int(self.elements.shape[0])
 
     @property
     def n_dof(self) -> int:
+        """Number of degrees of freedom (3 per node)."""
         return 3 * self.n_nodes
 
     def skfem_mesh(self) -> MeshHex2:

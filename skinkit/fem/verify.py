@@ -52,6 +52,7 @@ _LATE_CASES = ("sensitivities-qlv-history",)
 
 
 def case(name: str):
+    """Decorator registering an engine verification case under ``name``."""
     def deco(f):
         _CASES[name] = f
         return f

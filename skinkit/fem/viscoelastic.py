@@ -40,9 +40,11 @@ class PronyState:
 
     @classmethod
     def zeros(cls, n_terms: int, shape: tuple[int, ...]) -> PronyState:
+        """A zero history for ``n_terms`` Prony terms at integration points of ``shape``."""
         return cls(np.zeros((n_terms, *shape, 3, 3)), np.zeros((*shape, 3, 3)))
 
     def copy(self) -> PronyState:
+        """An independent copy."""
         return PronyState(self.h.copy(), self.Se.copy())
 
 

@@ -66,10 +66,12 @@ class LumpedSpec:
 
     @property
     def predicted(self) -> str:
+        """The channel the model predicts (the tip channel that does not drive it)."""
         return "tip_force" if self.drive == "tip_position" else "tip_position"
 
     @property
     def axis_name(self) -> str:
+        """The axis as ``"x"``, ``"y"`` or ``"z"``."""
         return "xyz"[self.axis]
 
     def parameter_bounds(self, name: str) -> tuple[str, float, float]:

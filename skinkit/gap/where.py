@@ -72,6 +72,7 @@ class Cell:
     noise_dof: float = float("inf")
 
     def to_dict(self) -> dict[str, Any]:
+        """The cell as a plain dict (JSON-ready)."""
         return {"axis": self.axis, "label": self.label, "chi2": self.chi2, "dof": self.dof,
                 "chi2_per_dof": self.chi2_per_dof, "p_value": self.p_value,
                 "significant": bool(self.significant), "share": self.share, "n": int(self.n),
@@ -271,6 +272,7 @@ class Samples:
 
     @property
     def is_points(self) -> bool:
+        """True for a channel of tracked points."""
         return self.full.ndim == 3
 
     @property

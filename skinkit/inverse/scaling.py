@@ -89,6 +89,7 @@ class Scaling:
         return self.to_scaled_bound(self.lower), self.to_scaled_bound(self.upper)
 
     def to_scaled_bound(self, b: np.ndarray) -> np.ndarray:
+        """Bounds ``b`` (n,) [SI] in scaled coordinates (infinite ones stay infinite)."""
         out = np.empty(len(self.names))
         for i, k in enumerate(self.kinds):
             if not math.isfinite(b[i]):

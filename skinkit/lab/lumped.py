@@ -38,13 +38,16 @@ class LumpedTruth:
 
     @property
     def skin(self) -> SecondOrder:
+        """The skin's second-order system (K, B, I)."""
         return SecondOrder(self.K_N_per_m, self.B_Ns_per_m, self.I_kg)
 
     @property
     def robot(self) -> RobotDynamics:
+        """The robot's dynamics (its mass)."""
         return RobotDynamics(mass_kg=self.robot_mass_kg)
 
     def to_dict(self) -> dict[str, Any]:
+        """The truth as a plain dict."""
         return asdict(self)
 
 

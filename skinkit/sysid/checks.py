@@ -108,6 +108,7 @@ class Signals:
 
     @property
     def n(self) -> int:
+        """Number of samples."""
         return int(self.force_N.size)
 
 

@@ -30,6 +30,7 @@ class DampedFit:
 
     @property
     def system(self) -> SecondOrder:
+        """The second-order system (K, B, I) of the fitted damped sinusoid."""
         return SecondOrder.from_damped_sinusoid(self.A1, self.A2, self.A3)
 
 

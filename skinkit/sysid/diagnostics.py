@@ -64,6 +64,7 @@ class ResidualDiagnostics:
         return float(np.mean(np.abs(self.crosscorr) > self.bound))
 
     def to_dict(self) -> dict[str, Any]:
+        """The diagnostics as a plain dict of floats and lists (JSON-ready)."""
         return {"vaf_pct": self.vaf_pct, "n": self.n, "bound": self.bound,
                 "whiteness_outside": self.whiteness_outside,
                 "crosscorr_outside": self.crosscorr_outside,

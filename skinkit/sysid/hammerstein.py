@@ -38,6 +38,7 @@ class HammersteinModel:
 
     @property
     def dynamics(self) -> SecondOrder:
+        """The identified second-order dynamics (from the scaled Is and Bs)."""
         return SecondOrder.from_scaled(self.Is_s2, self.Bs_s)
 
     def predict(self, force_N: np.ndarray) -> np.ndarray:
@@ -46,6 +47,7 @@ class HammersteinModel:
         return simulate(self.dynamics, u, self.rate_hz, self.hold)
 
     def to_dict(self) -> dict[str, Any]:
+        """The linear model's dict with the Hammerstein fields and the nonlinearity added."""
         d = self.linear.to_dict()
         d.update({"model": "hammerstein", "Is_s2": self.Is_s2, "Bs_s": self.Bs_s,
                   "vaf_hammerstein_pct": self.vaf_hammerstein_pct,

@@ -42,9 +42,11 @@ class Programme:
 
     @property
     def time_s(self) -> np.ndarray:
+        """Sample times (N,) [s] from 0."""
         return np.arange(self.force_N.size) / self.rate_hz
 
     def identify_segments(self) -> list[Segment]:
+        """The segments used for identification."""
         return [s for s in self.segments if s.kind == "identify"]
 
 

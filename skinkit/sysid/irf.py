@@ -48,10 +48,12 @@ class IRF:
 
     @property
     def n_neg(self) -> int:
+        """Number of negative lags."""
         return int(np.sum(self.lags_s < 0))
 
     @property
     def two_sided(self) -> bool:
+        """True when the IRF has negative lags."""
         return self.n_neg > 0
 
     def bounds(self, z: float = 1.96) -> tuple[np.ndarray, np.ndarray]:
@@ -74,6 +76,7 @@ class IRF:
         return full[nn:nn + x.size]
 
     def to_dict(self) -> dict[str, object]:
+        """The IRF as a plain dict (lags [s], h and its std [m/(N s)], rank, memory [s])."""
         return {"lags_s": self.lags_s.tolist(), "h_m_per_Ns": self.h.tolist(),
                 "h_std_m_per_Ns": self.h_std.tolist(), "rank": self.rank,
                 "memory_s": self.memory_s, "two_sided": self.two_sided}

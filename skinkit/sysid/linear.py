@@ -111,6 +111,7 @@ class LinearModel:
         return out
 
     def to_dict(self) -> dict[str, Any]:
+        """The linear model as a plain dict: K, B, I and their standard errors, gain, wn, damping, VAF."""
         return {
             "model": "linear", "valid": self.valid, "errors": self.errors,
             "K_N_per_m": self.skin.K, "B_Ns_per_m": self.skin.B, "I_kg": self.skin.I,

@@ -83,6 +83,7 @@ class SecondOrder:
         return [1.0], [self.I, self.B, self.K]
 
     def to_dict(self) -> dict[str, float]:
+        """K [N/m], B [N s/m], I [kg], gain [m/N], natural frequency [rad/s] and damping ratio as a dict."""
         return {"K_N_per_m": self.K, "B_Ns_per_m": self.B, "I_kg": self.I,
                 "gain_m_per_N": self.gain_m_per_N, "wn_rad_s": self.wn_rad_s, "zeta": self.zeta}
 

@@ -19,6 +19,7 @@ class StaticNonlinearity:
     params: tuple[float, ...]
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
+        """The static nonlinearity at ``x`` (any shape), same shape."""
         x = np.asarray(x, float)
         if self.kind == "exponential":
             c1, c2, y0 = self.params
@@ -34,6 +35,7 @@ class StaticNonlinearity:
         return np.polyval(np.polyder(self.params), x)
 
     def to_dict(self) -> dict[str, object]:
+        """The kind and its parameters as a plain dict (with units in the keys)."""
         if self.kind == "exponential":
             c1, c2, y0 = self.params
             return {"kind": "exponential", "C1_m": c1, "C2_per_N": c2, "offset_m": y0}

@@ -65,6 +65,7 @@ class RobotDynamics:
                            I=(skin.I + self.mass_kg) / f)
 
     def to_dict(self) -> dict[str, object]:
+        """The robot dynamics as a plain dict (SI units in the keys)."""
         return {"mass_kg": self.mass_kg, "damping_Ns_per_m": self.damping_Ns_per_m,
                 "stiffness_N_per_m": self.stiffness_N_per_m, "force_scale": self.force_scale,
                 "position_poly": list(self.position_poly)}

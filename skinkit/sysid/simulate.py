@@ -24,6 +24,7 @@ class SimulatedRecord:
 
     @property
     def time_s(self) -> np.ndarray:
+        """Sample times (N,) [s] from 0."""
         return np.arange(self.force_N.size) / self.rate_hz
 
     def to_robot_record(self, axis: int = 2, name: str = "stochastic") -> RobotRecord:

@@ -58,10 +58,12 @@ class WienerModel:
 
     @property
     def dynamics(self) -> SecondOrder:
+        """The identified second-order dynamics (from the scaled Is and Bs)."""
         return SecondOrder.from_scaled(self.Is_s2, self.Bs_s)
 
     @property
     def iterations(self) -> int:
+        """Number of iterations made."""
         return len(self.vaf_history)
 
     def intermediate(self, force_N: np.ndarray) -> np.ndarray:
@@ -73,6 +75,7 @@ class WienerModel:
         return self.nonlinearity(self.intermediate(force_N))
 
     def to_dict(self) -> dict[str, Any]:
+        """The linear model's dict with the Wiener fields, the iterations and the nonlinearity added."""
         d = self.linear.to_dict()
         d.update({"model": "wiener", "Is_s2": self.Is_s2, "Bs_s": self.Bs_s,
                   "vaf_wiener_pct": self.vaf_wiener_pct, "iterations": self.iterations,

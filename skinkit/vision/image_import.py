@@ -52,6 +52,7 @@ class FramePlan:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames (files)."""
         return len(self.files)
 
 

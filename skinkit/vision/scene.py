@@ -118,6 +118,7 @@ class Skin:
         return depth.reshape(n), u[:, :2]
 
     def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays from ``origin`` (3,) along ``dirs`` (R, 3): depth (R,) [m], inf if missed; radiance (R,)."""
         depth, XY = self.intersect(origin, dirs)
         inside = (np.abs(XY[:, 0]) <= self.half_extent_m[0]) & (np.abs(XY[:, 1]) <= self.half_extent_m[1])
         rad = np.full(len(dirs), 0.5 * self.texture.background)
@@ -149,6 +150,7 @@ class Board:
         return self.object_points() @ np.asarray(self.R).T + np.asarray(self.t)
 
     def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays from ``origin`` (3,) along ``dirs`` (R, 3): depth (R,) [m], inf if missed; radiance (R,)."""
         R = np.asarray(self.R, float)
         nrm = R[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -199,6 +201,7 @@ class Cone:
         return (p - self.apex) @ B.T
 
     def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays from ``origin`` (3,) along ``dirs`` (R, 3): depth (R,) [m], inf if missed; radiance (R,)."""
         n = self.axis
         c2 = np.cos(np.deg2rad(self.half_angle_deg)) ** 2
         w = origin - self.apex
@@ -249,6 +252,7 @@ class Markers:
     brightness: float = 1.0
 
     def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays from ``origin`` (3,) along ``dirs`` (R, 3): depth (R,) [m], inf if missed; radiance (R,)."""
         depth = np.full(len(dirs), np.inf)
         for c in np.asarray(self.centres, float):
             w = origin - c
@@ -364,6 +368,7 @@ class CharucoTarget:
     px_per_square: int = 60
 
     def cv_board(self) -> object:
+        """The OpenCV ``aruco.CharucoBoard`` of this target."""
         import cv2
 
         d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
@@ -374,6 +379,7 @@ class CharucoTarget:
         return np.asarray(self.cv_board().getChessboardCorners(), float).reshape(-1, 3)  # type: ignore[attr-defined]
 
     def corners_world(self) -> np.ndarray:
+        """``(P, 3)`` chessboard-corner world coordinates [m], in ChArUco id order."""
         return self.object_points() @ np.asarray(self.R).T + np.asarray(self.t)
 
     def _image(self) -> np.ndarray:
@@ -385,6 +391,7 @@ class CharucoTarget:
                               int(self.px_per_square))
 
     def hit(self, origin: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays from ``origin`` (3,) along ``dirs`` (R, 3): depth (R,) [m], inf if missed; radiance (R,)."""
         from scipy.ndimage import map_coordinates
 
         R = np.asarray(self.R, float)

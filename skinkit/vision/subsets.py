@@ -50,6 +50,7 @@ class TrackResult:
                    np.full(n, np.nan))
 
     def invalidate(self, i: int, why: str) -> None:
+        """Mark point ``i`` invalid with reason ``why`` (its displacement NaN)."""
         self.valid[i] = False
         self.displacement_px[i] = np.nan
         self.reason[i] = why
