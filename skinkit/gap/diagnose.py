@@ -36,6 +36,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -261,6 +262,36 @@ def _qualifies(c: EffectScore, state: dict[str, Any], base: dict[str, Any]) -> t
     return True, ""
 
 
+@dataclass
+class _Run:
+    """What the rounds share: the inputs (fixed) and the diagnosis so far (updated by each round)."""
+
+    spec: Mapping[str, Any]
+    base: Any
+    observations: Observations
+    held: Observations
+    present: list[str]
+    loader: Callable[..., Any]
+    say: Callable[[str], None]
+    alpha: float
+    candidates: int
+    max_effects: int
+    error_estimate: bool
+    state0: dict[str, Any]
+    current: dict[str, Any]
+    theta_r: list[str]
+    remaining: list[str]
+    n_forward: int
+    rounds: list[dict[str, Any]] = field(default_factory=list)
+    named: list[str] = field(default_factory=list)
+    tables: list[dict[str, Any]] = field(default_factory=list)
+    separation: list[dict[str, Any]] = field(default_factory=list)
+    gap0: dict[str, Any] = field(default_factory=dict)
+    first_candidates: list[EffectScore] = field(default_factory=list)
+    loc0: Any = None
+    disc: dict[str, Any] | None = None
+
+
 def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              observations: Observations | str | os.PathLike[str], *,
              effects: Sequence[str] | None = None, holdout: Sequence[str] = (),
@@ -284,10 +315,6 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     a finer mesh would is neither refitted nor named (:mod:`skinkit.inverse.discretisation`).
     """
     from skinkit.forward import load, model_kind, read_description
-    from skinkit.gap.where import cell_chi2, locate
-    from skinkit.inverse import fit
-    from skinkit.inverse.discretisation import has_mesh
-    from skinkit.inverse.fit import free_set
 
     t0 = time.perf_counter()
     say = progress or (lambda _m: None)
@@ -300,6 +327,30 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
 
     def loader(s: Mapping[str, Any]) -> Any:
         return load(s, workers=workers)
+
+    cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
+                     until=until, protocols=protocols, say=say)
+    state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
+    run = _Run(spec=spec, base=cal["base"], observations=cal["observations"], held=cal["held"],
+               present=cal["present"], loader=loader, say=say, alpha=alpha, candidates=candidates,
+               max_effects=max_effects, error_estimate=error_estimate, state0=state0, current=state0,
+               theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1)
+    for rnd in range(max(max_effects, 1)):
+        if not _round(run, rnd):
+            break
+    return _assemble_report(run, cal, _how_far(run), t0)
+
+
+def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
+               observations: Observations | str | os.PathLike[str], *, effects: Sequence[str] | None,
+               holdout: Sequence[str], free: Sequence[str] | None, until: float | None,
+               protocols: Sequence[str] | None, say: Callable[[str], None]) -> dict[str, Any]:
+    """The session read and checked, the candidate effects, and the model calibrated on it:
+    ``name``, ``source``, ``observations``, ``held``, ``present`` (the model's effects),
+    ``theta`` (free names), ``candidates``, ``result`` (the fit), ``state0`` (:func:`_state`),
+    ``base`` (the loaded model, closed)."""
+    from skinkit.inverse import fit
+    from skinkit.inverse.fit import free_set
 
     base = loader(spec)
     try:
@@ -332,123 +383,170 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         state0 = _state(base, r0, observations, held)
     finally:
         _close(base)
-    n_forward = r0.n_forward + 1
-    messages: list[str] = []
-    rounds: list[dict[str, Any]] = []
-    named: list[str] = []
-    tables: list[dict[str, Any]] = []
-    separation: list[dict[str, Any]] = []
-    current, theta_r = state0, list(theta)
-    gap0: dict[str, Any] = {}
-    first_candidates: list[EffectScore] = []
-    loc0 = None
-    remaining = list(cands)
-    disc: dict[str, Any] | None = None
-    for rnd in range(max(max_effects, 1)):
-        k = current["k"]
-        say(f"round {rnd + 1}: locating the residual (χ²/ν {current['chi2'] / current['dof']:.4g})")
-        loc = locate(observations, current["prediction"], n_params=k, alpha=alpha)
-        if loc0 is None:
-            loc0 = loc
-        values = _values(current["result"])
-        spec_r = with_effects(spec, tables)
-        entry: dict[str, Any] = {"round": rnd + 1, "model_effects": present + [t["name"] for t in tables],
-                                 "chi2_per_dof": current["chi2"] / current["dof"],
-                                 "gap_significant": bool(loc.significant), "candidates": [], "named": None}
-        if not remaining:
-            rounds.append(entry)
-            break
-        sens = collect(spec_r, observations, values, theta_r, remaining, load=loader, progress=say)
-        n_forward += sens.n_forward
-        from skinkit.gap.score import score_all
-        tests = score_all(sens)
-        ok = corrected(tests, alpha)
-        if error_estimate and disc is None and any(ok.values()) and has_mesh(base):
-            disc = _discretisation(base, observations, values, state0["prediction"], sens, alpha, say)
-            n_forward += 1
-        mesh_only = _mesh_only(disc, sens, tests, ok, alpha)
-        top = [t for t in tests if ok[t.effect] and t.effect not in mesh_only][:candidates]
-        seps = separability(sens, tests, alpha, [t.effect for t in top])
-        states: dict[str, dict[str, Any]] = {}
-        if max_effects > 0:
-            for t in top:
-                try:
-                    states[t.effect] = _refit(spec, tables, observations, held, values, theta_r, t, sens,
-                                              load=loader, say=say)
-                    n_forward += states[t.effect]["result"].n_forward + 1
-                except SkinkitError as exc:
-                    say(f"refit with {t.effect} failed: {exc}")
-                    entry.setdefault("refit_failures", {})[t.effect] = str(exc)
-        records = [_candidate(t, ok[t.effect], states.get(t.effect), current) for t in tests]
-        for sp in seps:
-            a, b = sp["effects"]
-            if sp["separable"]:
-                continue
-            for c in records:
-                if c.effect == a:
-                    c.not_separable_from.append(b)
-                elif c.effect == b:
-                    c.not_separable_from.append(a)
-            say(f"{a} and {b} leave nearly the same signature (|cos| {sp['cosine']:.3f}): ranking protocols")
-            best = separating_protocol(spec_r, observations, values, theta_r, sens, tests, (a, b),
-                                       load=loader, progress=say)
-            sp_out = {"effects": [a, b], "cosine": sp["cosine"], "round": rnd + 1}
-            if best is not None:
-                sp_out.update({"protocol": best["protocol"], "cosine_after": best["cosine"],
-                               "ranking": best["ranking"][:5]})
-            separation.append(sp_out)
-        if rnd == 0:
-            first_candidates = records
-        entry["candidates"] = [c.to_dict() for c in records]
-        entry["skipped"] = sens.skipped
-        entry["notes"] = sens.notes
-        reasons = {}
-        winner = None
-        # a gap: the residual as a whole, or one of its cells, or along a candidate's signature
-        # (the score test is the more powerful test against that alternative); each at level alpha
-        directed = [t.effect for t in tests if ok[t.effect]]
-        gap_sig = bool(loc.significant or any(c.significant for c in loc.cells) or directed)
-        entry["gap_significant"] = gap_sig
-        entry["directed"] = directed
-        if rnd == 0:
-            gap0 = {"significant": gap_sig, "omnibus_significant": bool(loc.significant),
+    return {"name": name, "source": source, "observations": observations, "held": held, "present": present,
+            "theta": theta, "candidates": cands, "result": r0, "state0": state0, "base": base}
+
+
+def _round(run: _Run, rnd: int) -> bool:
+    """Round ``rnd`` (0-based): locate the residual, score and refit the candidates, name the best
+    one that qualifies; True when another round should follow."""
+    from skinkit.gap.where import locate
+
+    current = run.current
+    run.say(f"round {rnd + 1}: locating the residual (χ²/ν {current['chi2'] / current['dof']:.4g})")
+    loc = locate(run.observations, current["prediction"], n_params=current["k"], alpha=run.alpha)
+    if run.loc0 is None:
+        run.loc0 = loc
+    values = _values(current["result"])
+    spec_r = with_effects(run.spec, run.tables)
+    entry: dict[str, Any] = {"round": rnd + 1, "model_effects": run.present + [t["name"] for t in run.tables],
+                             "chi2_per_dof": current["chi2"] / current["dof"],
+                             "gap_significant": bool(loc.significant), "candidates": [], "named": None}
+    if not run.remaining:
+        run.rounds.append(entry)
+        return False
+    sens, tests, ok, mesh_only, top = _score(run, spec_r, values)
+    seps = separability(sens, tests, run.alpha, [t.effect for t in top])
+    states = _refit_top(run, top, values, sens, entry)
+    records = [_candidate(t, ok[t.effect], states.get(t.effect), current) for t in tests]
+    _separate(run, seps, records, spec_r, values, sens, tests, rnd)
+    if rnd == 0:
+        run.first_candidates = records
+    entry["candidates"] = [c.to_dict() for c in records]
+    entry["skipped"] = sens.skipped
+    entry["notes"] = sens.notes
+    winner, reasons = _choose(run, entry, loc, tests, ok, records, states, rnd)
+    for e in mesh_only:
+        reasons[e] = ("what it would explain is the mesh's discretisation error (its score test fails "
+                      "once that signature is projected out): refine the mesh (skinkit convergence)")
+    entry["explained_by_discretisation"] = mesh_only
+    if run.disc is not None:
+        run.disc.setdefault("explains", [])
+        run.disc["explains"] += [e for e in mesh_only if e not in run.disc["explains"]]
+    entry["not_named"] = reasons
+    run.rounds.append(entry)
+    if winner is None or len(run.named) >= run.max_effects:
+        return False
+    return _name(run, winner, states[winner.effect], rnd)
+
+
+def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
+           ) -> tuple[Sensitivities, list[ScoreTest], dict[str, bool], list[str], list[ScoreTest]]:
+    """The score tests of the remaining candidates at the current model: ``(sensitivities, tests,
+    significant after correction, explained by the mesh alone, the top ones to refit)``; makes
+    the discretisation check (once) when a test is significant."""
+    from skinkit.gap.score import score_all
+    from skinkit.inverse.discretisation import has_mesh
+
+    sens = collect(spec_r, run.observations, values, run.theta_r, run.remaining, load=run.loader,
+                   progress=run.say)
+    run.n_forward += sens.n_forward
+    tests = score_all(sens)
+    ok = corrected(tests, run.alpha)
+    if run.error_estimate and run.disc is None and any(ok.values()) and has_mesh(run.base):
+        run.disc = _discretisation(run.base, run.observations, values, run.state0["prediction"], sens,
+                                   run.alpha, run.say)
+        run.n_forward += 1
+    mesh_only = _mesh_only(run.disc, sens, tests, ok, run.alpha)
+    top = [t for t in tests if ok[t.effect] and t.effect not in mesh_only][:run.candidates]
+    return sens, tests, ok, mesh_only, top
+
+
+def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float], sens: Sensitivities,
+               entry: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The refitted states of the ``top`` candidates (none when ``max_effects`` is 0); a refit that
+    fails is said and recorded in ``entry["refit_failures"]``."""
+    states: dict[str, dict[str, Any]] = {}
+    if run.max_effects <= 0:
+        return states
+    for t in top:
+        try:
+            states[t.effect] = _refit(run.spec, run.tables, run.observations, run.held, values,
+                                      run.theta_r, t, sens, load=run.loader, say=run.say)
+            run.n_forward += states[t.effect]["result"].n_forward + 1
+        except SkinkitError as exc:
+            run.say(f"refit with {t.effect} failed: {exc}")
+            entry.setdefault("refit_failures", {})[t.effect] = str(exc)
+    return states
+
+
+def _separate(run: _Run, seps: Sequence[dict[str, Any]], records: Sequence[EffectScore],
+              spec_r: Mapping[str, Any], values: Mapping[str, float], sens: Sensitivities,
+              tests: Sequence[ScoreTest], rnd: int) -> None:
+    """Mark each non-separable pair on its candidates and rank the protocols that would separate it
+    (appended to ``run.separation``)."""
+    for sp in seps:
+        a, b = sp["effects"]
+        if sp["separable"]:
+            continue
+        for c in records:
+            if c.effect == a:
+                c.not_separable_from.append(b)
+            elif c.effect == b:
+                c.not_separable_from.append(a)
+        run.say(f"{a} and {b} leave nearly the same signature (|cos| {sp['cosine']:.3f}): ranking protocols")
+        best = separating_protocol(spec_r, run.observations, values, run.theta_r, sens, tests, (a, b),
+                                   load=run.loader, progress=run.say)
+        sp_out = {"effects": [a, b], "cosine": sp["cosine"], "round": rnd + 1}
+        if best is not None:
+            sp_out.update({"protocol": best["protocol"], "cosine_after": best["cosine"],
+                           "ranking": best["ranking"][:5]})
+        run.separation.append(sp_out)
+
+
+def _choose(run: _Run, entry: dict[str, Any], loc: Any, tests: Sequence[ScoreTest], ok: Mapping[str, bool],
+            records: Sequence[EffectScore], states: Mapping[str, dict[str, Any]], rnd: int
+            ) -> tuple[EffectScore | None, dict[str, str]]:
+    """The round's verdict: whether there is a gap (recorded in ``entry``), the refitted candidate
+    that qualifies with the lowest AIC (or None), and why each other refitted one does not."""
+    reasons: dict[str, str] = {}
+    winner = None
+    # a gap: the residual as a whole, or one of its cells, or along a candidate's signature
+    # (the score test is the more powerful test against that alternative); each at level alpha
+    directed = [t.effect for t in tests if ok[t.effect]]
+    gap_sig = bool(loc.significant or any(c.significant for c in loc.cells) or directed)
+    entry["gap_significant"] = gap_sig
+    entry["directed"] = directed
+    if rnd == 0:
+        run.gap0 = {"significant": gap_sig, "omnibus_significant": bool(loc.significant),
                     "directed": directed}
-        if gap_sig:
-            for c in records:
-                if c.effect not in states:
-                    continue
-                good, why = _qualifies(c, states[c.effect], current)
-                if not good:
-                    reasons[c.effect] = why
-                elif winner is None or c.delta_aic < winner.delta_aic:
-                    winner = c
-        for e in mesh_only:
-            reasons[e] = ("what it would explain is the mesh's discretisation error (its score test fails "
-                          "once that signature is projected out): refine the mesh (skinkit convergence)")
-        entry["explained_by_discretisation"] = mesh_only
-        if disc is not None:
-            disc.setdefault("explains", [])
-            disc["explains"] += [e for e in mesh_only if e not in disc["explains"]]
-        entry["not_named"] = reasons
-        rounds.append(entry)
-        if winner is None or len(named) >= max_effects:
-            break
-        st = states[winner.effect]
-        named.append(winner.effect)
-        entry["named"] = winner.effect
-        tables.append(st["table"])
-        theta_r = theta_r + st["added"]
-        current = st
-        remaining = [e for e in remaining if e != winner.effect]
-        if len(named) >= max_effects:
-            rounds.append({"round": rnd + 2, "model_effects": present + [t["name"] for t in tables],
-                           "chi2_per_dof": current["chi2"] / current["dof"], "candidates": [], "named": None,
-                           "note": f"--max-effects {max_effects} reached"})
-            break
-    # how far: the calibrated model against the final one
-    final = current
+    if gap_sig:
+        for c in records:
+            if c.effect not in states:
+                continue
+            good, why = _qualifies(c, states[c.effect], run.current)
+            if not good:
+                reasons[c.effect] = why
+            elif winner is None or c.delta_aic < winner.delta_aic:
+                winner = c
+    return winner, reasons
+
+
+def _name(run: _Run, winner: EffectScore, st: dict[str, Any], rnd: int) -> bool:
+    """Add ``winner`` to the model at its refitted state; True when another round may follow."""
+    run.named.append(winner.effect)
+    run.rounds[-1]["named"] = winner.effect
+    run.tables.append(st["table"])
+    run.theta_r = run.theta_r + st["added"]
+    run.current = st
+    run.remaining = [e for e in run.remaining if e != winner.effect]
+    if len(run.named) >= run.max_effects:
+        run.rounds.append({"round": rnd + 2, "model_effects": run.present + [t["name"] for t in run.tables],
+                           "chi2_per_dof": st["chi2"] / st["dof"], "candidates": [], "named": None,
+                           "note": f"--max-effects {run.max_effects} reached"})
+        return False
+    return True
+
+
+def _how_far(run: _Run) -> dict[str, Any]:
+    """How far the named effects close the gap: shrinkage overall, held out and per cell of the
+    first round's location, and the final model's located residual (None when nothing is named)."""
+    from skinkit.gap.where import cell_chi2, locate
+
+    final, state0, loc0, named = run.current, run.state0, run.loc0, run.named
     cells_before = [(c.axis, c.label) for c in loc0.cells]
-    after = cell_chi2(observations, final["prediction"], cells_before, n_params=final["k"]) if named else {}
+    after = (cell_chi2(run.observations, final["prediction"], cells_before, n_params=final["k"])
+             if named else {})
     shrink_cells = []
     for c in loc0.cells:
         a2, d2 = after.get((c.axis, c.label), (c.chi2, c.dof))
@@ -461,28 +559,39 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     if state0["held_n"]:
         held_out = _fraction(state0["held_chi2"] - state0["held_n"], final["held_chi2"] - final["held_n"]) \
             if named else 0.0
-    loc_after = locate(observations, final["prediction"], n_params=final["k"], alpha=alpha) if named else None
-    messages = _messages(loc0, gap0, first_candidates, named, overall, separation, rounds, state0, disc)
+    loc_after = (locate(run.observations, final["prediction"], n_params=final["k"], alpha=run.alpha)
+                 if named else None)
+    return {"overall": overall, "held_out": held_out, "cells": shrink_cells, "loc_after": loc_after}
+
+
+def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], t0: float) -> GapReport:
+    """The :class:`GapReport` of a finished diagnosis (``cal``: :func:`_calibrate`'s, ``far``:
+    :func:`_how_far`'s; ``t0``: its start, ``time.perf_counter``)."""
+    r0, theta, state0, final, loc0 = cal["result"], cal["theta"], run.state0, run.current, run.loc0
+    observations, named, loc_after = run.observations, run.named, far["loc_after"]
+    messages = _messages(loc0, run.gap0, run.first_candidates, named, far["overall"], run.separation,
+                         run.rounds, state0, run.disc)
     fit_d = {"parameters": {n: float(r0.parameters[n]) for n in theta}, "chi2_per_dof": r0.chi2_per_dof,
              "n_forward": r0.n_forward, "se": {n: _num(r0.se.get(n)) for n in theta}, "aic": r0.aic,
              "held_out": r0.held_out, "converged": r0.converged, "free": list(theta)}
     extra = {"points": _points(observations),
              "point_map_after": {} if loc_after is None else
              {k: [_num(x) for x in v] for k, v in loc_after.point_map.items()},
-             "separation": separation, "rounds": rounds, "messages": messages,
-             "discretisation": None if disc is None else {k: v for k, v in disc.items() if k != "e"},
-             "effects_tested": list(cands), "alpha": alpha,
+             "separation": run.separation, "rounds": run.rounds, "messages": messages,
+             "discretisation": None if run.disc is None else {k: v for k, v in run.disc.items() if k != "e"},
+             "effects_tested": list(cal["candidates"]), "alpha": run.alpha,
              "chi2": {"before": state0["chi2"], "after": final["chi2"], "dof_before": state0["dof"],
                       "dof_after": final["dof"], "held_out_before": state0["held_chi2"],
                       "held_out_after": final["held_chi2"], "held_out_samples": state0["held_n"]},
-             "final_parameters": {n: float(final["result"].parameters[n]) for n in theta_r},
-             "effects_model": [dict(t) for t in tables],
-             "n_forward": n_forward, "wall_s": time.perf_counter() - t0}
+             "final_parameters": {n: float(final["result"].parameters[n]) for n in run.theta_r},
+             "effects_model": [dict(t) for t in run.tables],
+             "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0}
     gap_d = _gap_dict(loc0)
-    gap_d.update(gap0 or {"significant": bool(loc0.significant),
-                          "omnibus_significant": bool(loc0.significant), "directed": []})
-    return GapReport(name, source, fit=fit_d, gap=gap_d, candidates=first_candidates, named=named,
-                     shrinkage={"overall": overall, "held_out": held_out, "cells": shrink_cells}, extra=extra)
+    gap_d.update(run.gap0 or {"significant": bool(loc0.significant),
+                              "omnibus_significant": bool(loc0.significant), "directed": []})
+    return GapReport(cal["name"], cal["source"], fit=fit_d, gap=gap_d, candidates=run.first_candidates,
+                     named=named, shrinkage={"overall": far["overall"], "held_out": far["held_out"],
+                                             "cells": far["cells"]}, extra=extra)
 
 
 def _discretisation(model: Any, observations: Observations, values: Mapping[str, float], coarse: Prediction,
@@ -524,21 +633,42 @@ def _num(x: Any) -> float | None:
     return v if math.isfinite(v) else None
 
 
+def _disc_messages(disc: Mapping[str, Any] | None) -> list[str]:
+    """The discretisation check's sentences (none when it was not made)."""
+    if disc is None:
+        return []
+    frac = disc.get("explained_by_signature")
+    share = "" if frac is None else (f"; along its signature, at any size, a finer mesh would remove "
+                                     f"{100 * frac:.0f} % of the excess")
+    out = [f"Discretisation (mesh refined {disc['factor']}x, {disc['unknowns']:,} -> "
+           f"{disc['unknowns_refined']:,} unknowns): the error alone is χ² "
+           f"{disc['chi2_discretisation']:.4g} against ν {disc['dof']}{share}."]
+    if disc.get("explains"):
+        out.append(f"Not named, because discretisation explains the residual along their signatures: "
+                   f"{', '.join(disc['explains'])}.")
+    return out
+
+
+def _named_messages(named: Sequence[str], rounds: Sequence[dict[str, Any]]) -> list[str]:
+    """One sentence per named effect: ΔAIC, shrinkage and the identified parameters (95 % intervals)."""
+    out = []
+    for e in named:
+        c = next((c for r in rounds for c in r["candidates"] if c["effect"] == e and c.get("refitted")), None)
+        if c is None:
+            continue
+        pars = ", ".join(f"{n} = {v['value']:.4g}" + (f" ± {1.96 * v['se']:.2g}" if v.get("se") else "")
+                         + f" {v.get('unit', '')}".rstrip() for n, v in (c.get("parameters") or {}).items())
+        shr = (f"shrinkage {100 * c['shrinkage']:.0f} % of the excess" if c["shrinkage"] is not None
+               else "no excess above the noise as a whole to shrink")
+        out.append(f"`{e}` named: ΔAIC {c['delta_aic']:.1f}, {shr} ({pars}).")
+    return out
+
+
 def _messages(loc: Any, gap: Mapping[str, Any], cands: Sequence[EffectScore], named: Sequence[str],
               overall: float | None, separation: Sequence[dict[str, Any]], rounds: Sequence[dict[str, Any]],
               state0: dict[str, Any], disc: Mapping[str, Any] | None = None) -> list[str]:
     """The verdict in plain sentences."""
-    out = []
-    if disc is not None:
-        frac = disc.get("explained_by_signature")
-        share = "" if frac is None else (f"; along its signature, at any size, a finer mesh would remove "
-                                         f"{100 * frac:.0f} % of the excess")
-        out.append(f"Discretisation (mesh refined {disc['factor']}x, {disc['unknowns']:,} -> "
-                   f"{disc['unknowns_refined']:,} unknowns): the error alone is χ² "
-                   f"{disc['chi2_discretisation']:.4g} against ν {disc['dof']}{share}.")
-        if disc.get("explains"):
-            out.append(f"Not named, because discretisation explains the residual along their signatures: "
-                       f"{', '.join(disc['explains'])}.")
+    out = _disc_messages(disc)
     cpd = state0["chi2"] / state0["dof"]
     if not gap.get("significant", loc.significant):
         out.append(f"No significant gap: χ²/ν {cpd:.3g} is at the noise level; no effect named.")
@@ -560,15 +690,7 @@ def _messages(loc: Any, gap: Mapping[str, Any], cands: Sequence[EffectScore], na
     if cands:
         top = cands[0]
         out.append(f"Best candidate by score: {top.effect} (LM {top.score:.3g}, q {top.dof}).")
-    for e in named:
-        c = next((c for r in rounds for c in r["candidates"] if c["effect"] == e and c.get("refitted")), None)
-        if c is None:
-            continue
-        pars = ", ".join(f"{n} = {v['value']:.4g}" + (f" ± {1.96 * v['se']:.2g}" if v.get("se") else "")
-                         + f" {v.get('unit', '')}".rstrip() for n, v in (c.get("parameters") or {}).items())
-        shr = (f"shrinkage {100 * c['shrinkage']:.0f} % of the excess" if c["shrinkage"] is not None
-               else "no excess above the noise as a whole to shrink")
-        out.append(f"`{e}` named: ΔAIC {c['delta_aic']:.1f}, {shr} ({pars}).")
+    out += _named_messages(named, rounds)
     if named and overall is not None:
         out.append(f"With {', '.join(named)} the excess residual shrinks by {100 * overall:.0f} %.")
     if not named:

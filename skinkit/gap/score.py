@@ -162,68 +162,94 @@ def collect(spec: Mapping[str, Any], observations: Observations, values: Mapping
     effects editing the same thing), each effect is first tried alone (those refused alone
     are skipped with the reason), then the rest together, then one model per effect.
     """
-    from skinkit.inverse.objective import Objective
-
     say = progress or (lambda _m: None)
     fitted = observations.fitted()
     skipped: dict[str, str] = {}
     groups: list[list[str]] = [list(effects)] if effects else [[]]
-    n_forward = 0
     notes: list[str] = []
 
     def run(group: list[str]) -> tuple[Any, Prediction, list[str]]:
-        model = _load_group(spec, group, load)
-        try:
-            ps = model.parameters()
-            ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
-            names = list(theta) + [n for e in group for n in ps.names if n.startswith(e + ".")]
-            pred = model.predict(ps, fitted, sensitivities=names)
-            return model, pred, names
-        except BaseException:
-            _close(model)
-            raise
+        return _predict_group(spec, group, load, values, theta, fitted)
 
     results: list[tuple[list[str], Any, Prediction, list[str]]] = []
     say(f"score step: one prediction with {len(theta)} fitted and the candidate effects' sensitivities"
         f" ({len(effects)} effect(s))")
     try:
         model, pred, names = run(groups[0])
-        n_forward += 1
         results.append((groups[0], model, pred, names))
     except SkinkitError as exc:
         notes.append(f"the candidates together were refused ({exc}); tried one by one")
-        good = []
-        for e in effects:
-            try:
-                _close(_load_group(spec, [e], load))
-                good.append(e)
-            except SkinkitError as exc1:
-                skipped[e] = str(exc1)
-        # a refusal at prediction time (e.g. robot compliance under a displacement drive):
-        # halve the group until the refused effect stands alone, so one bad candidate costs
-        # about log2(K) extra predictions, not K
-        pending = [good] if good else []
-        while pending:
-            group = pending.pop(0)
-            if len(group) == 1:
-                say(f"score step: {group[0]} alone")
-            try:
-                model, pred, names = run(group)
-                n_forward += 1
-                results.append((group, model, pred, names))
-            except SkinkitError as exc2:
-                if len(group) == 1:
-                    skipped[group[0]] = str(exc2)
-                else:
-                    half = len(group) // 2
-                    pending[:0] = [group[:half], group[half:]]
+        _predict_apart(spec, effects, load, run, results, skipped, say)
     if not results:
         # nothing could be added: the calibrated model alone, for z and J_θ
         model, pred, names = run([])
-        n_forward += 1
         results.append(([], model, pred, names))
+    n_forward = len(results)
+    z0, J_theta, base_pred, columns, n_sec = _columns(results, fitted, theta, values, say)
+    return Sensitivities(z0, J_theta, list(theta), columns, skipped, base_pred, n_forward + n_sec, notes)
+
+
+def _predict_group(spec: Mapping[str, Any], group: list[str], load: Callable[..., Any],
+                   values: Mapping[str, float], theta: Sequence[str], fitted: Observations
+                   ) -> tuple[Any, Prediction, list[str]]:
+    """The model with the effects of ``group`` added (open), its prediction at ``values`` with the
+    sensitivities to ``theta`` and to the group's parameters, and those names (columns' order)."""
+    model = _load_group(spec, group, load)
+    try:
+        ps = model.parameters()
+        ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
+        names = list(theta) + [n for e in group for n in ps.names if n.startswith(e + ".")]
+        pred = model.predict(ps, fitted, sensitivities=names)
+        return model, pred, names
+    except BaseException:
+        _close(model)
+        raise
+
+
+def _predict_apart(spec: Mapping[str, Any], effects: Sequence[str], load: Callable[..., Any],
+                   run: Callable[[list[str]], tuple[Any, Prediction, list[str]]],
+                   results: list[tuple[list[str], Any, Prediction, list[str]]], skipped: dict[str, str],
+                   say: Callable[[str], None]) -> None:
+    """The candidates that were refused together: those refused alone at load go to ``skipped``;
+    the rest are predicted in groups halved until the refusal stands alone (appended to
+    ``results``; a single effect refused at prediction time goes to ``skipped``)."""
+    good = []
+    for e in effects:
+        try:
+            _close(_load_group(spec, [e], load))
+            good.append(e)
+        except SkinkitError as exc1:
+            skipped[e] = str(exc1)
+    # a refusal at prediction time (e.g. robot compliance under a displacement drive):
+    # halve the group until the refused effect stands alone, so one bad candidate costs
+    # about log2(K) extra predictions, not K
+    pending = [good] if good else []
+    while pending:
+        group = pending.pop(0)
+        if len(group) == 1:
+            say(f"score step: {group[0]} alone")
+        try:
+            model, pred, names = run(group)
+            results.append((group, model, pred, names))
+        except SkinkitError as exc2:
+            if len(group) == 1:
+                skipped[group[0]] = str(exc2)
+            else:
+                half = len(group) // 2
+                pending[:0] = [group[:half], group[half:]]
+
+
+def _columns(results: Sequence[tuple[list[str], Any, Prediction, list[str]]], fitted: Observations,
+             theta: Sequence[str], values: Mapping[str, float], say: Callable[[str], None]
+             ) -> tuple[np.ndarray, np.ndarray, Prediction, dict[str, EffectColumns], int]:
+    """From the group predictions (whose models it closes): the whitened residual z (n,) and
+    J_θ (n, len(theta)) of the first, its prediction, every effect's columns, and the number of
+    extra predictions the secants cost."""
+    from skinkit.inverse.objective import Objective
+
     columns: dict[str, EffectColumns] = {}
     z0 = J_theta = None
+    n_forward = 0
     try:
         for group, model, pred, names in results:
             obj = Objective(model, fitted, names, "noise")
@@ -242,7 +268,7 @@ def collect(spec: Mapping[str, Any], observations: Observations, values: Mapping
     finally:
         for _, model, _, _ in results:
             _close(model)
-    return Sensitivities(z0, J_theta, list(theta), columns, skipped, base_pred, n_forward, notes)
+    return z0, J_theta, base_pred, columns, n_forward
 
 
 def _classify(effect: str, names: list[str], J: np.ndarray, methods: Mapping[str, str]
