@@ -85,10 +85,7 @@ def _bound(item: str, params) -> tuple[str, float, float]:
                    "beside the residual and each parameter's bias from it (finite-element models)")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
-# C901: a command of 19 options: each option is checked where it is used, in the order the
-# fit uses them (session, parameters, bounds, resume, output); the work itself is in
-# skinkit.inverse.fit. Not yet split into per-option helpers (issue 13 item 9 follow-up).
-def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,  # noqa: C901
+def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,
         start_items: tuple[str, ...], bound_items: tuple[str, ...], starts: int,
         holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
         max_iterations: int, protocols: str | None,
@@ -100,22 +97,11 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     --resume replays what was done (no forward solve repeated) and goes on to the same optimum.
     """
     import shutil
-    import warnings
 
-    import numpy as np
-
-    from skinkit import registry
     from skinkit.forward import load
-    from skinkit.inverse import WEIGHTINGS, fit_json
-    from skinkit.inverse import fit as run_fit
-    from skinkit.inverse.fit import FitError, free_set, with_bounds
-    from skinkit.inverse.scaling import Scaling
+    from skinkit.inverse import fit_json
 
-    if weighting not in WEIGHTINGS:
-        raise SkinkitError(f"--objective {weighting!r}: must be one of {', '.join(WEIGHTINGS)}")
-    if optimiser not in registry.names("skinkit.optimisers"):
-        raise SkinkitError(f"--optimiser {optimiser!r} is not installed; installed: "
-                           f"{', '.join(registry.names('skinkit.optimisers'))}")
+    _check_choices(weighting, optimiser)
     model = load(model_file, workers=workers)
     if error_estimate:
         from skinkit.inverse.discretisation import has_mesh
@@ -131,29 +117,8 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     out = Path(out_dir) if out_dir else Path.cwd() / check_name(fit_name, "--name")
     evals_dir = out / "evaluations"
     state_file = out / "checkpoint.json"
-    params = free_set(model.parameters(), split_names(free) or None)
-    bounds = {}
-    for item in bound_items:
-        name, lo, hi = _bound(item, params)
-        bounds[name] = (lo, hi)
-    if bounds:
-        params = with_bounds(params, bounds)
+    params, bounds, given = _fit_parameters(model, free, bound_items, start_items)
     names = params.free_names
-    given = {}
-    for item in start_items:
-        name, eq, val = item.partition("=")
-        name = name.strip()
-        if not eq or name not in params:
-            raise SkinkitError(f"--start {item!r}: expected NAME=VALUE with NAME one of {params.names}")
-        if name not in names:
-            raise SkinkitError(f"--start {name}: not a free parameter (free: {', '.join(names)})")
-        v = _value(val, params.param(name).unit, f"--start {name}")
-        p = params.param(name)
-        if not p.lower <= v <= p.upper:
-            raise SkinkitError(f"--start {name} = {v:g} {p.unit} is outside its bounds "
-                               f"[{p.lower:g}, {p.upper:g}]")
-        given[name] = v
-    params = params.with_values(given) if given else params
     # what makes two runs the same fit: a resumed run must match it exactly
     identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
                 "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
@@ -161,70 +126,21 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
                 "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "until": until_s,
                 "protocols": split_names(protocols),
                 "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations}
-    if resume:
-        if not state_file.is_file():
-            raise SkinkitError(f"--resume: no checkpoint in {out} "
-                               "(run without --resume first, with the same --out)")
-        saved = json.loads(state_file.read_text())
-        diff = sorted(k for k in identity if saved.get(k) != identity[k])
-        if diff:
-            raise SkinkitError(f"--resume: the checkpoint in {out} is of another fit (it differs in "
-                               f"{', '.join(diff)})")
-    if stores and not overwrite:   # checked before the fit runs, not after it
-        from skinkit.store import open_experiment
-        with open_experiment(session) as exp:
-            if fit_name in exp.fit_names():
-                raise SkinkitError(f"{session} already holds a fit named {fit_name!r}: give another --name, "
-                                   "or --overwrite to replace it")
-    if not resume:   # a finished fit's fit.json is a result too: not replaced silently by a new fit
-        check_result_files(out, ("fit.json",), "--out", overwrite=overwrite)
+    _check_out(out, state_file, identity, resume=resume, session=session, stores=stores, fit_name=fit_name,
+               overwrite=overwrite)
     if not resume:   # a fresh fit: evaluations of an earlier one in this --out are not its own
         shutil.rmtree(evals_dir, ignore_errors=True)
     out.mkdir(parents=True, exist_ok=True)
     _checkpoint(state_file, identity)
-    sc = Scaling.for_parameters(params, names)
-    lo, hi = sc.bounds()
-    # the starts: the model's values, then a scrambled Sobol design in the scaled box
-    x_starts = [sc.to_scaled(params.free_vector())]
-    if starts > 1:
-        from scipy.stats import qmc
-        box_lo = np.where(np.isfinite(lo), lo, x_starts[0] - 1)
-        box_hi = np.where(np.isfinite(hi), hi, x_starts[0] + 1)
-        with warnings.catch_warnings():   # any count is fine here, not only powers of two
-            warnings.simplefilter("ignore")
-            u = qmc.Sobol(len(names), scramble=True, seed=0).random(starts - 1)
-        x_starts += list(qmc.scale(u, box_lo, box_hi))
+    sc, x_starts = _start_points(params, names, starts)
 
-    results, done, failures = [], [], []
-    for k in range(starts):
-        start_vals = dict(zip(names, sc.to_values(x_starts[k]).tolist(), strict=True))
+    def run_start(k: int, start_vals: dict[str, float], progress) -> object:
+        from skinkit.inverse import fit as run_fit
+        return run_fit(model, obs, names, weighting=weighting, optimiser=optimiser, start=start_vals,
+                       ftol=ftol, xtol=xtol, max_iterations=max_iterations, bounds=bounds or None,
+                       checkpoint=evals_dir / f"start-{k:03d}", progress=progress)
 
-        def progress(i: int, phi: float, x: dict, k: int = k) -> None:
-            if not as_json:
-                vals = ", ".join(f"{n} = {v:.4g}" for n, v in x.items())
-                click.echo(f"  start {k + 1}/{starts} evaluation {i}: objective {phi:.6g}  [{vals}]",
-                           err=True)
-
-        try:
-            r = run_fit(model, obs, names, weighting=weighting, optimiser=optimiser, start=start_vals,
-                        ftol=ftol, xtol=xtol, max_iterations=max_iterations, bounds=bounds or None,
-                        checkpoint=evals_dir / f"start-{k:03d}", progress=progress)
-        except FitError as exc:
-            if starts == 1:
-                raise
-            # a start the model cannot solve (a design point breaking a constraint of the
-            # model): kept as a failed start, the others go on
-            failures.append(str(exc))
-            done.append({"start": start_vals, "failed": str(exc)})
-            if not as_json:
-                click.echo(f"  start {k + 1}/{starts} failed: {exc}", err=True)
-            continue
-        done.append({"start": start_vals, "objective": r.objective, "converged": r.converged,
-                     "parameters": {n: r.parameters[n] for n in names}, "n_forward": r.n_forward,
-                     "n_replayed": r.extra.get("n_replayed", 0)})
-        results.append(r)
-    if not results:
-        raise SkinkitError(f"every start of the fit failed; the first: {failures[0]}")
+    results, done = _run_starts(run_start, sc, x_starts, names, as_json)
     best_result = min(results, key=lambda r: r.objective)
     best_result.starts = done
     if error_estimate:
@@ -256,9 +172,143 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     if as_json:
         click.echo(json.dumps(best, indent=2, default=float))
         return
+    _echo_summary(best, model.name, session, best_result.wall_s, names, out)
+
+
+def _check_choices(weighting: str, optimiser: str) -> None:
+    """--objective is a known weighting and --optimiser an installed plugin."""
+    from skinkit import registry
+    from skinkit.inverse import WEIGHTINGS
+
+    if weighting not in WEIGHTINGS:
+        raise SkinkitError(f"--objective {weighting!r}: must be one of {', '.join(WEIGHTINGS)}")
+    if optimiser not in registry.names("skinkit.optimisers"):
+        raise SkinkitError(f"--optimiser {optimiser!r} is not installed; installed: "
+                           f"{', '.join(registry.names('skinkit.optimisers'))}")
+
+
+def _fit_parameters(model, free: str | None, bound_items: tuple[str, ...], start_items: tuple[str, ...]
+                    ) -> tuple[object, dict[str, tuple[float, float]], dict[str, float]]:
+    """The model's parameters with --free, --bounds and --start applied: ``(parameters, bounds
+    (name -> (lower, upper) [SI]), the given starts (name -> SI))``, each option checked."""
+    from skinkit.inverse.fit import free_set, with_bounds
+
+    params = free_set(model.parameters(), split_names(free) or None)
+    bounds = {}
+    for item in bound_items:
+        name, lo, hi = _bound(item, params)
+        bounds[name] = (lo, hi)
+    if bounds:
+        params = with_bounds(params, bounds)
+    names = params.free_names
+    given = {}
+    for item in start_items:
+        name, eq, val = item.partition("=")
+        name = name.strip()
+        if not eq or name not in params:
+            raise SkinkitError(f"--start {item!r}: expected NAME=VALUE with NAME one of {params.names}")
+        if name not in names:
+            raise SkinkitError(f"--start {name}: not a free parameter (free: {', '.join(names)})")
+        v = _value(val, params.param(name).unit, f"--start {name}")
+        p = params.param(name)
+        if not p.lower <= v <= p.upper:
+            raise SkinkitError(f"--start {name} = {v:g} {p.unit} is outside its bounds "
+                               f"[{p.lower:g}, {p.upper:g}]")
+        given[name] = v
+    params = params.with_values(given) if given else params
+    return params, bounds, given
+
+
+def _check_out(out: Path, state_file: Path, identity: dict, *, resume: bool, session: str, stores: bool,
+               fit_name: str, overwrite: bool) -> None:
+    """Before the fit runs: --resume has this fit's checkpoint, the session does not already
+    hold a fit of that name, --out holds no fit.json (unless --overwrite)."""
+    if resume:
+        if not state_file.is_file():
+            raise SkinkitError(f"--resume: no checkpoint in {out} "
+                               "(run without --resume first, with the same --out)")
+        saved = json.loads(state_file.read_text())
+        diff = sorted(k for k in identity if saved.get(k) != identity[k])
+        if diff:
+            raise SkinkitError(f"--resume: the checkpoint in {out} is of another fit (it differs in "
+                               f"{', '.join(diff)})")
+    if stores and not overwrite:   # checked before the fit runs, not after it
+        from skinkit.store import open_experiment
+        with open_experiment(session) as exp:
+            if fit_name in exp.fit_names():
+                raise SkinkitError(f"{session} already holds a fit named {fit_name!r}: give another --name, "
+                                   "or --overwrite to replace it")
+    if not resume:   # a finished fit's fit.json is a result too: not replaced silently by a new fit
+        check_result_files(out, ("fit.json",), "--out", overwrite=overwrite)
+
+
+def _start_points(params, names: list[str], starts: int) -> tuple[object, list]:
+    """The fit's scaling and its ``starts`` scaled start points (each (len(names),)): the model's
+    values, then a scrambled Sobol design in the scaled box."""
+    import warnings
+
+    import numpy as np
+
+    from skinkit.inverse.scaling import Scaling
+
+    sc = Scaling.for_parameters(params, names)
+    lo, hi = sc.bounds()
+    x_starts = [sc.to_scaled(params.free_vector())]
+    if starts > 1:
+        from scipy.stats import qmc
+        box_lo = np.where(np.isfinite(lo), lo, x_starts[0] - 1)
+        box_hi = np.where(np.isfinite(hi), hi, x_starts[0] + 1)
+        with warnings.catch_warnings():   # any count is fine here, not only powers of two
+            warnings.simplefilter("ignore")
+            u = qmc.Sobol(len(names), scramble=True, seed=0).random(starts - 1)
+        x_starts += list(qmc.scale(u, box_lo, box_hi))
+    return sc, x_starts
+
+
+def _run_starts(run_start, sc, x_starts: list, names: list[str], as_json: bool) -> tuple[list, list[dict]]:
+    """Fit from every start (``run_start(k, start values, progress)``): the results and one record
+    per start (a failed one kept with its reason, unless it is the only start)."""
+    from skinkit.inverse.fit import FitError
+
+    starts = len(x_starts)
+    results, done, failures = [], [], []
+    for k in range(starts):
+        start_vals = dict(zip(names, sc.to_values(x_starts[k]).tolist(), strict=True))
+
+        def progress(i: int, phi: float, x: dict, k: int = k) -> None:
+            if not as_json:
+                vals = ", ".join(f"{n} = {v:.4g}" for n, v in x.items())
+                click.echo(f"  start {k + 1}/{starts} evaluation {i}: objective {phi:.6g}  [{vals}]",
+                           err=True)
+
+        try:
+            r = run_start(k, start_vals, progress)
+        except FitError as exc:
+            if starts == 1:
+                raise
+            # a start the model cannot solve (a design point breaking a constraint of the
+            # model): kept as a failed start, the others go on
+            failures.append(str(exc))
+            done.append({"start": start_vals, "failed": str(exc)})
+            if not as_json:
+                click.echo(f"  start {k + 1}/{starts} failed: {exc}", err=True)
+            continue
+        done.append({"start": start_vals, "objective": r.objective, "converged": r.converged,
+                     "parameters": {n: r.parameters[n] for n in names}, "n_forward": r.n_forward,
+                     "n_replayed": r.extra.get("n_replayed", 0)})
+        results.append(r)
+    if not results:
+        raise SkinkitError(f"every start of the fit failed; the first: {failures[0]}")
+    return results, done
+
+
+def _echo_summary(best: dict, model_name: str, session: str, wall_s: float, names: list[str],
+                  out: Path) -> None:
+    """The fit in lines: χ²/ν and cost, each free parameter with its 95 % interval, problems,
+    held-out errors, the discretisation check, plots."""
     status = "converged" if best["converged"] else "NOT converged"
-    click.echo(f"{model.name} on {session}: chi2/dof {best['chi2_per_dof']:.4g}, {best['n_forward']} forward "
-               f"solves ({best['n_sensitivity']} with sensitivities), {best_result.wall_s:.1f} s, {status}")
+    click.echo(f"{model_name} on {session}: chi2/dof {best['chi2_per_dof']:.4g}, {best['n_forward']} forward "
+               f"solves ({best['n_sensitivity']} with sensitivities), {wall_s:.1f} s, {status}")
     for n in names:
         p = best["parameters"][n]
         if p.get("identifiable") is False:

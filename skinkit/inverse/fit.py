@@ -115,10 +115,7 @@ class _Evaluations:
         os.replace(tmp, path)
 
 
-# C901: the optimiser's objective, Jacobian, checkpoint replay and result assembly share the
-# evaluation state of one fit (closures over it); not yet split into an object (issue 13
-# item 9 follow-up).
-def fit(model: Any, observations: Observations, free: Sequence[str] | None = None, *,  # noqa: C901
+def fit(model: Any, observations: Observations, free: Sequence[str] | None = None, *,
         weighting: str = "noise", optimiser: str = "scipy-lsq", start: dict[str, float] | None = None,
         ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50, jacobian: str = "analytic",
         checkpoint: str | os.PathLike[str] | None = None,
@@ -143,25 +140,8 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
         raise FitError(f"jacobian must be 'analytic', 'fd' or 'none', got {jacobian!r}")
     use_jac = jacobian == "analytic"
     t0 = time.perf_counter()
-    params = free_set(model.parameters(), free)
+    params = _start_parameters(model, free, bounds, start)
     names = params.free_names
-    if not names:
-        raise FitError(f"model {model.name!r} has no free parameter")
-    if bounds:
-        params = with_bounds(params, bounds)
-    for n in names:
-        p = params.param(n)
-        if not p.lower < p.upper:
-            raise FitError(f"bounds of {n} are inverted or empty: [{p.lower:g}, {p.upper:g}] {p.unit}")
-    if start:
-        for k, v in start.items():
-            if k not in params:
-                raise FitError(f"start: the model has no parameter {k!r}")
-            p = params.param(k)
-            if not p.lower <= v <= p.upper:
-                raise FitError(f"start of {k} = {v:g} {p.unit} is outside its bounds "
-                               f"[{p.lower:g}, {p.upper:g}]")
-        params = params.with_values(start)
     fitted = observations.fitted()
     obj = Objective(model, fitted, names, weighting)
     sc = Scaling.for_parameters(params, names)
@@ -256,6 +236,32 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
         "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations,
     })
     return out
+
+
+def _start_parameters(model: Any, free: Sequence[str] | None, bounds: dict[str, tuple[float, float]] | None,
+                      start: dict[str, float] | None) -> ParameterSet:
+    """The model's parameters with ``free`` free, the fit's ``bounds`` and the ``start`` values
+    [SI], each checked (a free one, non-empty bounds, a start inside them)."""
+    params = free_set(model.parameters(), free)
+    names = params.free_names
+    if not names:
+        raise FitError(f"model {model.name!r} has no free parameter")
+    if bounds:
+        params = with_bounds(params, bounds)
+    for n in names:
+        p = params.param(n)
+        if not p.lower < p.upper:
+            raise FitError(f"bounds of {n} are inverted or empty: [{p.lower:g}, {p.upper:g}] {p.unit}")
+    if start:
+        for k, v in start.items():
+            if k not in params:
+                raise FitError(f"start: the model has no parameter {k!r}")
+            p = params.param(k)
+            if not p.lower <= v <= p.upper:
+                raise FitError(f"start of {k} = {v:g} {p.unit} is outside its bounds "
+                               f"[{p.lower:g}, {p.upper:g}]")
+        params = params.with_values(start)
+    return params
 
 
 def _describe(pset: ParameterSet, names: Sequence[str]) -> str:
