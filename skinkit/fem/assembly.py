@@ -164,6 +164,47 @@ def _element_tangent(dN, w, F, S, CC, dNT, out):
     return out
 
 
+#: Voigt index of each tensor component (I, J) (order 11, 22, 33, 12, 23, 13)
+_V_OF = np.array([[0, 3, 5], [3, 1, 4], [5, 4, 2]])
+
+
+def first_elasticity(F: np.ndarray, S: np.ndarray, CC: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``(n_el, n_q, 9, 9)`` weighted tangent ``w ∂P/∂F`` of the first Piola stress ``P = F S``.
+
+    ``A[iJ, kL] = w (Σ F_iI CC_IJKL F_kK + δ_ik S_LJ)`` with ``CC`` taken minor-symmetric
+    through its Voigt form, exactly as :func:`element_tangent` sees it (``Bᵀ D B`` plus the
+    geometric part), so that ``δP = A δF`` reproduces that operator. ``F``, ``S`` ``(n_el, n_q,
+    3, 3)``, ``CC`` ``(n_el, n_q, 3, 3, 3, 3)`` [Pa], ``w`` ``(n_el, n_q)`` [m³].
+    """
+    D = voigt_tangent(CC)
+    CCs = D[..., _V_OF[:, :, None, None], _V_OF[None, None, :, :]]             # (e, q, I, J, K, L)
+    # (contiguous: einsum's optimised path returns a strided view, slow to work on)
+    A = np.ascontiguousarray(np.einsum("eqiI,eqIJKL,eqkK->eqiJkL", F, CCs, F, optimize=True))
+    ST = np.swapaxes(S, -1, -2)
+    for i in range(3):
+        A[:, :, i, :, i, :] += ST
+    A *= w[:, :, None, None, None, None]
+    return A.reshape(*F.shape[:2], 9, 9)
+
+
+def element_tangent_apply(dNT: np.ndarray, A: np.ndarray, ue: np.ndarray) -> np.ndarray:
+    """``(n_el, 81, m)`` products ``Kₑ uₑ`` of the element tangents with ``m`` element vectors
+    ``ue`` ``(n_el, 81, m)``, without forming the ``(81, 81)`` matrices.
+
+    ``δF = uₑ ∇N``, ``w δP = A δF`` with ``A`` from :func:`first_elasticity`, then
+    ``∫ δP : ∇N``: the operator of :func:`element_tangent`. ``dNT`` ``(n_el, n_q, 3, 27)``.
+    For a few ``m`` it costs a fraction of one element-tangent assembly.
+    """
+    ne, nq, _, nb = dNT.shape
+    m = ue.shape[2]
+    with single_threaded_blas():
+        dF = np.einsum("eiam,eqJa->eqiJm", ue.reshape(ne, 3, nb, m), dNT, optimize=True)
+        dP = np.matmul(A, dF.reshape(ne, nq, 9, m))                                # (e, q, iJ, m)
+        P = dP.reshape(ne, nq, 3, 3, m).transpose(0, 4, 2, 1, 3).reshape(ne, m * 3, nq * 3)
+        out = np.matmul(P, dNT.reshape(ne, nq * 3, nb))                          # (e, m*3, 27)
+    return out.reshape(ne, m, 3 * nb).transpose(0, 2, 1)
+
+
 class SparsePattern:
     """The sparsity pattern of a reduced system, built once, reused for every assembly.
 

@@ -30,12 +30,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 from skinkit.fem import lawkit, viscoelastic
-from skinkit.fem.assembly import element_residual, full_vector
+from skinkit.fem.assembly import element_tangent, element_tangent_apply, first_elasticity, full_vector
 from skinkit.fem.problem import Problem
 from skinkit.fem.solver import NewtonSolver
 from skinkit.fem.tensors import push_with
+from skinkit.fem.threads import single_threaded_blas
 
 #: Prony parameters of a QLV law (relative moduli and relaxation times)
 _PRONY = re.compile(r"^(g|tau)[0-9]+$")
@@ -43,6 +45,8 @@ _PRONY = re.compile(r"^(g|tau)[0-9]+$")
 #: pre-stretch parameters of a material with ``prestress = (l1, l2, angle)`` (local names)
 PRESTRESS_NAMES = ("prestretch.l1", "prestretch.l2", "prestretch.angle")
 _CS = 1e-30
+#: ways of solving with the converged tangent (see HistorySensitivity)
+METHODS = ("iterative", "direct")
 
 
 def _b5(a) -> np.ndarray:
@@ -73,14 +77,15 @@ class Sensitivities:
         du: ``(n_dof, n_par)`` displacement derivatives [m per parameter unit].
         tip_displacement: ``(3, n_par)`` reference-point motion derivatives (NaN in untied directions).
         tip_force: ``(3, n_par)`` indenter force derivatives [N per parameter unit].
-        reaction: ``(n_dof, n_par)`` nodal internal-force derivatives.
+        reaction: ``(n_dof, n_par)`` nodal internal-force derivatives [N per parameter unit], when
+            asked for (``HistorySensitivity(reactions=True)``, :func:`sensitivities`), else None.
     """
 
     names: list[str]
     du: np.ndarray
     tip_displacement: np.ndarray | None
     tip_force: np.ndarray | None
-    reaction: np.ndarray
+    reaction: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -122,9 +127,25 @@ class HistorySensitivity:
     (``NewtonSolver.run(..., sensitivities=True)`` does so); with ``dt = None`` the state is
     static (viscous laws answer elastically, as in a static solve). ``only``: restrict to
     these parameter names (the others are not computed).
+
+    ``method``: how ``K du/dp = -∂r/∂p`` is solved with the converged tangent ``K`` — exact
+    either way (see :meth:`_solve`): ``"iterative"`` (default) builds no tangent matrix and
+    factorises nothing when the Newton loop's last factorisation is at hand, ``"direct"``
+    assembles and factorises ``K`` at every step. ``reactions``: also return every nodal
+    reaction derivative (``Sensitivities.reaction``; otherwise None and only the elements
+    holding the indenter are differentiated). ``tol``, ``max_iter``: the iterative solve's
+    relative error estimate per column and iteration limit.
     """
 
-    def __init__(self, solver: NewtonSolver, only: list[str] | None = None) -> None:
+    def __init__(self, solver: NewtonSolver, only: list[str] | None = None, method: str = "iterative",
+                 reactions: bool = False, tol: float = 1e-10, max_iter: int = 12) -> None:
+        if method not in METHODS:
+            from skinkit.fem.errors import ModelError
+            raise ModelError("sensitivities", f"method {method!r} is not one of {list(METHODS)}")
+        self.method, self.reactions = method, bool(reactions)
+        self.tol, self.max_iter = float(tol), int(max_iter)
+        #: solves by conjugate gradients, their iterations, and tangents factorised here
+        self.stats = {"iterative": 0, "iterations": 0, "factorisations": 0}
         self.solver = solver
         prob = solver.problem
         rigid = solver.dofmap.bc.rigid
@@ -148,6 +169,18 @@ class HistorySensitivity:
             ne = prob.materials[k].elements.size
             self.dSe[k] = np.zeros((npar, ne, nq, 3, 3))
             self.dh[k] = np.zeros((npar, st.h.shape[0], ne, nq, 3, 3))
+        dm, g = solver.dofmap, prob.geom
+        # element vectors -> reduced unknowns, as one sparse product for every column at once
+        p_ = solver.pattern
+        self._gather = sp.csr_matrix((np.ones(p_.rtake.size), (p_.rdest, p_.rtake)),
+                                     shape=(p_.n, g.edofs.size))
+        self._springs = dm.spring_matrix()
+        # the elements holding the indenter's nodes: the only ones its force derivative reads
+        self._tip_elements = np.zeros(0, dtype=int)
+        if dm.rigid_dofs is not None:
+            on = np.zeros(prob.n_dof, dtype=bool)
+            on[(3 * dm.bc.rigid.nodes[:, None] + np.arange(3)).ravel()] = True
+            self._tip_elements = np.flatnonzero(on[g.edofs].any(axis=1))
 
     # -- explicit derivatives at fixed displacement ------------------------------------------
     def _explicit_dSe(self, k: int, p: _Par, Ce: np.ndarray, C: np.ndarray, Se: np.ndarray,
@@ -203,19 +236,47 @@ class HistorySensitivity:
         prob.t = t
         viscous = dt is not None and prob.viscous
         states: dict = {}
-        re, Ke = prob.evaluate(u, True, dt if viscous else None, keep=states)
-        K = solver.tangent(Ke)
-        solver.linear.factor(K)
-        solver.factored = True
-        n_el = g.edofs.shape[0]
-        dre = np.zeros((npar, n_el, g.edofs.shape[1]))
-        cache = {}
+        # the tangent's ingredients at u (law stress and tangent), not its element matrices
+        _, lin = prob.linearise(u, dt if viscous else None, keep=states)
+        lin = [(F, S, first_elasticity(F, S, CC, g.w[sl]), CC)
+               for (F, S, CC), sl in zip(lin, prob.slices, strict=True)]
+        dre = self._pseudo_loads(states, dt, viscous)
+        # right-hand sides: explicit material part, plus the drive
+        rhs = self._reduce(dre.transpose(1, 2, 0)) if npar else np.zeros((solver.dofmap.n_unknowns, 0))
+        dm = solver.dofmap
+        rigid = dm.bc.rigid
+        dup = self._drive(rhs, t, lin)
+        dq = -self._solve(rhs, lin, states) if npar else rhs
+        mp = dm.map
+        du = dup.copy()
+        du[mp >= 0] = dq[mp[mp >= 0]]
+        react = None
+        if self.reactions:
+            react = _full(g.edofs, dre.transpose(1, 2, 0) + self._apply(lin, du), prob.n_dof)
+        if viscous:
+            self._update_history(u, du, dt, states)
+        tip_u = tip_f = None
+        if dm.rigid_dofs is not None:
+            tip_u = np.full((3, npar), np.nan)
+            tip_u[dm.rigid_components] = du[dm.rigid_dofs[0]]
+            if react is not None:
+                tip_f = react.reshape(-1, 3, npar)[rigid.nodes].sum(axis=0)
+            else:   # only the elements holding the indenter's nodes carry its force
+                el = self._tip_elements
+                fe = dre[:, el].transpose(1, 2, 0) + self._apply(lin, du, el)
+                tip_f = _full(g.edofs[el], fe, prob.n_dof).reshape(-1, 3, npar)[rigid.nodes].sum(axis=0)
+        return Sensitivities(list(self.names), du, tip_u, tip_f, react)
+
+    def _pseudo_loads(self, states: dict, dt: float | None, viscous: bool) -> np.ndarray:
+        """``(n_par, n_el, 81)`` element forces ∂rₑ/∂p at fixed displacement [N per unit]."""
+        prob, g = self.solver.problem, self.solver.problem.geom
+        npar = len(self.pars)
+        dre = np.zeros((npar, g.edofs.shape[0], g.edofs.shape[1]))
         for k, m in enumerate(prob.materials):
             sl = prob.slices[k]
             F, C, Ce, Se, CCe = states[k]
             need_law_S = any(p.kind == "field" for p in self.pars) and prob.fields_of(k)
             law_S = lawkit.response(m.law, Ce, m.params, False)[0] if need_law_S else None
-            cache[k] = (F, C, Ce, Se, CCe)
             pr = m.prony() if viscous else None
             h_new = None
             S_nat = Se
@@ -225,9 +286,7 @@ class HistorySensitivity:
                 st = prob.state[k]
                 h_new = _b5(e) * st.h + _b5(beta) * (Se - st.Se)[None]
                 S_nat = (1 - gg.sum()) * Se + np.tensordot(gg, h_new, axes=(0, 0))
-            elif m.prony() is not None:
-                # a static solve of a viscous law: the instantaneous (elastic) response
-                S_nat = Se
+            js, dSs = [], []
             for j, p in enumerate(self.pars):
                 dSe_p = self._explicit_dSe(k, p, Ce, C, Se, CCe, law_S)
                 if p.kind == "prony" and p.k == k and pr is None:
@@ -249,38 +308,93 @@ class HistorySensitivity:
                         dF = dF0(m.prestress, int(p.local))
                         extra = dF @ S_nat @ m.F0.T + m.F0 @ S_nat @ dF.T
                         dS = extra if dS is None else dS + extra
-                if dS is None:
-                    continue
-                dre[j, sl] = element_residual(g.dN[sl], g.w[sl], F, dS)
-        # right-hand sides: explicit material part, plus the drive
-        rhs = np.stack([solver.pattern.vector(dre[j]) for j in range(npar)], axis=1) if npar else \
-            np.zeros((solver.dofmap.n_unknowns, 0))
-        dm = solver.dofmap
-        rigid = dm.bc.rigid
-        dup = self._drive(rhs, t, Ke)
-        dq = -solver.linear.solve(rhs).reshape(dm.n_unknowns, -1) if npar else rhs
-        mp = dm.map
-        du = dup.copy()
-        du[mp >= 0] = dq[mp[mp >= 0]]
-        react = np.zeros((prob.n_dof, npar))
-        for j in range(npar):
-            dre_tot = dre[j] + np.einsum("eij,ej->ei", Ke, du[g.edofs, j])
-            react[:, j] = full_vector(g.edofs, dre_tot, prob.n_dof)
-        if viscous:
-            self._update_history(u, du, dt, cache)
-        tip_u = tip_f = None
-        if dm.rigid_dofs is not None:
-            tip_u = np.full((3, npar), np.nan)
-            tip_u[dm.rigid_components] = du[dm.rigid_dofs[0]]
-            tip_f = react.reshape(-1, 3, npar)[rigid.nodes].sum(axis=0)
-        return Sensitivities(list(self.names), du, tip_u, tip_f, react)
+                if dS is not None:
+                    js.append(j)
+                    dSs.append(dS)
+            if js:
+                dre[js, sl] = self._residuals(k, F, np.stack(dSs))
+        return dre
 
-    def _drive(self, rhs: np.ndarray, t: float, Ke: np.ndarray) -> np.ndarray:
+    def _residuals(self, k: int, F: np.ndarray, dS: np.ndarray) -> np.ndarray:
+        """``(n, n_el_k, 81)`` element forces of ``n`` stress fields ``dS`` ``(n, n_el_k, n_q, 3, 3)``
+        of material ``k`` at deformation ``F``, in one product."""
+        g, sl = self.solver.problem.geom, self.solver.problem.slices[k]
+        n, ne, nq = dS.shape[:3]
+        Pw = np.matmul(F[None], dS) * g.w[sl][None, :, :, None, None]
+        A = Pw.transpose(1, 3, 0, 2, 4).reshape(ne, 3 * n, nq * 3)            # rows (i, n)
+        with single_threaded_blas():
+            out = np.matmul(A, g.dNT[sl].reshape(ne, nq * 3, -1))           # (e, 3n, 27)
+        return out.reshape(ne, 3, n, -1).transpose(2, 0, 1, 3).reshape(n, ne, -1)
+
+    def _apply(self, lin: list, V: np.ndarray, elements: np.ndarray | None = None) -> np.ndarray:
+        """Element tangent products ``(n_el, 81, m)`` with the full-dof vectors ``V``
+        ``(n_dof, m)`` (only ``elements``, an increasing index array, when given)."""
+        prob, g = self.solver.problem, self.solver.problem.geom
+        m = V.shape[1]
+        sel = np.arange(g.edofs.shape[0]) if elements is None else elements
+        out = np.empty((sel.size, g.edofs.shape[1], m))
+        ue = V[g.edofs[sel]]
+        for k, (_, _, A, _) in enumerate(lin):
+            sl = prob.slices[k]
+            pos = np.flatnonzero((sel >= sl.start) & (sel < sl.stop))
+            if pos.size == 0:
+                continue
+            loc = sel[pos] - sl.start
+            whole = pos.size == sl.stop - sl.start
+            ix = slice(None) if whole else loc
+            glob = sl if whole else sel[pos]
+            out[pos] = element_tangent_apply(g.dNT[glob], A[ix], ue[pos])
+        return out
+
+    def _reduce(self, fe: np.ndarray) -> np.ndarray:
+        """Element vectors ``(n_el, 81, m)`` summed onto the reduced unknowns ``(n_unknowns, m)``."""
+        return self._gather @ fe.reshape(-1, fe.shape[-1])
+
+    def _matvec(self, lin: list, q: np.ndarray) -> np.ndarray:
+        """The reduced tangent at the converged state times ``q`` ``(n_unknowns, m)``."""
+        dm, prob = self.solver.dofmap, self.solver.problem
+        V = np.zeros((prob.n_dof, q.shape[1]))
+        free = dm.map >= 0
+        V[free] = q[dm.map[free]]
+        out = self._reduce(self._apply(lin, V))
+        if self._springs is not None:
+            out += self._springs @ q
+        return out
+
+    def _solve(self, rhs: np.ndarray, lin: list, states: dict) -> np.ndarray:
+        """``K⁻¹ rhs`` with the tangent ``K`` at the converged state.
+
+        ``method="iterative"`` (with a factorisation held, the Newton loop's last): conjugate
+        gradients on ``K`` preconditioned by that factorisation, with matrix-free products, to a
+        relative error estimate ``tol`` per column — no tangent assembled or factorised, and
+        the factorisation stays the Newton loop's for the next increment. It falls back to
+        the direct solve when ``K`` is not positive definite or ``max_iter`` is reached.
+        ``method="direct"``: assemble and factorise ``K`` (kept for the next increment).
+        """
+        solver = self.solver
+        if self.method == "iterative" and solver.factored:
+            x, its = _pcg(lambda q: self._matvec(lin, q), solver.linear.solve, rhs, self.tol, self.max_iter)
+            self.stats["iterations"] += its
+            if x is not None:
+                self.stats["iterative"] += 1
+                return x
+        prob, g = solver.problem, solver.problem.geom
+        Ke = np.empty((g.edofs.shape[0], g.edofs.shape[1], g.edofs.shape[1]))
+        for k, (F, S, _, CC) in enumerate(lin):
+            sl = prob.slices[k]
+            element_tangent(g.dN[sl], g.w[sl], F, S, CC, g.dNT[sl], out=Ke[sl])
+        solver.linear.factor(solver.tangent(Ke))
+        solver.factored = True
+        self.stats["factorisations"] += 1
+        return solver.linear.solve(rhs).reshape(rhs.shape)
+
+    def _drive(self, rhs: np.ndarray, t: float, lin: list) -> np.ndarray:
         """Add the drive parameters' part to ``rhs`` ``(n_unknowns, n_par)`` (in place) and
         return the prescribed displacements' derivatives ``(n_dof, n_par)`` [m per unit]."""
         solver, prob = self.solver, self.solver.problem
-        dm, edofs = solver.dofmap, prob.geom.edofs
+        dm = solver.dofmap
         dup = np.zeros((prob.n_dof, len(self.pars)))
+        moved = []
         for j, p in enumerate(self.pars):
             if p.kind != "drive":
                 continue
@@ -289,7 +403,9 @@ class HistorySensitivity:
                 rhs[dm.n_free:, j] -= dv   # r = f_int - f_ext: ∂r/∂p = -∂f_ext/∂p
             else:
                 dup[dm.rigid_dofs, j] = dv[None, :]
-                rhs[:, j] += solver.pattern.vector(np.einsum("eij,ej->ei", Ke, dup[edofs, j]))
+                moved.append(j)
+        if moved:   # the imposed motion's forces on the unknowns: K_fp ∂u_p/∂p
+            rhs[:, moved] += self._reduce(self._apply(lin, dup[:, moved]))
         return dup
 
     def _update_history(self, u: np.ndarray, du: np.ndarray, dt: float, cache: dict) -> None:
@@ -328,6 +444,48 @@ class HistorySensitivity:
                 self.dSe[k][j] = dSe_tot
 
 
+def _full(edofs: np.ndarray, fe: np.ndarray, n_dof: int) -> np.ndarray:
+    """Element vectors ``(n_el, 81, m)`` summed onto the full dofs ``(n_dof, m)``."""
+    return np.stack([full_vector(edofs, fe[..., j], n_dof) for j in range(fe.shape[-1])], axis=1) \
+        if fe.shape[-1] else np.zeros((n_dof, 0))
+
+
+def _pcg(matvec, precondition, b: np.ndarray, tol: float, max_iter: int):
+    """Preconditioned conjugate gradients on the columns of ``b`` ``(n, m)`` at once.
+
+    ``matvec(q)`` and ``precondition(r)`` act on ``(n, m)`` blocks. Starts from the
+    preconditioned right-hand side; a column is done when its preconditioned residual (the
+    estimate of its remaining error) is at most ``tol`` times its solution. Returns
+    ``(x, iterations)``, ``x`` None when a curvature ``pᵀKp`` is not positive or ``max_iter``
+    iterations do not reach ``tol``.
+    """
+    x = precondition(b).reshape(b.shape)
+    bnorm = np.linalg.norm(b, axis=0)
+    r = b - matvec(x)
+    z = precondition(r).reshape(b.shape)
+    p = z.copy()
+    rz = np.einsum("ij,ij->j", r, z)
+    for it in range(max_iter + 1):
+        done = (np.linalg.norm(z, axis=0) <= tol * np.linalg.norm(x, axis=0)) | (bnorm == 0)
+        if done.all():
+            return x, it
+        if it == max_iter:
+            break
+        Kp = matvec(p)
+        pKp = np.einsum("ij,ij->j", p, Kp)
+        if np.any(pKp[~done] <= 0):
+            break
+        alpha = np.where(done, 0.0, rz / np.where(done, 1.0, pKp))
+        x += alpha * p
+        r -= alpha * Kp
+        z = precondition(r).reshape(b.shape)
+        rz_new = np.einsum("ij,ij->j", r, z)
+        beta = np.where(done | (rz == 0), 0.0, rz_new / np.where(rz == 0, 1.0, rz))
+        p = z + beta * p
+        rz = rz_new
+    return None, it
+
+
 def sensitivities(solver: NewtonSolver, u: np.ndarray, t: float, only: list[str] | None = None
                   ) -> Sensitivities:
     """Derivatives of the converged static state ``u`` (at load ``t``).
@@ -336,7 +494,7 @@ def sensitivities(solver: NewtonSolver, u: np.ndarray, t: float, only: list[str]
     derivatives; through a time history use :class:`HistorySensitivity`. Costs one tangent
     assembly and factorisation at ``u`` plus one back-substitution per parameter.
     """
-    return HistorySensitivity(solver, only).step(u, t, None)
+    return HistorySensitivity(solver, only, reactions=True).step(u, t, None)
 
 
 __all__ = ["PRESTRESS_NAMES", "HistorySensitivity", "Sensitivities", "dF0", "parameter_list",

@@ -285,14 +285,17 @@ class NewtonSolver:
 
     def run(self, times: Sequence[float], u0: np.ndarray | None = None, viscous_time: bool = False,
             progress: Callable[[float], None] | None = None, sensitivities: bool | Sequence[str] = False,
-            extrapolate: bool = True) -> Solution:
+            extrapolate: bool = True, sensitivity_method: str = "iterative") -> Solution:
         """Solve at each of ``times`` (increasing); cut increments that fail.
 
         ``viscous_time``: ``times`` are seconds and viscous histories advance; otherwise
         they are load factors and viscous laws answer elastically. ``sensitivities``: also
         differentiate every output step with respect to every parameter (True) or to the
         named ones (direct differentiation, through the viscous history when there is one);
-        the results are in ``solution.extra["sensitivities"]``, one per output time.
+        the results are in ``solution.extra["sensitivities"]``, one per output time, and how
+        their linear systems were solved in ``solution.extra["sensitivity_solves"]``.
+        ``sensitivity_method``: ``"iterative"`` (default; no tangent assembled at the converged
+        states) or ``"direct"`` — both exact, see :class:`~skinkit.fem.sensitivity.HistorySensitivity`.
         ``extrapolate``: start each increment from a quadratic extrapolation of the last
         converged states (falls back to the tangent predictor after a failure).
 
@@ -301,15 +304,16 @@ class NewtonSolver:
         step on a non-finite one and, failing, raises one :class:`SolverError` saying where.
         """
         with np.errstate(all="ignore"):
-            return self._run(times, u0, viscous_time, progress, sensitivities, extrapolate)
+            return self._run(times, u0, viscous_time, progress, sensitivities, extrapolate,
+                             sensitivity_method)
 
     def _run(self, times: Sequence[float], u0: np.ndarray | None, viscous_time: bool,
              progress: Callable[[float], None] | None, sensitivities: bool | Sequence[str],
-             extrapolate: bool) -> Solution:
+             extrapolate: bool, sensitivity_method: str = "iterative") -> Solution:
         from skinkit.fem import sensitivity as sens_mod
         only = None if isinstance(sensitivities, bool) else list(sensitivities)
         want_sens = bool(sensitivities) if isinstance(sensitivities, bool) else True
-        tracker = sens_mod.HistorySensitivity(self, only) if want_sens else None
+        tracker = sens_mod.HistorySensitivity(self, only, sensitivity_method) if want_sens else None
         sens_out = []
         times = [float(x) for x in times]
         if any(b <= a for a, b in zip(times, times[1:], strict=False)):
@@ -363,6 +367,7 @@ class NewtonSolver:
                        self.linear)
         if tracker is not None:
             sol.extra["sensitivities"] = sens_out
+            sol.extra["sensitivity_solves"] = dict(tracker.stats)
         return sol
 
 
