@@ -164,10 +164,6 @@ def _element_tangent(dN, w, F, S, CC, dNT, out):
     return out
 
 
-#: Voigt index of each tensor component (I, J) (order 11, 22, 33, 12, 23, 13)
-_V_OF = np.array([[0, 3, 5], [3, 1, 4], [5, 4, 2]])
-
-
 def first_elasticity(F: np.ndarray, S: np.ndarray, CC: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``(n_el, n_q, 9, 9)`` weighted tangent ``w ∂P/∂F`` of the first Piola stress ``P = F S``.
 
@@ -176,15 +172,17 @@ def first_elasticity(F: np.ndarray, S: np.ndarray, CC: np.ndarray, w: np.ndarray
     geometric part), so that ``δP = A δF`` reproduces that operator. ``F``, ``S`` ``(n_el, n_q,
     3, 3)``, ``CC`` ``(n_el, n_q, 3, 3, 3, 3)`` [Pa], ``w`` ``(n_el, n_q)`` [m³].
     """
-    D = voigt_tangent(CC)
-    CCs = D[..., _V_OF[:, :, None, None], _V_OF[None, None, :, :]]             # (e, q, I, J, K, L)
-    # (contiguous: einsum's optimised path returns a strided view, slow to work on)
-    A = np.ascontiguousarray(np.einsum("eqiI,eqIJKL,eqkK->eqiJkL", F, CCs, F, optimize=True))
+    ne, nq = F.shape[:2]
+    # δE (Voigt) = (F P)ᵀ : δF and F δS = (F P) δS (Voigt): the material part is (F P) D (F P)ᵀ
+    with single_threaded_blas():
+        FP = np.einsum("vIJ,eqiI->eqiJv", _P, F, optimize=True).reshape(ne, nq, 9, 6)
+        A = FP @ (voigt_tangent(CC) @ np.swapaxes(FP, -1, -2))
     ST = np.swapaxes(S, -1, -2)
-    for i in range(3):
-        A[:, :, i, :, i, :] += ST
-    A *= w[:, :, None, None, None, None]
-    return A.reshape(*F.shape[:2], 9, 9)
+    A6 = A.reshape(ne, nq, 3, 3, 3, 3)
+    for i in range(3):                                                   # geometric: δ_ik S_LJ
+        A6[:, :, i, :, i, :] += ST
+    A *= w[:, :, None, None]
+    return A
 
 
 def element_tangent_apply(dNT: np.ndarray, A: np.ndarray, ue: np.ndarray) -> np.ndarray:

@@ -258,26 +258,21 @@ class Problem:
                 keep[k] = (F, *(np.concatenate([p[i] for p in parts]) for i in range(4)))
         return re, Ke
 
-    def linearise(self, u: np.ndarray, dt: float | None = None, keep: dict | None = None):
-        """Element forces ``(n_el, 81)`` [N] and, per material, ``(F, S, CC)`` at ``u``: what the
-        element tangents are made of (``F`` ``(n_el_k, n_q, 3, 3)``, PK2 stress ``S`` [Pa] and
-        its tangent ``CC`` ``(n_el_k, n_q, 3, 3, 3, 3)`` [Pa] as :meth:`evaluate` uses them),
-        without assembling the ``(81, 81)`` matrices (see
-        :func:`skinkit.fem.assembly.element_tangent_apply`). ``dt`` and ``keep`` as in
-        :meth:`evaluate`."""
-        g = self.geom
-        re = np.empty((self.mesh.n_elements, g.edofs.shape[1]))
+    def linearise(self, u: np.ndarray, dt: float | None = None, keep: dict | None = None) -> list:
+        """Per material, ``(F, S, CC)`` at ``u``: what the element tangents are made of
+        (deformation gradients ``F`` ``(n_el_k, n_q, 3, 3)``, PK2 stress ``S`` [Pa] and its
+        tangent ``CC`` ``(n_el_k, n_q, 3, 3, 3, 3)`` [Pa] as :meth:`evaluate` uses them), without
+        the ``(81, 81)`` element matrices (see :func:`skinkit.fem.assembly.element_tangent_apply`).
+        ``dt`` and ``keep`` as in :meth:`evaluate`."""
         out = []
         for k in range(len(self.materials)):
-            el = self.slices[k]
             F = self._F(u, k)
             parts: list | None = [] if keep is not None else None
             S, CC = self.material_response(k, F, True, dt, None, parts)
-            re[el] = element_residual(g.dN[el], g.w[el], F, S, g.dNT[el])
             if keep is not None:
                 keep[k] = (F, *parts[0])
             out.append((F, S, CC))
-        return re, out
+        return out
 
     def _F(self, u: np.ndarray, k: int) -> np.ndarray:
         """Deformation gradients ``(n_el_k, n_q, 3, 3)`` of material ``k``'s elements."""

@@ -175,6 +175,8 @@ class HistorySensitivity:
         self._gather = sp.csr_matrix((np.ones(p_.rtake.size), (p_.rdest, p_.rtake)),
                                      shape=(p_.n, g.edofs.size))
         self._springs = dm.spring_matrix()
+        #: material -> parameter index -> ∂Sₑ/∂p at fixed deformation, of the current step
+        self._explicit: dict[int, dict[int, np.ndarray]] = {}
         # the elements holding the indenter's nodes: the only ones its force derivative reads
         self._tip_elements = np.zeros(0, dtype=int)
         if dm.rigid_dofs is not None:
@@ -237,7 +239,7 @@ class HistorySensitivity:
         viscous = dt is not None and prob.viscous
         states: dict = {}
         # the tangent's ingredients at u (law stress and tangent), not its element matrices
-        _, lin = prob.linearise(u, dt if viscous else None, keep=states)
+        lin = prob.linearise(u, dt if viscous else None, keep=states)
         lin = [(F, S, first_elasticity(F, S, CC, g.w[sl]), CC)
                for (F, S, CC), sl in zip(lin, prob.slices, strict=True)]
         dre = self._pseudo_loads(states, dt, viscous)
@@ -287,8 +289,11 @@ class HistorySensitivity:
                 h_new = _b5(e) * st.h + _b5(beta) * (Se - st.Se)[None]
                 S_nat = (1 - gg.sum()) * Se + np.tensordot(gg, h_new, axes=(0, 0))
             js, dSs = [], []
+            self._explicit[k] = {}
             for j, p in enumerate(self.pars):
                 dSe_p = self._explicit_dSe(k, p, Ce, C, Se, CCe, law_S)
+                if dSe_p is not None:   # the history update reads it again
+                    self._explicit[k][j] = dSe_p
                 if p.kind == "prony" and p.k == k and pr is None:
                     dSe_p = None   # no history: the instantaneous response has no Prony terms
                 if pr is None:
@@ -409,7 +414,7 @@ class HistorySensitivity:
         return dup
 
     def _update_history(self, u: np.ndarray, du: np.ndarray, dt: float, cache: dict) -> None:
-        """Carry the total dSₑ/dp and dh/dp of this step to the next."""
+        """Carry the total dSₑ/dp and dh/dp of this step to the next (every parameter at once)."""
         prob, g = self.solver.problem, self.solver.problem.geom
         npar = len(self.pars)
         for k, m in enumerate(prob.materials):
@@ -418,30 +423,34 @@ class HistorySensitivity:
                 continue
             sl = prob.slices[k]
             F, C, Ce, Se, CCe = cache[k]
-            need_law_S = any(p.kind == "field" for p in self.pars) and prob.fields_of(k)
-            law_S = lawkit.response(m.law, Ce, m.params, False)[0] if need_law_S else None
+            ne, nq = CCe.shape[:2]
             gg, tau = pr
             e, beta, _ = viscoelastic.step_factors(gg, tau, dt)
             st = prob.state[k]
-            ue = du[g.edofs[sl]].reshape(-1, 3, g.dN.shape[2], npar)
-            dF = np.einsum("eiaj,eqaJ->jeqiJ", ue, g.dN[sl])
-            dC = np.swapaxes(dF, -1, -2) @ F + np.swapaxes(F, -1, -2) @ dF
+            # dC = δFᵀF + FᵀδF of every parameter's δu, the parameters riding inside each 3 x 3p
+            # block so that each product is one matmul per quadrature point
+            ue = du[g.edofs[sl]].reshape(ne, 3, g.dN.shape[2], npar)
+            with single_threaded_blas():
+                dF = np.einsum("eiaj,eqJa->eqijJ", ue, g.dNT[sl], optimize=True)
+                G = np.matmul(np.swapaxes(F, -1, -2), dF.reshape(ne, nq, 3, 3 * npar))
+            G = G.reshape(ne, nq, 3, npar, 3)                                              # FᵀδF (I, p, J)
+            dC = G.transpose(0, 1, 2, 4, 3) + G.transpose(0, 1, 4, 2, 3)                 # (e, q, I, J, p)
             if m.F0 is not None:
-                dC = np.swapaxes(m.F0, -1, -2) @ dC @ m.F0
+                dCp = np.moveaxis(dC, -1, 0)
+                dC = np.moveaxis(np.swapaxes(m.F0, -1, -2) @ dCp @ m.F0, 0, -1)
             # every parameter's ½ CCe : dC at once, as one batched (9 x 9) @ (9 x npar) product
-            ne, nq = CCe.shape[:2]
-            dSe_all = 0.5 * (CCe.reshape(ne, nq, 9, 9) @ np.moveaxis(dC, 0, -1).reshape(ne, nq, 9, npar))
-            dSe_all = np.moveaxis(dSe_all.reshape(ne, nq, 3, 3, npar), -1, 0)
-            for j, p in enumerate(self.pars):
-                dSe_tot = dSe_all[j]
-                if p.kind != "prony":
-                    ex = self._explicit_dSe(k, p, Ce, C, Se, CCe, law_S)
-                    if ex is not None:
-                        dSe_tot = dSe_tot + ex
-                _, _, de, dbeta = self._partials(k, p, dt, len(gg))
-                self.dh[k][j] = (_b5(e) * self.dh[k][j] + _b5(beta) * (dSe_tot - self.dSe[k][j])[None]
-                                 + _b5(de) * st.h + _b5(dbeta) * (Se - st.Se)[None])
-                self.dSe[k][j] = dSe_tot
+            with single_threaded_blas():
+                dSe = 0.5 * (CCe.reshape(ne, nq, 9, 9) @ np.ascontiguousarray(dC).reshape(ne, nq, 9, npar))
+            dSe = np.moveaxis(dSe.reshape(ne, nq, 3, 3, npar), -1, 0)                   # (p, e, q, 3, 3)
+            for j, ex in self._explicit.get(k, {}).items():
+                if self.pars[j].kind != "prony":
+                    dSe[j] += ex
+            parts = [self._partials(k, p, dt, len(gg)) for p in self.pars]
+            de = np.array([q[2] for q in parts])[:, :, None, None, None, None]         # (p, n, 1, 1, 1, 1)
+            dbeta = np.array([q[3] for q in parts])[:, :, None, None, None, None]
+            self.dh[k] = (_b5(e)[None] * self.dh[k] + _b5(beta)[None] * (dSe - self.dSe[k])[:, None]
+                          + de * st.h[None] + dbeta * (Se - st.Se)[None, None])
+            self.dSe[k] = dSe
 
 
 def _full(edofs: np.ndarray, fe: np.ndarray, n_dof: int) -> np.ndarray:
