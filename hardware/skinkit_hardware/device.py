@@ -81,6 +81,60 @@ class Event:
     index: int = 0
 
 
+class _TickContext:
+    """What the control tick reads, hoisted once per :meth:`Device.advance` call into one
+    slotted object: the parameters, limits and derived factors, and the device's state lists.
+
+    The state lists are the ones current when the call starts, as they were when the tick was
+    one loop over locals: a :meth:`Device.hold` at the end of a run binds a fresh zero ``integ``
+    on the device, and the rest of that call's ticks still integrate into the old list (the
+    next call starts from zero). ``tests/hardware/test_device_regression.py`` pins this.
+    """
+
+    __slots__ = (
+        "dt", "m", "b", "k", "mg", "rest", "kf0", "droop", "mid", "half", "imax", "fpk",
+        "kp", "ki", "kd", "alpha", "th_a", "cont", "cont2", "t_lo", "t_hi", "stop_lo", "stop_hi",
+        "a_lo", "nlev", "lsb", "ilsb", "fres", "tres", "plen", "tip_force", "tip_lim2",
+        "stuck_ticks", "sig_q", "sig_i", "skin", "so", "inj",
+        "x", "v", "integ", "xf", "th", "last_raw", "same_raw",
+    )  # fmt: skip
+
+    def __init__(self, dev: Device) -> None:
+        p, lim = dev.params, dev.limits
+        self.dt = dt = p.dt
+        self.m, self.b, self.k = p.mass_kg, p.damping_Ns_per_m, p.stiffness_N_per_m
+        self.mg = p.mass_kg * p.gravity_m_s2
+        self.rest = p.spring_rest_m
+        self.kf0, self.droop = p.force_constant_N_per_A, p.force_constant_droop
+        s_lo, s_hi = p.stroke_m
+        self.mid, self.half = 0.5 * (s_lo + s_hi), 0.5 * (s_hi - s_lo)
+        self.imax = p.peak_current_A
+        self.fpk = lim.peak_force_N
+        self.kp, self.ki, self.kd = p.kp_N_per_m, p.ki_N_per_m_s, p.kd_Ns_per_m
+        self.alpha = 1.0 - math.exp(-2 * math.pi * p.derivative_filter_hz * dt)
+        self.th_a = dt / p.thermal_time_constant_s
+        self.cont = lim.continuous_force_N
+        self.cont2 = lim.continuous_force_N**2
+        self.t_lo, self.t_hi = lim.travel_m
+        self.stop_lo, self.stop_hi = self.t_lo - 5e-4, self.t_hi + 5e-4
+        a_lo, a_hi = p.adc_span_m
+        self.a_lo = a_lo
+        self.nlev = (1 << p.adc_bits) - 1
+        self.lsb = (a_hi - a_lo) / self.nlev
+        self.ilsb = p.current_lsb_A
+        self.fres, self.tres = p.ft_force_resolution_N, p.ft_torque_resolution_Nm
+        self.plen = p.probe_length_m
+        self.tip_force = lim.tip_force_N
+        self.tip_lim2 = lim.tip_force_N**2
+        self.stuck_ticks = lim.stuck_ticks
+        self.sig_q, self.sig_i = p.pot_sigma_m, p.current_noise_A
+        self.skin = dev.skin
+        self.so = tuple(dev.skin_origin.tolist())
+        self.inj = dev.injection
+        self.x, self.v, self.integ, self.xf, self.th = dev.x, dev.v, dev.integ, dev.xf, dev.th
+        self.last_raw, self.same_raw = dev.last_raw, dev.same_raw
+
+
 @dataclass
 class Device:
     """Firmware + physics of one simulated robot. See the module docstring.
@@ -351,213 +405,259 @@ class Device:
         self._trip(F.Fault(F.WATCHDOG, value=silent, limit=wd, time_s=self._run_time()))
 
     # -- the control loop -------------------------------------------------------------
-    # C901: the per-tick control loop (physics, PID, safety trips, streaming) runs in plain Python
-    # at 10 kHz with every parameter hoisted into locals; a call per step per tick would cost more
-    # than the arithmetic. The tests of test_hw_sim.py guard its behaviour.
-    def advance(self, n_ticks: int) -> None:  # noqa: C901
+    # One control period is a fixed sequence of named steps. Their float operations and order
+    # are pinned by tests/hardware/test_device_regression.py (a recorded run, bit for bit): do
+    # not reorder a sum. The steps read the per-run constants and the state lists from one
+    # slotted :class:`_TickContext` built per ``advance`` call, the rest from ``self``; the
+    # nine calls per tick cost about 5 % of the tick's time (measured against the single loop).
+    def advance(self, n_ticks: int) -> None:
         """Run ``n_ticks`` control periods (physics, control, safety, streaming)."""
-        p, lim = self.params, self.limits
         self.check_watchdog()
-        dt = p.dt
-        m, b, k, g = p.mass_kg, p.damping_Ns_per_m, p.stiffness_N_per_m, p.gravity_m_s2
-        rest = p.spring_rest_m
-        kf0, droop = p.force_constant_N_per_A, p.force_constant_droop
-        s_lo, s_hi = p.stroke_m
-        mid, half = 0.5 * (s_lo + s_hi), 0.5 * (s_hi - s_lo)
-        imax = p.peak_current_A
-        fpk = lim.peak_force_N
-        kp, ki, kd = p.kp_N_per_m, p.ki_N_per_m_s, p.kd_Ns_per_m
-        alpha = 1.0 - math.exp(-2 * math.pi * p.derivative_filter_hz * dt)
-        th_a = dt / p.thermal_time_constant_s
-        cont2 = lim.continuous_force_N**2
-        t_lo, t_hi = lim.travel_m
-        stop_lo, stop_hi = t_lo - 5e-4, t_hi + 5e-4
-        a_lo, a_hi = p.adc_span_m
-        nlev = (1 << p.adc_bits) - 1
-        lsb = (a_hi - a_lo) / nlev
-        ilsb = p.current_lsb_A
-        fres, tres = p.ft_force_resolution_N, p.ft_torque_resolution_Nm
-        plen = p.probe_length_m
-        tip_lim2 = lim.tip_force_N**2
+        c = _TickContext(self)
         noise = self.rng.standard_normal((n_ticks, 6)).tolist()
-        sig_q, sig_i = p.pot_sigma_m, p.current_noise_A
-        x, v, integ, xf, th = self.x, self.v, self.integ, self.xf, self.th
-        skin = self.skin
-        so = tuple(self.skin_origin.tolist())
-        inj = self.injection
         for n in range(n_ticks):
             if self.tick % 100 == 0:
                 self._refresh_kinematics()
-            j00, j01, j02, j10, j11, j12, j20, j21, j22 = self.jl
-            tr, qr = self.tip_ref, self.q_ref
             nz = noise[n]
-            dq0, dq1, dq2 = x[0] - qr[0], x[1] - qr[1], x[2] - qr[2]
-            u = (
-                tr[0] + j00 * dq0 + j01 * dq1 + j02 * dq2 - so[0],
-                tr[1] + j10 * dq0 + j11 * dq1 + j12 * dq2 - so[1],
-                tr[2] + j20 * dq0 + j21 * dq1 + j22 * dq2 - so[2],
-            )
-            vt = (
-                j00 * v[0] + j01 * v[1] + j02 * v[2],
-                j10 * v[0] + j11 * v[1] + j12 * v[2],
-                j20 * v[0] + j21 * v[1] + j22 * v[2],
-            )
-            fs = skin.reaction(u, vt, dt)
+            fs = self._skin_force(c)
             run_k = self.tick - self.run_tick0
-            # setpoint for this tick
-            mode = self.mode
-            force_mode = False
-            sp = self.setpoint
-            if mode == RUNNING:
-                prog = self.programme
-                pos = run_k * self.prog_rate * dt
-                i0 = int(pos)
-                if i0 >= prog.shape[0] - 1:
-                    row = prog[-1]
-                    if self.prog_mode == "force":
-                        self.setpoint = list(xf)
-                    else:
-                        self.setpoint = [row[0], row[1], row[2]]
-                    self._end_run()
-                    sp = self.setpoint
-                    mode = self.mode
-                else:
-                    fr = pos - i0
-                    r0, r1 = prog[i0], prog[i0 + 1]
-                    sp = [
-                        r0[0] + fr * (r1[0] - r0[0]),
-                        r0[1] + fr * (r1[1] - r0[1]),
-                        r0[2] + fr * (r1[2] - r0[2]),
-                    ]
-                    force_mode = self.prog_mode == "force"
-            elif mode == HOMING:
-                sp = self._homing_setpoint(sp)
-            flags = 0
-            cur = [0.0, 0.0, 0.0]
-            meas = [0.0, 0.0, 0.0]
-            for i in range(3):
-                # measure
-                raw = int(round((x[i] + sig_q * nz[i] - a_lo) / lsb))
-                raw = 0 if raw < 0 else (nlev if raw > nlev else raw)
-                if inj.stuck_motor == i + 1 and mode == RUNNING and run_k * dt >= inj.stuck_after_s:
-                    raw = self.last_raw[i]
-                if raw == self.last_raw[i]:
-                    self.same_raw[i] += 1
-                else:
-                    self.same_raw[i] = 0
-                    self.last_raw[i] = raw
-                qm = a_lo + raw * lsb
-                meas[i] = qm
-                xf_prev = xf[i]
-                xf[i] += alpha * (qm - xf[i])
-                # control
-                if self.energised:
-                    kfm = kf0 * (1.0 - droop * min(((qm - mid) / half) ** 2, 1.5))
-                    if force_mode:
-                        fcmd = sp[i]
-                    else:
-                        e = sp[i] - qm
-                        fcmd = kp * e + ki * integ[i] - kd * (xf[i] - xf_prev) / dt + m * g
-                        if abs(fcmd) < fpk:  # anti-windup: integrate only when not saturated
-                            integ[i] += e * dt
-                    if fcmd > fpk:
-                        fcmd, flags = fpk, flags | FLAG_SATURATED
-                    elif fcmd < -fpk:
-                        fcmd, flags = -fpk, flags | FLAG_SATURATED
-                    c = fcmd / kfm
-                    if c > imax:
-                        c, flags = imax, flags | FLAG_SATURATED
-                    elif c < -imax:
-                        c, flags = -imax, flags | FLAG_SATURATED
-                    cur[i] = c
-            # physics
-            jt = (
-                j00 * fs[0] + j10 * fs[1] + j20 * fs[2],
-                j01 * fs[0] + j11 * fs[1] + j21 * fs[2],
-                j02 * fs[0] + j12 * fs[1] + j22 * fs[2],
-            )
-            for i in range(3):
-                kf = kf0 * (1.0 - droop * min(((x[i] - mid) / half) ** 2, 1.5))
-                fm = kf * cur[i]
-                th[i] += (fm * fm - th[i]) * th_a
-                acc = (fm - b * v[i] - k * (x[i] - rest) - m * g + jt[i]) / m
-                v[i] += acc * dt
-                x[i] += v[i] * dt
-                if x[i] < stop_lo:
-                    x[i], v[i] = stop_lo, 0.0
-                elif x[i] > stop_hi:
-                    x[i], v[i] = stop_hi, 0.0
-            # sensors at the tip: the probe pushes the skin with -fs
-            fx = round(-fs[0] / fres) * fres
-            fy = round(-fs[1] / fres) * fres
-            fz = round(-fs[2] / fres) * fres
-            self.last_fz = fz
-            if fz >= self.home_contact:
-                flags |= FLAG_CONTACT
+            mode, sp, force_mode = self._setpoint(run_k, c.dt)
+            meas, xf_prev = self._measure(c, nz, mode, run_k)
+            cur, flags = self._control(c, meas, xf_prev, sp, force_mode)
+            self._physics(c, fs, cur)
+            fx, fy, fz, flags = self._tip_sensors(c, fs, flags)
             self.tick += 1
-            # safety, every tick
-            if self.energised:
-                tnow = (self.tick - 1 - self.run_tick0) * dt if mode == RUNNING else (self.tick - 1) * dt
-                for i in range(3):
-                    if self.same_raw[i] >= lim.stuck_ticks:
-                        self._trip(F.Fault(F.STUCK_SENSOR, i + 1, meas[i], time_s=tnow))
-                        break
-                    if meas[i] < t_lo or meas[i] > t_hi:
-                        self._trip(F.Fault(F.TRAVEL, i + 1, meas[i], t_lo if meas[i] < t_lo else t_hi, tnow))
-                        break
-                    if th[i] > cont2:
-                        self._trip(
-                            F.Fault(F.CONTINUOUS_FORCE, i + 1, math.sqrt(th[i]), lim.continuous_force_N, tnow)
-                        )
-                        break
-                else:
-                    if fx * fx + fy * fy + fz * fz > tip_lim2:
-                        self._trip(
-                            F.Fault(
-                                F.TIP_FORCE, 0, math.sqrt(fx * fx + fy * fy + fz * fz), lim.tip_force_N, tnow
-                            )
-                        )
-                if not self.energised:
-                    self.off_tick = self.tick  # the next tick computes zero current
-            elif self.off_tick < 0 and self.fault_tick >= 0:
-                self.off_tick = self.tick
-            # stream
+            self._safety(c, meas, fx, fy, fz, mode)
             self.flags_acc |= flags
             if self.streaming and (self.tick - 1 - self.run_tick0) % self.decimation == 0:
-                fl = self.flags_acc
-                if self.trigger_period and mode == RUNNING and run_k % self.trigger_period == 0:
-                    fl |= FLAG_CAMERA_TRIGGER
-                if self.mode == FAULTED:
-                    fl |= FLAG_ESTOP if self.fault and self.fault.code == F.ESTOP else FLAG_LIMIT
-                ci = [round((cur[i] + sig_i * nz[3 + i]) / ilsb) * ilsb for i in range(3)]
-                self.rows.append(
-                    (
-                        self.sample_index,
-                        self.tick - 1 - self.run_tick0,
-                        meas[0],
-                        meas[1],
-                        meas[2],
-                        ci[0],
-                        ci[1],
-                        ci[2],
-                        fx,
-                        fy,
-                        fz,
-                        round(-plen * fy / tres) * tres,
-                        round(plen * fx / tres) * tres,
-                        0.0,
-                        fl,
-                    )
-                )
-                self.sample_index += 1
-                self.generated += 1
-                self.flags_acc = 0
+                self._stream(c, nz, cur, meas, fx, fy, fz, mode, run_k)
             if self.post_fault_left > 0:
-                self.post_fault_left -= 1
-                if self.post_fault_left == 0:
-                    self.streaming = False
-                    self.events.append(Event("fault", fault=self.fault, generated=self.generated))
-                    self.post_fault_left = -1
+                self._count_down_post_fault()
+
+    def _skin_force(self, c: _TickContext) -> tuple[float, float, float]:
+        """Kinematics: tip displacement from the skin origin and tip velocity through the
+        linearised Jacobian, and the skin's reaction on the probe [N]."""
+        j00, j01, j02, j10, j11, j12, j20, j21, j22 = self.jl
+        tr, qr, so = self.tip_ref, self.q_ref, c.so
+        x, v = c.x, c.v
+        dq0, dq1, dq2 = x[0] - qr[0], x[1] - qr[1], x[2] - qr[2]
+        u = (
+            tr[0] + j00 * dq0 + j01 * dq1 + j02 * dq2 - so[0],
+            tr[1] + j10 * dq0 + j11 * dq1 + j12 * dq2 - so[1],
+            tr[2] + j20 * dq0 + j21 * dq1 + j22 * dq2 - so[2],
+        )
+        vt = (
+            j00 * v[0] + j01 * v[1] + j02 * v[2],
+            j10 * v[0] + j11 * v[1] + j12 * v[2],
+            j20 * v[0] + j21 * v[1] + j22 * v[2],
+        )
+        return c.skin.reaction(u, vt, c.dt)
+
+    def _setpoint(self, run_k: int, dt: float) -> tuple[str, list[float], bool]:
+        """This tick's ``(mode, setpoint, force_mode)``: the programme interpolated at run tick
+        ``run_k`` (ending the run after its last setpoint), the homing ramp, or the held setpoint."""
+        mode = self.mode
+        if mode == RUNNING:
+            prog = self.programme
+            pos = run_k * self.prog_rate * dt
+            i0 = int(pos)
+            if i0 < prog.shape[0] - 1:
+                fr = pos - i0
+                r0, r1 = prog[i0], prog[i0 + 1]
+                sp = [
+                    r0[0] + fr * (r1[0] - r0[0]),
+                    r0[1] + fr * (r1[1] - r0[1]),
+                    r0[2] + fr * (r1[2] - r0[2]),
+                ]
+                return mode, sp, self.prog_mode == "force"
+            row = prog[-1]
+            self.setpoint = list(self.xf) if self.prog_mode == "force" else [row[0], row[1], row[2]]
+            self._end_run()
+            return self.mode, self.setpoint, False
+        if mode == HOMING:
+            return mode, self._homing_setpoint(self.setpoint), False
+        return mode, self.setpoint, False
+
+    def _measure(
+        self, c: _TickContext, nz: list[float], mode: str, run_k: int
+    ) -> tuple[list[float], list[float]]:
+        """Per axis: the position ADC reading (noise, quantisation, an injected stuck sensor), its
+        repeat count, and the derivative filter. Returns measured positions [m] and the filter's
+        previous values."""
+        x, xf, last_raw, same_raw = c.x, c.xf, c.last_raw, c.same_raw
+        sig_q, a_lo, lsb, nlev, alpha = c.sig_q, c.a_lo, c.lsb, c.nlev, c.alpha
+        inj = c.inj
+        stuck = inj.stuck_motor if mode == RUNNING and run_k * c.dt >= inj.stuck_after_s else 0
+        meas = [0.0, 0.0, 0.0]
+        xf_prev = [0.0, 0.0, 0.0]
+        for i in range(3):
+            raw = int(round((x[i] + sig_q * nz[i] - a_lo) / lsb))
+            raw = 0 if raw < 0 else (nlev if raw > nlev else raw)
+            if stuck == i + 1:
+                raw = last_raw[i]
+            if raw == last_raw[i]:
+                same_raw[i] += 1
+            else:
+                same_raw[i] = 0
+                last_raw[i] = raw
+            qm = a_lo + raw * lsb
+            meas[i] = qm
+            xf_prev[i] = xf[i]
+            xf[i] += alpha * (qm - xf[i])
+        return meas, xf_prev
+
+    def _control(
+        self, c: _TickContext, meas: list[float], xf_prev: list[float], sp: list[float], force_mode: bool
+    ) -> tuple[list[float], int]:
+        """Per axis: the motor force (PID with anti-windup, or the force programme), saturated at
+        the peak force and current. Returns currents [A] (zero when de-energised) and flags."""
+        cur = [0.0, 0.0, 0.0]
+        flags = 0
+        if not self.energised:
+            return cur, flags
+        xf, integ = c.xf, c.integ
+        kf0, droop, mid, half, imax, fpk = c.kf0, c.droop, c.mid, c.half, c.imax, c.fpk
+        kp, ki, kd, mg, dt = c.kp, c.ki, c.kd, c.mg, c.dt
+        for i in range(3):
+            qm = meas[i]
+            kfm = kf0 * (1.0 - droop * min(((qm - mid) / half) ** 2, 1.5))
+            if force_mode:
+                fcmd = sp[i]
+            else:
+                e = sp[i] - qm
+                fcmd = kp * e + ki * integ[i] - kd * (xf[i] - xf_prev[i]) / dt + mg
+                if abs(fcmd) < fpk:  # anti-windup: integrate only when not saturated
+                    integ[i] += e * dt
+            if fcmd > fpk:
+                fcmd, flags = fpk, flags | FLAG_SATURATED
+            elif fcmd < -fpk:
+                fcmd, flags = -fpk, flags | FLAG_SATURATED
+            ci = fcmd / kfm
+            if ci > imax:
+                ci, flags = imax, flags | FLAG_SATURATED
+            elif ci < -imax:
+                ci, flags = -imax, flags | FLAG_SATURATED
+            cur[i] = ci
+        return cur, flags
+
+    def _physics(self, c: _TickContext, fs: tuple[float, float, float], cur: list[float]) -> None:
+        """Per arm: voice-coil force, coil heating, one semi-implicit Euler step with the skin's
+        force through ``J^T``, and the hard stops."""
+        j00, j01, j02, j10, j11, j12, j20, j21, j22 = self.jl
+        jt = (
+            j00 * fs[0] + j10 * fs[1] + j20 * fs[2],
+            j01 * fs[0] + j11 * fs[1] + j21 * fs[2],
+            j02 * fs[0] + j12 * fs[1] + j22 * fs[2],
+        )
+        x, v, th = c.x, c.v, c.th
+        kf0, droop, mid, half, th_a = c.kf0, c.droop, c.mid, c.half, c.th_a
+        m, b, k, rest, mg, dt = c.m, c.b, c.k, c.rest, c.mg, c.dt
+        stop_lo, stop_hi = c.stop_lo, c.stop_hi
+        for i in range(3):
+            kf = kf0 * (1.0 - droop * min(((x[i] - mid) / half) ** 2, 1.5))
+            fm = kf * cur[i]
+            th[i] += (fm * fm - th[i]) * th_a
+            acc = (fm - b * v[i] - k * (x[i] - rest) - mg + jt[i]) / m
+            v[i] += acc * dt
+            x[i] += v[i] * dt
+            if x[i] < stop_lo:
+                x[i], v[i] = stop_lo, 0.0
+            elif x[i] > stop_hi:
+                x[i], v[i] = stop_hi, 0.0
+
+    def _tip_sensors(
+        self, c: _TickContext, fs: tuple[float, float, float], flags: int
+    ) -> tuple[float, float, float, int]:
+        """The F/T reading of the force the probe applies to the skin (``-fs``), quantised [N],
+        and the contact flag added to ``flags``."""
+        fres = c.fres
+        fx = round(-fs[0] / fres) * fres
+        fy = round(-fs[1] / fres) * fres
+        fz = round(-fs[2] / fres) * fres
+        self.last_fz = fz
+        if fz >= self.home_contact:
+            flags |= FLAG_CONTACT
+        return fx, fy, fz, flags
+
+    def _safety(self, c: _TickContext, meas: list[float], fx: float, fy: float, fz: float, mode: str) -> None:
+        """Every tick: trip on the first limit broken (stuck sensor, travel, continuous force per
+        motor, then tip force) and note the tick from which the current is zero."""
+        if not self.energised:
+            if self.off_tick < 0 and self.fault_tick >= 0:
+                self.off_tick = self.tick
+            return
+        dt = c.dt
+        tnow = (self.tick - 1 - self.run_tick0) * dt if mode == RUNNING else (self.tick - 1) * dt
+        fault = self._motor_fault(c, meas, tnow)
+        if fault is None and fx * fx + fy * fy + fz * fz > c.tip_lim2:
+            fault = F.Fault(F.TIP_FORCE, 0, math.sqrt(fx * fx + fy * fy + fz * fz), c.tip_force, tnow)
+        if fault is not None:
+            self._trip(fault)
+        if not self.energised:
+            self.off_tick = self.tick  # the next tick computes zero current
+
+    def _motor_fault(self, c: _TickContext, meas: list[float], tnow: float) -> F.Fault | None:
+        """The first per-motor limit broken at device time ``tnow`` [s], or None."""
+        t_lo, t_hi, th, same_raw = c.t_lo, c.t_hi, c.th, c.same_raw
+        for i in range(3):
+            if same_raw[i] >= c.stuck_ticks:
+                return F.Fault(F.STUCK_SENSOR, i + 1, meas[i], time_s=tnow)
+            if meas[i] < t_lo or meas[i] > t_hi:
+                return F.Fault(F.TRAVEL, i + 1, meas[i], t_lo if meas[i] < t_lo else t_hi, tnow)
+            if th[i] > c.cont2:
+                return F.Fault(F.CONTINUOUS_FORCE, i + 1, math.sqrt(th[i]), c.cont, tnow)
+        return None
+
+    def _stream(
+        self,
+        c: _TickContext,
+        nz: list[float],
+        cur: list[float],
+        meas: list[float],
+        fx: float,
+        fy: float,
+        fz: float,
+        mode: str,
+        run_k: int,
+    ) -> None:
+        """Append one sample row (see :data:`COLUMNS`) with the flags OR-ed since the last one."""
+        fl = self.flags_acc
+        if self.trigger_period and mode == RUNNING and run_k % self.trigger_period == 0:
+            fl |= FLAG_CAMERA_TRIGGER
+        if self.mode == FAULTED:
+            fl |= FLAG_ESTOP if self.fault and self.fault.code == F.ESTOP else FLAG_LIMIT
+        sig_i, ilsb, plen, tres = c.sig_i, c.ilsb, c.plen, c.tres
+        ci = [round((cur[i] + sig_i * nz[3 + i]) / ilsb) * ilsb for i in range(3)]
+        self.rows.append(
+            (
+                self.sample_index,
+                self.tick - 1 - self.run_tick0,
+                meas[0],
+                meas[1],
+                meas[2],
+                ci[0],
+                ci[1],
+                ci[2],
+                fx,
+                fy,
+                fz,
+                round(-plen * fy / tres) * tres,
+                round(plen * fx / tres) * tres,
+                0.0,
+                fl,
+            )
+        )
+        self.sample_index += 1
+        self.generated += 1
+        self.flags_acc = 0
+
+    def _count_down_post_fault(self) -> None:
+        """After a trip while streaming: stream on for ``Limits.post_fault_s``, then report the fault."""
+        self.post_fault_left -= 1
+        if self.post_fault_left == 0:
+            self.streaming = False
+            self.events.append(Event("fault", fault=self.fault, generated=self.generated))
+            self.post_fault_left = -1
 
     def _homing_setpoint(self, sp: list[float]) -> list[float]:
         dt = self.params.dt
