@@ -85,10 +85,10 @@ class _TickContext:
     """What the control tick reads, hoisted once per :meth:`Device.advance` call into one
     slotted object: the parameters, limits and derived factors, and the device's state lists.
 
-    The state lists are the ones current when the call starts, as they were when the tick was
-    one loop over locals: a :meth:`Device.hold` at the end of a run binds a fresh zero ``integ``
-    on the device, and the rest of that call's ticks still integrate into the old list (the
-    next call starts from zero). ``tests/hardware/test_device_regression.py`` pins this.
+    The state lists are the device's own (shared, not copied): :meth:`Device.hold` at the end
+    of a run zeroes ``integ`` in place, so the rest of that call's ticks see the reset (before,
+    they integrated into a stale list until the call ended: when the reset took effect depended
+    on the host's polling block size). ``tests/hardware/test_device_regression.py`` pins this.
     """
 
     __slots__ = (
@@ -238,7 +238,9 @@ class Device:
         if self.mode == FAULTED:
             return
         self.setpoint = list(self.xf)
-        self.integ = [0.0, 0.0, 0.0]
+        # in place: a run ending inside an advance() call resets the integrator that call's
+        # remaining ticks use, so the reset does not depend on the host's polling block size
+        self.integ[:] = (0.0, 0.0, 0.0)
         self.energised = True
         self.mode = HOLD
 
