@@ -167,20 +167,21 @@ def _element_tangent(dN, w, F, S, CC, dNT, out):
 def first_elasticity(F: np.ndarray, S: np.ndarray, CC: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``(n_el, n_q, 9, 9)`` weighted tangent ``w ∂P/∂F`` of the first Piola stress ``P = F S``.
 
-    ``A[iJ, kL] = w (Σ F_iI CC_IJKL F_kK + δ_ik S_LJ)`` with ``CC`` taken minor-symmetric
-    through its Voigt form, exactly as :func:`element_tangent` sees it (``Bᵀ D B`` plus the
-    geometric part), so that ``δP = A δF`` reproduces that operator. ``F``, ``S`` ``(n_el, n_q,
-    3, 3)``, ``CC`` ``(n_el, n_q, 3, 3, 3, 3)`` [Pa], ``w`` ``(n_el, n_q)`` [m³].
+    ``A[(J, i), (L, k)] = w (Σ F_iI CC_IJKL F_kK + δ_ik S_LJ)``, rows and columns ordered
+    (material index, spatial index) — the order in which ``∇N`` gives ``δF`` — with ``CC`` taken
+    minor-symmetric through its Voigt form, exactly as :func:`element_tangent` sees it
+    (``Bᵀ D B`` plus the geometric part), so that ``δP = A δF`` reproduces that operator.
+    ``F``, ``S`` ``(n_el, n_q, 3, 3)``, ``CC`` ``(n_el, n_q, 3, 3, 3, 3)`` [Pa], ``w`` ``(n_el, n_q)`` [m³].
     """
     ne, nq = F.shape[:2]
     # δE (Voigt) = (F P)ᵀ : δF and F δS = (F P) δS (Voigt): the material part is (F P) D (F P)ᵀ
     with single_threaded_blas():
-        FP = np.einsum("vIJ,eqiI->eqiJv", _P, F, optimize=True).reshape(ne, nq, 9, 6)
+        FP = np.einsum("vIJ,eqiI->eqJiv", _P, F, optimize=True).reshape(ne, nq, 9, 6)
         A = FP @ (voigt_tangent(CC) @ np.swapaxes(FP, -1, -2))
     ST = np.swapaxes(S, -1, -2)
     A6 = A.reshape(ne, nq, 3, 3, 3, 3)
     for i in range(3):                                                   # geometric: δ_ik S_LJ
-        A6[:, :, i, :, i, :] += ST
+        A6[:, :, :, i, :, i] += ST
     A *= w[:, :, None, None]
     return A
 
@@ -190,17 +191,19 @@ def element_tangent_apply(dNT: np.ndarray, A: np.ndarray, ue: np.ndarray) -> np.
     ``ue`` ``(n_el, 81, m)``, without forming the ``(81, 81)`` matrices.
 
     ``δF = uₑ ∇N``, ``w δP = A δF`` with ``A`` from :func:`first_elasticity`, then
-    ``∫ δP : ∇N``: the operator of :func:`element_tangent`. ``dNT`` ``(n_el, n_q, 3, 27)``.
-    For a few ``m`` it costs a fraction of one element-tangent assembly.
+    ``∫ δP : ∇N``: the operator of :func:`element_tangent`, as three batched matrix products
+    per element. ``dNT`` ``(n_el, n_q, 3, 27)``. For a few ``m`` it costs a fraction of one
+    element-tangent assembly.
     """
     ne, nq, _, nb = dNT.shape
     m = ue.shape[2]
+    dN = dNT.reshape(ne, nq * 3, nb)                                             # ((q, J), a)
+    U = ue.reshape(ne, 3, nb, m).transpose(0, 2, 1, 3).reshape(ne, nb, 3 * m)    # (a, (i, m))
     with single_threaded_blas():
-        dF = np.einsum("eiam,eqJa->eqiJm", ue.reshape(ne, 3, nb, m), dNT, optimize=True)
-        dP = np.matmul(A, dF.reshape(ne, nq, 9, m))                                # (e, q, iJ, m)
-        P = dP.reshape(ne, nq, 3, 3, m).transpose(0, 4, 2, 1, 3).reshape(ne, m * 3, nq * 3)
-        out = np.matmul(P, dNT.reshape(ne, nq * 3, nb))                          # (e, m*3, 27)
-    return out.reshape(ne, m, 3 * nb).transpose(0, 2, 1)
+        dF = np.matmul(dN, U).reshape(ne, nq, 9, m)                              # (q, (J, i), m)
+        dP = np.matmul(A, dF)
+        out = np.matmul(np.swapaxes(dN, -1, -2), dP.reshape(ne, nq * 3, 3 * m))  # (a, (i, m))
+    return out.reshape(ne, nb, 3, m).transpose(0, 2, 1, 3).reshape(ne, 3 * nb, m)
 
 
 class SparsePattern:

