@@ -50,6 +50,7 @@ class Material:
     prestress: tuple[float, float, float] | None = None
 
     def prony(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The law's Prony series ``(g (N,), tau (N,) [s])`` at its parameters, or None for an elastic law."""
         f = getattr(self.law, "prony", None)
         return f(self.params) if callable(f) else None
 
@@ -195,10 +196,12 @@ class Problem:
 
     @property
     def n_dof(self) -> int:
+        """Number of degrees of freedom (3 per node)."""
         return self.mesh.n_dof
 
     @property
     def viscous(self) -> bool:
+        """True when some material carries a viscous (Prony) history."""
         return bool(self.state)
 
     def material_response(self, k: int, F: np.ndarray, with_tangent: bool, dt: float | None,
@@ -299,9 +302,11 @@ class Problem:
             st.Se = Se
 
     def save_state(self) -> dict[int, viscoelastic.PronyState]:
+        """A copy of the viscous history (material index -> Prony state), for :meth:`restore_state`."""
         return {k: s.copy() for k, s in self.state.items()}
 
     def restore_state(self, saved: dict[int, viscoelastic.PronyState]) -> None:
+        """Restore a history saved by :meth:`save_state` (copied: the saved one stays intact)."""
         self.state = {k: s.copy() for k, s in saved.items()}
 
     def stress_at(self, u: np.ndarray, dt: float | None = None) -> np.ndarray:

@@ -275,6 +275,8 @@ class NewtonSolver:
 
     def step_result(self, u: np.ndarray, t: float, its: int, norm: float,
                     dt: float | None) -> StepResult:
+        """The converged step at load time ``t`` [s]: Newton iterations, residual norm [N], the
+        rigid indenter's displacement [m] and force [N], the full residual ``(n_dof,)``."""
         if dt is None or not self.problem.viscous:
             re = self._last_re  # the residual of the converged iterate
         else:
