@@ -164,34 +164,43 @@ def verify(as_json: bool, cases: tuple[str, ...]) -> None:
 @click.option("--order", type=click.FloatRange(0, min_open=True), default=None,
               help="convergence order to assume (default: measured from the three finest levels; "
                    "1 with two levels)")
+@click.option("--factors", default=None, metavar="F1,F2,...",
+              help="refinement factors to solve instead of 1..LEVELS, increasing, whole numbers or "
+                   "fractions (e.g. 1/2,1: the file's mesh and one coarsened 2x, each count halved, "
+                   "for a mesh whose 2x refinement is too large to solve)")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bool, order: float | None,
-                as_json: bool) -> None:
+                factors: str | None, as_json: bool) -> None:
     """Mesh refinement study (thesis Figs 6-4, 7-9): final tip force against element count.
 
     With two levels or more, each level's estimated discretisation error (Richardson
     extrapolation: the extrapolated value and the observed order) is reported."""
+    from skinkit.fem.discretisation import parse_factor
     from skinkit.fem.discretisation import refined_spec as _refined
     from skinkit.fem.model import build_model, check_size, layer_table
     from skinkit.fem.run import solve_model
     path = _model_path(model_file)
+    facs = [parse_factor(1 + i) for i in range(levels)] if factors is None else \
+        [parse_factor(x) for x in factors.split(",")]
+    if any(not b > a for a, b in zip(facs, facs[1:], strict=False)):
+        raise SkinkitError(f"--factors {factors}: refinement factors must increase")
     out = check_result_dir(Path(out_dir) if out_dir else Path.cwd() / f"{path.stem}_convergence", "--out",
                            overwrite=overwrite, owned=CONVERGENCE_FILES, command="skinkit convergence")
     spec = _fe_spec(path)
     first = build_model(spec)  # validates every entry before any refinement
-    finest = _refined(spec, levels)
-    check_size(finest, layer_table(finest))  # refuse now, not after solving the coarse levels
+    specs = [_refined(spec, f) for f in facs]  # a count a fraction does not divide is refused now
+    check_size(specs[-1], layer_table(specs[-1]))  # refuse now, not after solving the coarse levels
     rows = []
-    for lev in range(1, levels + 1):
-        model = first if lev == 1 else build_model(_refined(spec, lev))
+    for lev, (fac, sp) in enumerate(zip(facs, specs, strict=True), start=1):
+        model = first if fac == 1 else build_model(sp)
         _, info = solve_model(model)
         last = info["steps"][-1]
         f = last["tip_force_N"]
         d = last["tip_displacement_m"]
-        rows.append({"level": lev, "dof": info["dof"], "elements": info["elements"],
+        rows.append({"level": lev, "factor": str(fac), "dof": info["dof"], "elements": info["elements"],
                      "tip_force_N": f, "tip_displacement_m": d, "wall_s": info["wall_s"]})
         if not as_json:
-            click.echo(f"level {lev}: {info['dof']} dofs, tip force {f} N, displacement {d} m, "
+            click.echo(f"level {lev} ({fac}x): {info['dof']} dofs, tip force {f} N, displacement {d} m, "
                        f"{info['wall_s']:.1f} s", err=True)
     key = "tip_force_N" if spec.get("indenter", {}).get("mode", "displacement") == "displacement" \
         else "tip_displacement_m"
@@ -210,7 +219,7 @@ def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bo
         return
     for r in rows:
         if r.get("relative_error") is not None:
-            click.echo(f"level {r['level']}: {r['dof']:,} unknowns, "
+            click.echo(f"level {r['level']} ({r['factor']}x): {r['dof']:,} unknowns, "
                        f"estimated error {_pct(r['relative_error'])}")
     if res["extrapolated"] is not None:
         how = "assumed" if res["order_assumed"] else "observed"
@@ -223,13 +232,15 @@ def _estimate_levels(rows: list[dict], key: str, order: float | None) -> dict:
     """Richardson over the levels' final ``key`` vectors: adds to each row ``estimated_error``
     (3,) and ``relative_error`` (its length over the extrapolated value's), and returns
     ``extrapolated``, ``observed_order``, ``order``, ``order_assumed`` (None with one level)."""
+    from fractions import Fraction
+
     from skinkit.fem.discretisation import ASSUMED_ORDER, richardson
     none = {"extrapolated": None, "observed_order": None, "order": None, "order_assumed": None}
     vals = [r[key] for r in rows]
     if len(rows) < 2 or any(v is None or None in v for v in vals):
         return none
     assumed = order is None and len(rows) < 3
-    est = richardson([np.array(v, float) for v in vals], [r["level"] for r in rows],
+    est = richardson([np.array(v, float) for v in vals], [float(Fraction(r["factor"])) for r in rows],
                      ASSUMED_ORDER if assumed else order)
     ext = np.asarray(est["extrapolated"])
     scale = float(np.linalg.norm(ext))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Mapping, Sequence
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,8 @@ COUNT_DEFAULTS: dict[str, dict[str, Any]] = {
     "block": {"n": [4, 4]},
     "twopad": {"n_pad": 2, "n_gap": 6, "n_outer": 3, "n_side": 3},
 }
+#: a block with ``fit_indenter = true`` counts as a disc does
+FITTED_BLOCK_COUNTS: dict[str, Any] = {"n_inner": 2, "n_ring": 2}
 #: element layers of a ``[[layers]]`` table without ``elements``
 LAYER_ELEMENTS_DEFAULT = 2
 
@@ -39,12 +42,34 @@ def _whole(v: Any, entry: str) -> int:
     return v
 
 
-def refined_spec(spec: Mapping[str, Any], factor: int) -> dict[str, Any]:
+def parse_factor(text: str | int | float | Fraction) -> Fraction:
+    """A refinement factor: a whole number (``2``) or a fraction (``"1/2"``, ``"3/2"``, 0.5), > 0."""
+    try:
+        f = Fraction(str(text).strip()) if not isinstance(text, Fraction) else text
+    except (ValueError, ZeroDivisionError):
+        raise ModelError("refinement factor",
+                         f"expected a number or a fraction like 1/2, got {text!r}") from None
+    if not f > 0:
+        raise ModelError("refinement factor", f"must be positive, got {text!r}")
+    return f
+
+
+def _scaled(v: Any, f: Fraction, entry: str) -> int:
+    n = _whole(v, entry) * f
+    if n.denominator != 1:
+        raise ModelError(entry, f"{v} elements cannot be scaled by {f} (not a whole number): "
+                         "coarsen only meshes whose counts the factor divides")
+    return int(n)
+
+
+def refined_spec(spec: Mapping[str, Any], factor: int | Fraction | str) -> dict[str, Any]:
     """A deep copy of a model description with every element count multiplied by ``factor``.
 
     Args:
         spec: a model description (the mapping :func:`skinkit.fem.model.read_model` returns).
-        factor: whole number >= 1; the element size ``h`` of the copy is ``h / factor``.
+        factor: a whole number >= 1, or a fraction (``Fraction(1, 2)``, ``"1/2"``: a coarsened
+            copy; every count times it must be a whole number >= 1); the element size ``h``
+            of the copy is ``h / factor``.
 
     Counts: disc ``n_inner``, ``n_ring``; block ``n = [nx, ny]``; twopad ``n_pad``,
     ``n_gap``, ``n_outer``, ``n_side``; every layer's ``elements``. An absent count takes the
@@ -53,7 +78,7 @@ def refined_spec(spec: Mapping[str, Any], factor: int) -> dict[str, Any]:
     refined mesh resolves the same mapped geometry with ``factor`` times more elements.
     A count that is not a whole number >= 1 raises :class:`ModelError` naming the entry.
     """
-    f = _whole(factor, "refinement factor")
+    f = parse_factor(factor)
     s = copy.deepcopy(dict(spec))
     g = s.get("geometry")
     if not isinstance(g, Mapping):
@@ -62,14 +87,17 @@ def refined_spec(spec: Mapping[str, Any], factor: int) -> dict[str, Any]:
     kind = g.get("kind", "disc")
     if kind not in COUNT_DEFAULTS:
         raise ModelError("geometry.kind", f"must be 'disc', 'block' or 'twopad', got {kind!r}")
-    for key, default in COUNT_DEFAULTS[kind].items():
+    counts = COUNT_DEFAULTS[kind]
+    if kind == "block" and g.get("fit_indenter") is True:
+        counts = FITTED_BLOCK_COUNTS
+    for key, default in counts.items():
         v = g.get(key, default)
         if key == "n":
             if not isinstance(v, (list, tuple)) or len(v) != 2:
                 raise ModelError("geometry.n", f"expected [nx, ny] element counts, got {v!r}")
-            g[key] = [_whole(x, f"geometry.n[{i}]") * f for i, x in enumerate(v)]
+            g[key] = [_scaled(x, f, f"geometry.n[{i}]") for i, x in enumerate(v)]
         else:
-            g[key] = _whole(v, f"geometry.{key}") * f
+            g[key] = _scaled(v, f, f"geometry.{key}")
     layers = s.get("layers")
     if not isinstance(layers, list) or not layers:
         raise ModelError("layers", "needs at least one [[layers]] table")
@@ -78,9 +106,63 @@ def refined_spec(spec: Mapping[str, Any], factor: int) -> dict[str, Any]:
         if not isinstance(L, Mapping):
             raise ModelError(f"layers[{i}]", f"expected a table, got {L!r}")
         L = dict(L)
-        L["elements"] = _whole(L.get("elements", LAYER_ELEMENTS_DEFAULT), f"layers[{i}].elements") * f
+        L["elements"] = _scaled(L.get("elements", LAYER_ELEMENTS_DEFAULT), f, f"layers[{i}].elements")
         out.append(L)
     s["layers"] = out
+    return s
+
+
+#: every key of ``[geometry]`` that shapes the mesh (counts, gradings, layouts), per kind,
+#: with the builder's default (skinkit.fem.model._mesh, skinkit.fem.twopad.twopad_from_spec)
+MESH_KEYS: dict[str, dict[str, Any]] = {
+    "disc": {"n_inner": 3, "n_ring": 3, "grading": 1.6, "inner_grading": 1.0, "layer_grading": 1.0,
+             "o_grid": False},
+    "block": {"n": [4, 4], "layer_grading": 1.0, "fit_indenter": False},
+    "block_fitted": {"n_inner": 2, "n_ring": 2, "grading": 1.0, "inner_grading": 1.0,
+                     "layer_grading": 1.0, "fit_indenter": True},
+    "twopad": {"n_pad": 2, "n_gap": 6, "n_outer": 3, "n_side": 3, "grading": 1.6, "pad_grading": 1.0,
+               "layer_grading": 1.0},
+}
+
+
+def pin_mesh(spec: Mapping[str, Any], elements: Sequence[int], **geometry: Any) -> dict[str, Any]:
+    """A deep copy of a model description whose mesh is set explicitly, whatever the file says.
+
+    For a consumer that needs a given mesh (a benchmark, the virtual lab's truth, a test
+    that must stay fast and reproducible) and must not follow a change of an example file's
+    mesh: every mesh-shaping key of the geometry's kind (:data:`MESH_KEYS`) is written,
+    ``geometry``'s value where given and the builder's default otherwise, and layer ``i``
+    gets ``elements[i]`` element layers.
+
+    Args:
+        spec: a model description (:func:`skinkit.fem.model.read_model`).
+        elements: element layers of each ``[[layers]]`` table, top down.
+        **geometry: mesh keys of the kind (``n_inner=1, n_ring=2, grading=1.6``, ...);
+            a key of another kind raises :class:`ModelError`.
+    """
+    s = copy.deepcopy(dict(spec))
+    g = dict(s.get("geometry", {}))
+    kind = g.get("kind", "disc")
+    if kind == "block" and geometry.get("fit_indenter", False):
+        kind = "block_fitted"
+    keys = MESH_KEYS.get(kind)
+    if keys is None:
+        raise ModelError("geometry.kind", f"must be 'disc', 'block' or 'twopad', got {kind!r}")
+    bad = sorted(set(geometry) - set(keys))
+    if bad:
+        raise ModelError(f"geometry.{bad[0]}", f"not a mesh key of kind {g.get('kind', 'disc')!r}; "
+                         f"they are {sorted(keys)}")
+    for group in MESH_KEYS.values():
+        for k in group:
+            if k not in ("kind",):
+                g.pop(k, None)
+    g.update({k: copy.deepcopy(geometry.get(k, v)) for k, v in keys.items()})
+    s["geometry"] = g
+    layers = s.get("layers")
+    if not isinstance(layers, list) or len(layers) != len(elements):
+        raise ModelError("layers", f"{len(elements)} element counts given for "
+                         f"{len(layers) if isinstance(layers, list) else 0} layers")
+    s["layers"] = [dict(L, elements=int(e)) for L, e in zip(layers, elements, strict=True)]
     return s
 
 

@@ -312,14 +312,27 @@ def _block_n(g: Mapping[str, Any]) -> tuple[int, int]:
     return tuple(integer(v, f"geometry.n[{i}]", 1, MAX_ELEMENTS_PER_DIRECTION) for i, v in enumerate(n))
 
 
+def _fits_indenter(g: Mapping[str, Any]) -> bool:
+    """Whether a block's elements are fitted to its indenter (``fit_indenter = true``)."""
+    return flag(g.get("fit_indenter", False), "geometry.fit_indenter")
+
+
 def estimate_size(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> dict[str, float]:
     """Elements, nodes, unknowns and stiffness-matrix memory [bytes] of the model's mesh,
     counted from the geometry table without building it (27-node hexahedra)."""
     g = _geometry(spec)
     nz = sum(k for _, _, k in layers)
     kind = g.get("kind", "disc")
+    if kind == "disc" and flag(g.get("o_grid", False), "geometry.o_grid"):
+        # the O-grid: the central block and n_ring rings of 4 n_inner elements each
+        ni, nr = _count(g, "n_inner", 3), _count(g, "n_ring", 3)
+        nodes = ((2 * ni + 1) ** 2 + 16 * ni * nr) * (2 * nz + 1)
+        return {"elements": (ni * ni + 4 * ni * nr) * nz, "nodes": nodes, "unknowns": 3 * nodes,
+                "matrix_bytes": 3.0 * nodes * _NNZ_PER_UNKNOWN * _BYTES_PER_NNZ}
     if kind == "disc":
         nx = ny = _count(g, "n_inner", 3) + 2 * _count(g, "n_ring", 3)
+    elif kind == "block" and _fits_indenter(g):
+        nx = ny = _count(g, "n_inner", 2) + 2 * _count(g, "n_ring", 2)
     elif kind == "block":
         nx, ny = _block_n(g)
     else:
@@ -394,7 +407,7 @@ def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tupl
     lo, hi = LENGTH_RANGE
     if kind == "disc":
         _check_keys(g, {"kind", "diameter", "indenter_diameter", "n_inner", "n_ring", "grading",
-                        "inner_grading", "layer_grading"}, "geometry")
+                        "inner_grading", "layer_grading", "o_grid"}, "geometry")
         D = bounded(g.get("diameter", 0.040), "m", "geometry.diameter", lo, hi)
         d = bounded(g.get("indenter_diameter", 0.004), "m", "geometry.indenter_diameter", lo, hi)
         if d >= D:
@@ -402,14 +415,25 @@ def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tupl
                              f"{D:g} m, got {d:g} m")
         grading = _grading(g, "grading", 1.6)
         mesh = disc_mesh(D, d, layers, _count(g, "n_inner", 3), _count(g, "n_ring", 3), grading,
-                         _grading(g, "inner_grading"), _grading(g, "layer_grading"))
+                         _grading(g, "inner_grading"), _grading(g, "layer_grading"),
+                         flag(g.get("o_grid", False), "geometry.o_grid"))
         return mesh, None
     if kind == "block":
-        _check_keys(g, {"kind", "size", "n", "indenter_diameter", "layer_grading"}, "geometry")
+        fitted = _fits_indenter(g)
+        _check_keys(g, {"kind", "size", "indenter_diameter", "layer_grading", "fit_indenter"}
+                    | ({"n_inner", "n_ring", "grading", "inner_grading"} if fitted else {"n"}), "geometry")
         size = vector(_get(g, "size", "geometry"), "m", "geometry.size", 2)
         for i, v in enumerate(size):
             if not lo < v <= hi:
                 raise ModelError(f"geometry.size[{i}]", f"must be in ({lo:g}, {hi:g}] m, got {v:g}")
+        if fitted:
+            if "indenter_diameter" not in g:
+                raise ModelError("geometry.fit_indenter", "needs indenter_diameter (the circle to fit)")
+            from skinkit.fem.mesh import fitted_block_mesh
+            d = bounded(g["indenter_diameter"], "m", "geometry.indenter_diameter", 0.0, float(min(size)))
+            return fitted_block_mesh(size, d, layers, _count(g, "n_inner", 2), _count(g, "n_ring", 2),
+                                     _grading(g, "grading"), _grading(g, "inner_grading"),
+                                     _grading(g, "layer_grading")), None
         n = _block_n(g)
         H = sum(t for _, t, _ in layers)
         mesh = block_mesh((size[0], size[1], H), (n[0], n[1], 1), layers, _grading(g, "layer_grading"))

@@ -319,3 +319,88 @@ def test_convergence_on_an_example_reports_the_estimate(tmp_path):
     assert e1 == pytest.approx(2 * e2)
     # this example meets 5 % on the tip force at its documented load (docs/models/README.md)
     assert e1 < 0.05
+
+
+# --- mesh layouts: the disc's O-grid, the block fitted to its indenter -------------------------
+
+def _volume(mesh) -> float:
+    from skfem import Basis, ElementHex2, Functional
+    b = Basis(mesh.skfem_mesh(), ElementHex2(), intorder=3)
+    assert b.dx.min() > 0  # no inverted element
+    return float(Functional(lambda w: 1.0 + 0 * w.x[0]).assemble(b))
+
+
+def test_o_grid_keeps_the_block_elements_around_every_ring():
+    from skinkit.fem.mesh import disc_mesh
+    layers = [("skin", 0.0015, 1), ("subdermal", 0.0035, 1)]
+    m = disc_mesh(0.04, 0.004, layers, n_inner=2, n_ring=5, o_grid=True)
+    # per element layer: the 2 x 2 block and 5 rings of 4 x 2 = 8 elements
+    assert m.n_elements == 2 * (4 + 5 * 8)
+    top = m.nodes[m.node_sets["top"]]
+    r = np.hypot(top[:, 0], top[:, 1])
+    # the rim carries 2 x 8 = 16 nodes (vertices and mid-edge nodes), all on the circle
+    assert np.sum(np.isclose(r, 0.02)) == 16 and len(m.node_sets["outer"]) == 16 * 5
+    # the footprint is the indenter's circle, resolved as in the full grid
+    full = disc_mesh(0.04, 0.004, layers, n_inner=2, n_ring=5)
+    np.testing.assert_allclose(np.sort(m.nodes[m.node_sets["indenter"]], axis=0),
+                               np.sort(full.nodes[full.node_sets["indenter"]], axis=0), atol=1e-15)
+    # volume: the cylinder up to its rim's 8 quadratic arcs of 45° (each short of the circle
+    # by a sliver: 4e-3 of the area for this interpolation)
+    assert _volume(m) == pytest.approx(np.pi * 0.02 ** 2 * 0.005, rel=5e-3)
+    assert _volume(disc_mesh(0.04, 0.004, layers, n_inner=4, n_ring=5, o_grid=True)) == \
+        pytest.approx(np.pi * 0.02 ** 2 * 0.005, rel=5e-4)  # 16 arcs: 16x closer (h^4)
+    # the size estimate before building knows the layout
+    s = _spec("disc")
+    s["geometry"].update(o_grid=True, n_inner=2, n_ring=5)
+    assert estimate_size(s, layer_table(s))["unknowns"] == build_mesh(s).n_dof
+    assert refined_spec(s, 2)["geometry"]["o_grid"] is True
+
+
+def test_fitted_block_puts_the_indenter_circle_on_element_boundaries():
+    s = read_model(MODELS / "phantom_membrane_gel.toml")
+    g = {k: v for k, v in s["geometry"].items() if k != "n"}
+    s["geometry"] = dict(g, fit_indenter=True, n_inner=2, n_ring=3, grading=1.5)
+    m = build_mesh(s)
+    c = np.array([0.01, 0.01])
+    foot = m.nodes[m.node_sets["indenter"]]
+    r = np.hypot(*(foot[:, :2] - c).T)
+    # the footprint's outermost nodes lie on the 2.5 mm circle, on every refinement
+    for f in (1, 2):
+        mf = build_mesh(refined_spec(s, f))
+        ff = mf.nodes[mf.node_sets["indenter"]]
+        rf = np.hypot(*(ff[:, :2] - c).T)
+        assert np.isclose(rf.max(), 0.0025) and np.sum(np.isclose(rf, 0.0025)) == 8 * 2 * f
+    assert r.max() == pytest.approx(0.0025)
+    assert _volume(m) == pytest.approx(0.02 * 0.02 * 0.010, rel=1e-12)  # the box exactly
+    assert estimate_size(s, layer_table(s))["unknowns"] == m.n_dof
+    assert set(m.node_sets) >= {"top", "bottom", "sides", "xmin", "indenter"}
+    s["geometry"]["n"] = [4, 4]
+    with pytest.raises(ModelError, match="geometry.n: unknown key"):
+        build_mesh(s)
+
+
+def test_refined_spec_coarsens_by_a_fraction():
+    s = _spec("disc")
+    s["geometry"].update(n_inner=4, n_ring=6)
+    s["layers"][0]["elements"], s["layers"][1]["elements"] = 2, 4
+    c = refined_spec(s, "1/2")
+    assert (c["geometry"]["n_inner"], c["geometry"]["n_ring"]) == (2, 3)
+    assert [L["elements"] for L in c["layers"]] == [1, 2]
+    with pytest.raises(ModelError, match=r"geometry.n_ring: 6 elements cannot be scaled by 1/4"):
+        refined_spec(s, "1/4")
+    with pytest.raises(ModelError, match="refinement factor: expected a number"):
+        refined_spec(s, "half")
+
+
+def test_pin_mesh_sets_every_mesh_key():
+    from skinkit.fem.discretisation import MESH_KEYS, pin_mesh
+    s = _spec("disc")
+    s["geometry"].update(o_grid=True, inner_grading=2.0, n_ring=12)
+    p = pin_mesh(s, [1, 1], n_inner=1, n_ring=2)
+    g = p["geometry"]
+    assert {k: g[k] for k in MESH_KEYS["disc"]} == {"n_inner": 1, "n_ring": 2, "grading": 1.6,
+                                                    "inner_grading": 1.0, "layer_grading": 1.0,
+                                                    "o_grid": False}
+    assert [L["elements"] for L in p["layers"]] == [1, 1] and s["geometry"]["n_ring"] == 12
+    with pytest.raises(ModelError, match="geometry.n_pad: not a mesh key of kind 'disc'"):
+        pin_mesh(s, [1, 1], n_pad=2)
