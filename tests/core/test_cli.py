@@ -103,6 +103,7 @@ def test_import_csv_then_inspect(tmp_path):
     assert res.exit_code == 2 and "line 3" in res.output and "'oops' is not a number" in res.output
 
 
+@pytest.mark.needs_plugins
 def test_demo_refuses_an_out_that_is_a_file(tmp_path):
     """The chain itself is tested end to end in tests/pipelines/test_chain.py (its quick variant);
     here only what the command checks before any work."""

@@ -41,6 +41,7 @@ def _one_line(r) -> str:
     ("solve", "phantom_membrane_gel", ["result.h5", "summary.json"]),
     ("convergence", "phantom_membrane_gel_convergence", ["convergence.json", "convergence.png"]),
 ])
+@pytest.mark.needs_plugins
 def test_default_output_is_under_the_current_directory_and_never_replaced_silently(
         tmp_path, monkeypatch, command, folder, written):
     options = ["--no-vtu"] if command == "solve" else ["--levels", "1"]
@@ -78,6 +79,7 @@ def test_overwrite_never_replaces_a_folder_of_other_files(tmp_path):
     assert [p.name for p in out.iterdir()] == ["mine.txt"] and (out / "mine.txt").read_text() == "keep"
 
 
+@pytest.mark.needs_plugins
 def test_an_empty_out_folder_is_written(tmp_path):
     out = tmp_path / "empty"
     out.mkdir()

@@ -11,6 +11,9 @@ from click.testing import CliRunner
 from skinkit.cli import cli
 from tests.core._cli import one_error
 
+# the laws, effects and optimisers these tests use are built-in plugins
+pytestmark = pytest.mark.needs_plugins
+
 MODEL = """[model]
 kind = "lumped"
 name = "relax"

@@ -23,6 +23,9 @@ from skinkit.fem.problem import Material, Problem
 from skinkit.fem.sensitivity import HistorySensitivity, sensitivities
 from skinkit.fem.solver import NewtonSolver, SolverOptions
 
+# the laws, effects and optimisers these tests use are built-in plugins
+pytestmark = pytest.mark.needs_plugins
+
 L = 0.01
 TIMES = [0.1, 0.2, 0.4, 0.7, 1.0]
 

@@ -12,6 +12,9 @@ from skinkit.fem.problem import Material, Problem
 from skinkit.fem.solver import NewtonSolver, SolverOptions
 from skinkit.fem.twopad import twopad_from_spec, twopad_mesh
 
+# the laws, effects and optimisers these tests use are built-in plugins
+pytestmark = pytest.mark.needs_plugins
+
 LAYERS = (("skin", 0.0015, 1), ("subdermal", 0.0035, 1))
 
 

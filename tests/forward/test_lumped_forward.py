@@ -53,6 +53,7 @@ def test_linear_element_relaxes_as_the_closed_form():
     assert np.allclose(F[hold], exact, rtol=1e-10)
 
 
+@pytest.mark.needs_plugins
 def test_sensitivities_match_central_differences():
     """Complex step against central differences with h = 1e-6 of each value (truncation
     ~1e-12, rounding ~1e-10 relative): 1e-6 of the largest derivative."""

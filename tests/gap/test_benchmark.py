@@ -29,6 +29,9 @@ from skinkit.gap.benchmark import (
     run,
 )
 
+# the laws, effects and optimisers these tests use are built-in plugins
+pytestmark = pytest.mark.needs_plugins
+
 EFFECTS = ["viscoelastic", "force-drift"]
 NULLS = 3
 KEYS = ("top1_accuracy", "null_false_alarm_rate", "localisation_accuracy", "magnitude_error_median",

@@ -32,6 +32,9 @@ from skinkit.inverse.discretisation import (
     richardson_factor,
 )
 
+# the laws, effects and optimisers these tests use are built-in plugins
+pytestmark = pytest.mark.needs_plugins
+
 
 def _spec() -> dict:
     """A small layered disc (neo-Hookean skin over subdermal tissue, 735 unknowns), a 4 mm bonded
