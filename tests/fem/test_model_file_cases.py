@@ -41,18 +41,17 @@ def example(name: str) -> dict:
 
 def static_force() -> dict:
     """invivo_static_force.toml (pre-stretched skin, force control) on its coarsest mesh."""
-    s = example("invivo_static_force.toml")
-    s["geometry"].update(n_inner=1, n_ring=1)
-    s["layers"][1]["elements"] = 1
+    from skinkit.fem.discretisation import pin_mesh
+    s = pin_mesh(example("invivo_static_force.toml"), [1, 1], n_inner=1, n_ring=1, grading=1.6)
     s["load"]["steps"] = 2
     return s
 
 
 def cube() -> dict:
     """phantom_cube_box.toml on a 2 x 2 x 1 mesh."""
-    s = example("phantom_cube_box.toml")
-    s["geometry"].update(n=[2, 2], indenter_diameter="12 mm")
-    s["layers"][0]["elements"] = 1
+    from skinkit.fem.discretisation import pin_mesh
+    s = pin_mesh(example("phantom_cube_box.toml"), [1], n=[2, 2])
+    s["geometry"]["indenter_diameter"] = "12 mm"
     s["load"]["steps"] = 2
     return s
 
