@@ -1,14 +1,16 @@
 """``skinkit bench forward``: one session predicted serially, on 2 worker processes and on a
 Dask ``LocalCluster`` (same numbers, speed-up), and the in vivo 0.1 Hz protocol at scale.
 
-Part 1: the coarse in vivo model (``docs/models/invivo_quick.toml``, GOH + QLV skin) driven
+Part 1: the coarse in vivo model (``docs/models/invivo_quick.toml`` on its earlier 2,535-unknown mesh,
+:data:`PARALLEL_MESH`; GOH + QLV skin) driven
 by the tip trajectories of four Table 12 protocols (normal indentation, in-plane 0° and 90°,
 out of plane 330°) with 36 tracked points, with sensitivities to every parameter; solved in
 this process (``workers = 1``), on 2 worker processes and on a 2-worker Dask cluster. Every
 solve runs on one thread, so the three must agree to the last bit; the ratio of wall times
 is the speed-up of protocol-level parallelism.
 
-Part 2: the in vivo model of ``docs/models/invivo_goh_qlv.toml`` (~10,000 unknowns, GOH + QLV)
+Part 2: the in vivo model of ``docs/models/invivo_goh_qlv.toml`` on its earlier mesh (9,747 unknowns,
+:data:`INVIVO_MESH`; the file's converged mesh has 51,519), GOH + QLV,
 through the 0.1 Hz normal-indentation protocol (three periods, 1.5 mm peak to peak, 60
 steps): wall time, Newton iterations per step, assembly against linear-solve time.
 """
