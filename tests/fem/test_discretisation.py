@@ -410,3 +410,31 @@ def test_pin_mesh_sets_every_mesh_key():
     assert [L["elements"] for L in p["layers"]] == [1, 1] and s["geometry"]["n_ring"] == 12
     with pytest.raises(ModelError, match="geometry.n_pad: not a mesh key of kind 'disc'"):
         pin_mesh(s, [1, 1], n_pad=2)
+
+
+def test_convergence_at_the_peak_of_a_sinusoid_and_by_coarsened_factors(tmp_path):
+    # a sinusoid returns to zero depth at its end: the final step's force says nothing about
+    # the mesh, its peak does (step 1 of 2: half a period, the full 0.3 mm)
+    text = TINY.replace('kind = "ramp"\nvalue = ["0 mm", "0 mm", "-0.3 mm"]\nsteps = 1',
+                        'kind = "sinusoid"\npeak_to_peak = "0.3 mm"\nfrequency = "1 Hz"\nperiods = 1\n'
+                        'steps_per_period = 2\ndirection = [0, 0, -1]')
+    text = text.replace("n_inner = 1", "n_inner = 2\no_grid = true")
+    text = text.replace("elements = 1", "elements = 2")
+    p = tmp_path / "sine.toml"
+    p.write_text(text)
+    runs = {}
+    for at in ("final", "peak"):
+        r = CliRunner().invoke(cli, ["convergence", str(p), "--factors", "1/2,1", "--at", at,
+                                     "--out", str(tmp_path / at), "--json"])
+        assert r.exit_code == 0, r.output
+        runs[at] = json.loads(r.output)
+    peak = runs["peak"]["levels"]
+    assert [x["step"] for x in peak] == [0, 0] and [x["factor"] for x in peak] == ["1/2", "1"]
+    assert peak[1]["dof"] > peak[0]["dof"]
+    assert all(abs(x["tip_force_N"][2]) > 1e3 * abs(y["tip_force_N"][2])
+               for x, y in zip(peak, runs["final"]["levels"], strict=True))
+    # two levels, order 1 assumed: the finer level's estimated error is its change from the coarser
+    f1, f2 = (np.array(x["tip_force_N"]) for x in peak)
+    assert peak[1]["relative_error"] == pytest.approx(np.linalg.norm(f2 - f1) / np.linalg.norm(2 * f2 - f1))
+    r = CliRunner().invoke(cli, ["convergence", str(p), "--factors", "1/4,1", "--out", str(tmp_path / "x")])
+    assert r.exit_code != 0 and "cannot be scaled by 1/4" in r.output
