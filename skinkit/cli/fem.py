@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from skinkit.cli._paths import check_result_dir, staged_dir
+from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 #: what ``skinkit solve`` writes in its --out folder (and so may replace with --overwrite)
@@ -161,7 +162,7 @@ def verify(as_json: bool, cases: tuple[str, ...]) -> None:
               help="directory for convergence.json and convergence.png (default: <model file name>"
                    "_convergence in the current directory)")
 @click.option("--overwrite", is_flag=True, help="replace an earlier result in --out")
-@click.option("--order", type=click.FloatRange(0, min_open=True), default=None,
+@click.option("--order", type=FiniteFloat(min=0, min_open=True), default=None,
               help="convergence order to assume (default: measured from the three finest levels; "
                    "1 with two levels)")
 @click.option("--factors", default=None, metavar="F1,F2,...",

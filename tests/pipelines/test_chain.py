@@ -54,7 +54,7 @@ def chain(tmp_path_factory):
     return out, summary
 
 
-def test_no_step_reads_the_truth(chain):
+def _no_step_reads_the_truth(chain):
     out, _ = chain
     truth_files = {str(out / "truth.json"), str(out / "truth-surface.npz")}
     read = [(phase, p) for phase, p in _OPENED if p in truth_files]
@@ -62,7 +62,7 @@ def test_no_step_reads_the_truth(chain):
     assert {phase for phase, _ in read} <= {"acquire", "compare"}, read
 
 
-def test_gap_names_prestress_in_the_in_plane_protocols(chain):
+def _gap_names_prestress_in_the_in_plane_protocols(chain):
     _, s = chain
     gap = s["diagnose"]
     named = gap["named"]
@@ -77,7 +77,7 @@ def test_gap_names_prestress_in_the_in_plane_protocols(chain):
     assert 0.0 < shrink <= 1.0, shrink
 
 
-def test_closing_table_compares_every_step(chain):
+def _closing_table_compares_every_step(chain):
     out, s = chain
     steps = {r["step"] for r in s["table"]}
     assert {"lumped", "cameras", "identify", "diagnose"} <= steps
@@ -95,3 +95,11 @@ def test_closing_table_compares_every_step(chain):
     assert (out / "report.html").stat().st_size > 50_000
     assert Path(s["plots"][0]).name == "truth.png" and Path(s["plots"][0]).stat().st_size > 20_000
     assert json.loads((out / "summary.json").read_text())["table"] == json.loads(json.dumps(s["table"]))
+
+
+def test_the_chain(chain):
+    """One test over the one demo run (minutes): whatever way the runner distributes tests, the
+    demo is run once (three tests sharing a module fixture ran it twice on two workers)."""
+    _no_step_reads_the_truth(chain)
+    _gap_names_prestress_in_the_in_plane_protocols(chain)
+    _closing_table_compares_every_step(chain)
