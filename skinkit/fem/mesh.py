@@ -89,6 +89,16 @@ def _region_by_z(nodes: np.ndarray, elements: np.ndarray, z_interfaces: Sequence
     return np.sum(zc[:, None] < np.asarray(z_interfaces)[None, :], axis=1)
 
 
+def _check_rings(n_inner: int, n_ring: int, grading: float, inner_grading: float) -> None:
+    """The counts and gradings shared by the disc and the punch-fitted block."""
+    for key, gv in (("grading", grading), ("inner_grading", inner_grading)):
+        if not gv >= 1:
+            raise ModelError(f"geometry.{key}", f"must be at least 1 (1 is uniform), got {gv}")
+    for key, v in (("n_inner", n_inner), ("n_ring", n_ring)):
+        if int(v) != v or v < 1:
+            raise ModelError(f"geometry.{key}", f"must be a whole number at least 1, got {v}")
+
+
 def _near(a: np.ndarray, b: float, scale: float) -> np.ndarray:
     return np.abs(a - b) <= 1e-9 * max(scale, 1e-12)
 
@@ -218,12 +228,7 @@ def fitted_block_mesh(size: Sequence[float], indenter_diameter: float,
     if not 0 < a < 0.5 * min(Lx, Ly):
         raise ModelError("geometry.indenter_diameter", f"must be in (0, {min(Lx, Ly)}) m (the block's "
                          f"smaller side) to fit the mesh to it, got {indenter_diameter} m")
-    for key, gv in (("grading", grading), ("inner_grading", inner_grading)):
-        if not gv >= 1:
-            raise ModelError(f"geometry.{key}", f"must be at least 1 (1 is uniform), got {gv}")
-    for key, v in (("n_inner", n_inner), ("n_ring", n_ring)):
-        if int(v) != v or v < 1:
-            raise ModelError(f"geometry.{key}", f"must be a whole number at least 1, got {v}")
+    _check_rings(n_inner, n_ring, grading, inner_grading)
     z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers], layer_grading)
     n = n_inner + 2 * n_ring
     s = np.linspace(-1.0, 1.0, n + 1)
@@ -292,12 +297,7 @@ def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
     if not 0 < a < R:
         raise ModelError("geometry.indenter_diameter", f"must be in (0, {diameter}) m (the disc's "
                          f"diameter), got {indenter_diameter} m")
-    for key, gv in (("grading", grading), ("inner_grading", inner_grading)):
-        if not gv >= 1:
-            raise ModelError(f"geometry.{key}", f"must be at least 1 (1 is uniform), got {gv}")
-    for key, v in (("n_inner", n_inner), ("n_ring", n_ring)):
-        if int(v) != v or v < 1:
-            raise ModelError(f"geometry.{key}", f"must be a whole number at least 1, got {v}")
+    _check_rings(n_inner, n_ring, grading, inner_grading)
     z = _layer_coords([t for _, t, _ in layers], [k for _, _, k in layers], layer_grading)
     n = n_inner + 2 * n_ring
     if o_grid:
