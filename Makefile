@@ -38,7 +38,7 @@ demo: venv
 	$(BIN)/skinkit demo --out demo-output
 
 test: venv-test
-	$(BIN)/python -m pytest -n 2 --dist loadgroup -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
 lint: venv-test
 	$(BIN)/ruff check skinkit plugins hardware tests

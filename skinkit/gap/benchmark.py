@@ -772,7 +772,7 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         progress: Callable[[str], None] | None = None, *, model: str | Mapping[str, Any] | None = None,
         effects: Sequence[str] | None = None, nulls: int | None = None, pairs: int | None = None,
         magnitudes: Sequence[str] | None = None, parallel: int | None = None,
-        max_effects: int | None = None, candidates: int = 3) -> dict[str, Any]:
+        max_effects: int | None = None, candidates: int | None = None) -> dict[str, Any]:
     """Run the benchmark and score it (JSON-ready).
 
     ``quick``: the quick run (:data:`QUICK_EFFECTS` that apply and are visible, moderate
@@ -784,9 +784,9 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     ``parallel``: worker processes otherwise (default 2; 1 runs in this process); ``workers``:
     worker processes of each FE prediction (default 1 when cases run in parallel, else
     one per protocol up to the CPU count). ``progress(line)``: one line per calibrated effect
-    and per case. ``max_effects`` (default 1 quick, 2 full) and ``candidates`` go to each
-    :func:`~skinkit.gap.diagnose.diagnose`. Keys: ``top1_accuracy``, ``null_false_alarm_rate``,
-    ``localisation_accuracy``,
+    and per case. ``max_effects`` (default 1 quick, 2 full) and ``candidates`` (refits per round,
+    default 2 quick, 3 full) go to each :func:`~skinkit.gap.diagnose.diagnose`. Keys:
+    ``top1_accuracy``, ``null_false_alarm_rate``, ``localisation_accuracy``,
     ``magnitude_error_median``, ``shrinkage_error_median``, ``confusion``, ``cases`` (the
     records), ``wall_s``, and the details of :func:`score`, ``calibration``, ``skipped``.
     """
@@ -834,7 +834,7 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         if not any(c["kind"] != "null" for c in cases) and names:
             say("no effect is visible on these protocols: only null sessions run")
         opts = {"max_effects": (1 if quick else 2) if max_effects is None else int(max_effects),
-                "candidates": int(candidates)}
+                "candidates": (2 if quick else 3) if candidates is None else int(candidates)}
         payloads = [dict(c, spec=spec, free=free, workers=workers, diagnose=opts) for c in cases]
         n_done = [0]
 
