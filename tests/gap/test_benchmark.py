@@ -30,7 +30,8 @@ from skinkit.gap.benchmark import (
 )
 
 # the laws, effects and optimisers these tests use are built-in plugins
-pytestmark = pytest.mark.needs_plugins
+# one xdist worker runs these: it builds the module's benchmark run once
+pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("gap_benchmark")]
 
 EFFECTS = ["viscoelastic", "force-drift"]
 NULLS = 3

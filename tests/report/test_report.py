@@ -34,6 +34,9 @@ from skinkit.report import render_report, write_report
 from skinkit.report.common import num
 from skinkit.store import create_experiment, open_experiment
 
+# one xdist worker runs these: it builds the experiment file of tests/report/conftest.py once
+pytestmark = pytest.mark.xdist_group("report_session")
+
 
 @pytest.fixture(scope="module")
 def report(full_session) -> tuple[str, ReportDOM]:

@@ -21,6 +21,10 @@ from skinkit.report import write_report
 
 #: the browser window [px]: the screenshot must come back at this size
 WIDTH, HEIGHT = 1280, 4000
+# one xdist worker runs these: it builds the experiment file of tests/report/conftest.py once
+pytestmark = pytest.mark.xdist_group("report_session")
+
+
 ARTEFACT = REPO / "test-artifacts" / "report-screenshot.png"
 #: a guard against a hung browser only (no test asserts a duration)
 HANG_S = 600

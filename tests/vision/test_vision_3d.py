@@ -13,7 +13,8 @@ from skinkit.vision.cone import cone_distance, fit_cone
 from skinkit.vision.scene import ground_truth
 from skinkit.vision.tracking3d import track_3d
 
-pytestmark = pytest.mark.needs_plugins
+# one xdist worker runs these: it builds the rendered scenes of tests/vision/conftest.py once
+pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("vision_scenes")]
 
 
 def _occluded(arm_scene):

@@ -11,6 +11,9 @@ from skinkit.vision.boards import check_board, detect_board
 from skinkit.vision.calibration import calibrate, detect_all
 from skinkit.vision.triangulation import triangulate
 
+# one xdist worker runs these: it builds the rendered scenes of tests/vision/conftest.py once
+pytestmark = pytest.mark.xdist_group("vision_scenes")
+
 
 def _in_board0(poses, X):
     """World points expressed in the frame of the first (flat) board: the calibrated world."""

@@ -11,7 +11,8 @@ import pytest
 from skinkit.schemas import ImageSequence
 from skinkit.store import create_experiment, open_experiment
 
-pytestmark = pytest.mark.needs_plugins
+# one xdist worker runs these: it builds the rendered scenes of tests/vision/conftest.py once
+pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("vision_scenes")]
 
 
 def _run(*args: str) -> subprocess.CompletedProcess:

@@ -11,7 +11,8 @@ from skinkit.vision import camera as C
 from skinkit.vision.markers import detect_markers, match_markers, predict_from_track
 from skinkit.vision.tracking3d import track_3d
 
-pytestmark = pytest.mark.needs_plugins
+# one xdist worker runs these: it builds the rendered scenes of tests/vision/conftest.py once
+pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("vision_scenes")]
 
 
 def test_markers_detected_and_triangulated(true_rig, arm_scene):
