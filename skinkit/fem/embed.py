@@ -134,9 +134,11 @@ def embed_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: floa
     pts[:, 2] -= depth
     Xe = mesh.nodes[mesh.elements]                  # (E, 27, 3)
     lo, hi = Xe.min(axis=1), Xe.max(axis=1)
-    # a curved face can bulge micrometres beyond its nodes' box; the Newton inversion and the inside
-    # test below decide which element holds a point
-    pad = 1e-3 * (hi - lo).max(axis=1, keepdims=True)
+    # a quadratic element bulges beyond its nodes' box: along an edge whose node values span a
+    # range d, by up to d/8 (e.g. a top face fitted to a profile beside flat nodes under the
+    # indenter: micrometres above its highest node). Pad each axis by that bound; the Newton
+    # inversion and the inside test below decide which element holds a point.
+    pad = 0.125 * (hi - lo) + 1e-3 * (hi - lo).max(axis=1, keepdims=True)
     inbox = np.all((pts[:, None, :] >= lo[None] - pad[None]) & (pts[:, None, :] <= hi[None] + pad[None]),
                    axis=2)                           # (M, E)
     dist = np.linalg.norm(pts[:, None, :] - Xe.mean(axis=1)[None], axis=2)

@@ -80,3 +80,29 @@ def test_embedded_point_sensitivities_via_position_jacobian():
     comb = 1e4 * dP[:, 0] + 1e5 * dP[:, 1]
     moved = np.abs(emb.positions(m.nodes, sol.u[-1]) - emb.positions(m.nodes)).max()
     assert np.abs(comb).max() <= 1e-9 * moved
+
+
+def test_point_on_a_face_that_bulges_above_its_nodes_is_found():
+    """A quadratic top face whose node heights along x are (0, 0, -d) rises to d/8 above its
+    highest node at a quarter of the edge (a profile-fitted face beside flat nodes under an
+    indenter does this, by micrometres); a point there lies in the element and must be found.
+
+    Regression: the candidate boxes were padded by 1e-3 of the element's size only, so a point
+    on such a bulge (here d/8 = 2.5 % of the size) was reported outside the mesh."""
+    from skinkit.fem.embed import _shape
+
+    m = block_mesh((1e-3, 1e-3, 1e-3), (1, 1, 1))
+    x, z = m.nodes[:, 0], m.nodes[:, 2]
+    top = np.isclose(z, 0.0)
+    d = 0.2e-3
+    m.nodes[top & np.isclose(x, 1e-3), 2] = -d       # the far edge of the top face lowered by d
+    # the highest point of the element's faces: d/8 above every node's height
+    Xe = m.nodes[m.elements[0]]
+    s = np.linspace(0.0, 1.0, 41)
+    a, b = (g.ravel() for g in np.meshgrid(s, s))
+    faces = [np.insert(np.vstack([a, b]), k, end, axis=0) for k in range(3) for end in (0.0, 1.0)]
+    P = np.vstack([_shape(xi)[0].T @ Xe for xi in faces])
+    p = P[np.argmax(P[:, 2])]
+    assert p[2] == pytest.approx(d / 8, rel=1e-9)     # the construction does bulge, by d/8
+    emb = embed_points(m, p[None])
+    assert np.allclose(emb.positions(m.nodes)[0], p, rtol=0, atol=1e-12)
