@@ -107,6 +107,8 @@ def test_model_file_builds():
 
     spec = read_model(Path(__file__).resolve().parents[2] / "docs" / "models" / "extension_dic_twopad.toml")
     model = build_model(spec)
-    assert model.mesh.n_nodes <= 6000 and model.bc.rigid.mode == "displacement"
+    # the example's graded mesh (its convergence study: tests/fem/test_examples_converged.py)
+    # stays a model solved in seconds: under 50,000 unknowns
+    assert model.mesh.n_dof <= 50_000 and model.bc.rigid.mode == "displacement"
     assert set(model.fixed_sets) == {"pad_fixed", "bottom", "sides"}
     assert nodal_areas(model.mesh, model.mesh.node_sets["indenter"]).sum() == pytest.approx(64e-6, rel=1e-12)
