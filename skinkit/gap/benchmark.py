@@ -48,6 +48,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -718,6 +719,19 @@ def plan(calibrations: Sequence[Mapping[str, Any]], *, magnitudes: Sequence[str]
     return cases
 
 
+def execution_order(cases: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    """``cases`` in the order they run: seed by seed (a run stopped part-way has whole seeds),
+    within a seed pairs, then moderate, then near (the longest first: the pool's tail is short),
+    the null sessions after the first seed."""
+    def key(c: Mapping[str, Any]) -> tuple[int, int]:
+        if c["kind"] == "null":
+            return (0, 3)
+        rank = {"pair": 0, "moderate": 1}.get(c["kind"] if c["kind"] == "pair" else c["magnitude"], 2)
+        return (int(c["seed"]) if int(c["seed"]) == 0 else int(c["seed"]) + 1, rank)
+
+    return sorted(cases, key=key)
+
+
 class _Pool:
     """Tasks run in this process (``parallel <= 1``), in a pool of processes, or on a Dask cluster."""
 
@@ -768,11 +782,67 @@ class _Pool:
             self.client.close()
 
 
+def _open_journal(journal: str | os.PathLike[str] | None, settings: Mapping[str, Any],
+                  say: Callable[[str], None]) -> Any:
+    if journal is None:
+        return None
+    from skinkit.gap.journal import Journal
+
+    jr = Journal(journal, settings)
+    if jr.cases or jr.calibrations:
+        say(f"journal {journal}: {len(jr.calibrations)} calibrations and {len(jr.cases)} cases recorded")
+    return jr
+
+
+def _calibrations(pool: _Pool, tasks: Sequence[Mapping[str, Any]], jr: Any,
+                  say: Callable[[str], None]) -> list[dict[str, Any]]:
+    """The calibrations of ``tasks`` (one per effect, in order): from the journal ``jr`` when it
+    holds them, else run on ``pool`` (and recorded)."""
+    def cal_line(c: Mapping[str, Any]) -> None:
+        if "skipped" in c:
+            say(f"calibrate {c['effect']}: skipped ({c['skipped']})")
+        else:
+            scales = ", ".join(f"{m} x{v['scale']:.3g} ({v['multiple']:.1f} thresholds)"
+                               for m, v in c["magnitudes"].items())
+            say(f"calibrate {c['effect']}: {scales}, {c.get('wall_s', 0):.1f} s")
+        if jr is not None:
+            jr.add_calibration(c)
+
+    known = {} if jr is None else jr.calibrations
+    todo = [t for t in tasks if t["effect"] not in known]
+    new = {c["effect"]: c for c in pool.map(calibrate, todo, cal_line)}
+    return [new[t["effect"]] if t["effect"] in new else known[t["effect"]] for t in tasks]
+
+
+def _run_cases(pool: _Pool, payloads: Sequence[Mapping[str, Any]], jr: Any,
+               say: Callable[[str], None]) -> tuple[list[dict[str, Any]], int]:
+    """The records of ``payloads`` in their order, and how many came from the journal ``jr``;
+    the others run on ``pool`` in :func:`execution_order`, each recorded as it finishes."""
+    known = {} if jr is None else jr.cases
+    before = {p["id"]: known[p["id"]] for p in payloads if p["id"] in known}
+    todo = execution_order([p for p in payloads if p["id"] not in before])
+    n_done = [len(before)]
+
+    def case_line(r: Mapping[str, Any]) -> None:
+        n_done[0] += 1
+        named = "error" not in r and ", ".join(r["report"]["named"])
+        what = f"error: {r['error']}" if "error" in r else f"named {named or 'none'}"
+        say(f"case {n_done[0]}/{len(payloads)} {r['id']}: {what}, {r['wall_s']:.1f} s")
+        if jr is not None:
+            jr.add_case(r)
+
+    if before:
+        say(f"{len(before)} of {len(payloads)} cases from the journal, {len(todo)} to run")
+    fresh = {r["id"]: r for r in pool.map(run_case, todo, case_line)}
+    return [before[p["id"]] if p["id"] in before else fresh[p["id"]] for p in payloads], len(before)
+
+
 def run(quick: bool, scheduler: str | None = None, workers: int | None = None, seeds: int | None = None,
         progress: Callable[[str], None] | None = None, *, model: str | Mapping[str, Any] | None = None,
         effects: Sequence[str] | None = None, nulls: int | None = None, pairs: int | None = None,
         magnitudes: Sequence[str] | None = None, parallel: int | None = None,
-        max_effects: int | None = None, candidates: int | None = None) -> dict[str, Any]:
+        max_effects: int | None = None, candidates: int | None = None,
+        journal: str | os.PathLike[str] | None = None) -> dict[str, Any]:
     """Run the benchmark and score it (JSON-ready).
 
     ``quick``: the quick run (:data:`QUICK_EFFECTS` that apply and are visible, moderate
@@ -785,7 +855,11 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     worker processes of each FE prediction (default 1 when cases run in parallel, else
     one per protocol up to the CPU count). ``progress(line)``: one line per calibrated effect
     and per case. ``max_effects`` (default 1 quick, 2 full) and ``candidates`` (refits per round,
-    default 2 quick, 3 full) go to each :func:`~skinkit.gap.diagnose.diagnose`. Keys:
+    default 2 quick, 3 full) go to each :func:`~skinkit.gap.diagnose.diagnose`. ``journal``: a
+    file (:mod:`skinkit.gap.journal`) that records each calibration and case as it finishes; the
+    ones it already holds are not run again (resuming a stopped run, or adding seeds or null
+    sessions to a finished one). Cases run seed by seed (a stopped run has whole seeds), longest
+    first within a seed, null sessions after the first seed. Keys:
     ``top1_accuracy``, ``null_false_alarm_rate``, ``localisation_accuracy``,
     ``magnitude_error_median``, ``shrinkage_error_median``, ``confusion``, ``cases`` (the
     records), ``wall_s``, and the details of :func:`score`, ``calibration``, ``skipped``.
@@ -816,37 +890,19 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     parallel = 2 if parallel is None else int(parallel)
     if workers is None and (parallel > 1 or scheduler):
         workers = 1          # the cases are the parallel unit: one process per FE prediction
+    opts = {"max_effects": (1 if quick else 2) if max_effects is None else int(max_effects),
+            "candidates": (2 if quick else 3) if candidates is None else int(candidates)}
+    jr = _open_journal(journal, {"model": spec, "free": free, "magnitudes": {m: MAGNITUDES[m] for m in mags},
+                                 "diagnose": opts, "alpha": ALPHA}, say)
     pool = _Pool(parallel, scheduler)
     try:
-        tasks = [{"spec": spec, "free": free, "effect": n, "magnitudes": {m: MAGNITUDES[m] for m in mags},
-                  "workers": workers} for n in names]
-
-        def cal_line(c: Mapping[str, Any]) -> None:
-            if "skipped" in c:
-                say(f"calibrate {c['effect']}: skipped ({c['skipped']})")
-            else:
-                scales = ", ".join(f"{m} x{v['scale']:.3g} ({v['multiple']:.1f} thresholds)"
-                                   for m, v in c["magnitudes"].items())
-                say(f"calibrate {c['effect']}: {scales}, {c.get('wall_s', 0):.1f} s")
-
-        cals = pool.map(calibrate, tasks, cal_line)
+        cals = _calibrations(pool, [{"spec": spec, "free": free, "effect": n, "workers": workers,
+                                     "magnitudes": {m: MAGNITUDES[m] for m in mags}} for n in names], jr, say)
         cases = plan(cals, magnitudes=mags, seeds=seeds, nulls=nulls, pairs=pairs)
         if not any(c["kind"] != "null" for c in cases) and names:
             say("no effect is visible on these protocols: only null sessions run")
-        opts = {"max_effects": (1 if quick else 2) if max_effects is None else int(max_effects),
-                "candidates": (2 if quick else 3) if candidates is None else int(candidates)}
         payloads = [dict(c, spec=spec, free=free, workers=workers, diagnose=opts) for c in cases]
-        n_done = [0]
-
-        def case_line(r: Mapping[str, Any]) -> None:
-            n_done[0] += 1
-            if "error" in r:
-                what = f"error: {r['error']}"
-            else:
-                what = f"named {', '.join(r['report']['named']) or 'none'}"
-            say(f"case {n_done[0]}/{len(payloads)} {r['id']}: {what}, {r['wall_s']:.1f} s")
-
-        records = pool.map(run_case, payloads, case_line)
+        records, n_resumed = _run_cases(pool, payloads, jr, say)
     finally:
         pool.close()
         release()
@@ -856,7 +912,8 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
                 "occupied_share": OCCUPIED_SHARE, "alpha": ALPHA, "diagnose_options": opts,
                 "calibration": {c["effect"]: c for c in cals},
                 "skipped": {c["effect"]: c["skipped"] for c in cals if "skipped" in c},
-                "cases": records, "wall_s": time.perf_counter() - t0})
+                "cases": records, "wall_s": time.perf_counter() - t0,
+                "resumed_cases": n_resumed})
     return out
 
 
@@ -916,11 +973,14 @@ def _names(text: str | None) -> list[str] | None:
               help="null sessions (default 2 quick, 20 full)")
 @click.option("--parallel", type=click.IntRange(1), default=2, show_default=True,
               help="cases run at once (worker processes; without --scheduler)")
+@click.option("--journal", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="record each finished case in FILE (JSON lines) and skip the cases it already "
+              "holds: resume a stopped run, or add seeds or null sessions to a finished one")
 def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, effects: str | None,
-              model: str, nulls: int | None, parallel: int) -> None:
+              model: str, nulls: int | None, parallel: int, journal: str | None) -> None:
     """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
     res = run(quick, scheduler=scheduler, seeds=seeds, progress=lambda s: click.echo(s, err=True),
-              model=model, effects=_names(effects), nulls=nulls, parallel=parallel)
+              model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal)
     if as_json:
         click.echo(json.dumps(res, indent=1, default=float))
         return
@@ -929,5 +989,5 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
 
 
 __all__ = ["ALPHA", "MAGNITUDES", "BenchmarkError", "assess", "benchmark", "calibrate", "clopper_pearson",
-           "effect_at", "lumped_spec", "model_spec", "plan", "quick_spec", "release", "run", "run_case",
-           "score"]
+           "effect_at", "execution_order", "lumped_spec", "model_spec", "plan", "quick_spec", "release",
+           "run", "run_case", "score"]
