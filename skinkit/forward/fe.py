@@ -152,6 +152,12 @@ def _instrument() -> Any:
 _GAUSS3 = (np.array([0.0, -math.sqrt(0.6), math.sqrt(0.6)]), np.array([8.0, 5.0, 5.0]) / 9.0)
 
 
+#: step [SI: 1 for a scale, rad for a rotation] of the central differences of a tracked point's
+#: embedding in a similarity parameter (1e-4: 0.8 µm at 8 mm from the origin, far inside an
+#: element, where the interpolated field is smooth; truncation O(h²) ≈ 1e-8 relative)
+SIMILARITY_STEP = 1e-4
+
+
 def window_offsets(window_m: float) -> np.ndarray:
     """``(9, 3)`` [m] in-plane offsets of the 3 x 3 Gauss points of a square window of side
     ``window_m`` [m] (the centre first): a subset tracker's value is its subset's mean motion,
@@ -385,10 +391,10 @@ class FEForwardModel:
                          "output.point_depth")
         return mesh, nodes, depth
 
-    def _embed(self, mesh, ch, depth: float, where: str):
+    def _embed(self, mesh, ch, depth: float, where: str, ref: np.ndarray | None = None):
         from skinkit.fem.embed import embed_points, surface_points
         from skinkit.fem.errors import ModelError
-        ref = np.asarray(ch.reference, dtype=float)
+        ref = np.asarray(ch.reference if ref is None else ref, dtype=float)
         if ref.shape[1] == 2:
             ref = np.column_stack([ref, np.zeros(len(ref))])
         if ch.window_m is not None:   # each point: its subset's 3 x 3 Gauss points, centre first
@@ -408,6 +414,26 @@ class FEForwardModel:
             cache.clear()
         cache[key] = (emb.element, emb.local)
         return cache[key]
+
+    def _embed_channel(self, mesh, ch, depth: float, where: str, entries, inst_names: Sequence[str]):
+        """A points channel's embedding, and its sets (None: one set at the reference). A
+        measured reference under ``similarity`` entries is distorted as every frame is: the
+        points are embedded where the undistorted reference puts them, and for each similarity
+        parameter asked for, at ±:data:`SIMILARITY_STEP` of it too (the embedding's share of the
+        derivative, by central differences of the interpolated field: no extra solve)."""
+        inst_mod = _instrument()
+        sims = inst_mod.similarity_parameters(entries, ch.name)
+        if not sims or ch.reference_frame is None:
+            return self._embed(mesh, ch, depth, where), None
+        ref = np.asarray(ch.reference, dtype=float)
+        diff = [p for p in sims if p in inst_names]
+        refs = [inst_mod.unrecord_points(entries, ch.name, ref)]
+        for p in diff:
+            refs += [inst_mod.unrecord_points(entries, ch.name, ref, {p: sgn * SIMILARITY_STEP})
+                     for sgn in (1, -1)]
+        parts = [self._embed(mesh, ch, depth, where, r) for r in refs]
+        emb = (np.concatenate([e[0] for e in parts]), np.concatenate([e[1] for e in parts]))
+        return emb, {"n": len(parts), "diff": diff}
 
     def _drive_channel(self, spec: Mapping[str, Any]) -> tuple[str, str]:
         mode = str(dict(spec.get("indenter", {}) or {}).get("mode", "force"))
@@ -445,11 +471,12 @@ class FEForwardModel:
             dsteps = drive_mod.smooth_at(ch.time_s, true, times, window)
             dd = {n: drive_mod.smooth_at(ch.time_s, d, times, window) for n, d in dtrue.items()}
             drives[po.name] = (times, dsteps, dd)
-            embeds = {}
+            embeds, sets = {}, {}
             for c in po.channels.values():
                 if c.is_points:
-                    embeds[c.name] = self._embed(mesh, c, depth, f"session protocol {po.name!r}.{c.name}")
-            meta[po.name] = {"drive": drive_name, "embeds": embeds}
+                    embeds[c.name], sets[c.name] = self._embed_channel(
+                        mesh, c, depth, f"session protocol {po.name!r}.{c.name}", entries, inst_names)
+            meta[po.name] = {"drive": drive_name, "embeds": embeds, "sets": sets}
         # softening level over the session, protocols in order
         ref = max((float(np.linalg.norm(d[1], axis=1).max()) for d in drives.values()), default=0.0)
         running = 0.0
@@ -523,6 +550,34 @@ class FEForwardModel:
         except Exception:
             pass
 
+    @staticmethod
+    def _points(r, po, meta, tk, col_names) -> dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]:
+        """Each points channel of protocol ``po``: positions ``(P, T, k)`` at the record's frames
+        and their derivatives (the embedding's own, by differences, for similarity parameters)."""
+        true = {}
+        start = 0
+        for cname, (el, _) in meta["embeds"].items():
+            P = len(el)
+            ch = po.channels[cname]
+            sets = meta.get("sets", {}).get(cname) or {"n": 1, "diff": []}
+            Ps = P // sets["n"]
+            k = ch.values.shape[2]
+            pts_sets = []
+            for i in range(sets["n"]):
+                raw = r["points"][:, start + i * Ps:start + (i + 1) * Ps]
+                dp = r["d_points"][:, start + i * Ps:start + (i + 1) * Ps]
+                if ch.window_m is not None:
+                    raw, dp = window_mean(raw, dp)
+                pts_sets.append(np.moveaxis(_cubic(tk, raw, ch.time_s), 0, 1)[..., :k])
+                if i == 0:
+                    d = {nm: np.moveaxis(_cubic(tk, dp[..., j], ch.time_s), 0, 1)[..., :k]
+                         for j, nm in enumerate(col_names)}
+            for j, p in enumerate(sets["diff"]):
+                d[p] = (pts_sets[1 + 2 * j] - pts_sets[2 + 2 * j]) / (2 * SIMILARITY_STEP)
+            true[cname] = (pts_sets[0], d)
+            start += P
+        return true
+
     def _assemble(self, spec, observations: Observations, results, meta, cls, inst_names) -> Prediction:
         inst_mod = _instrument()
         entries = inst_mod.parse(spec.get("instrument"))
@@ -549,20 +604,7 @@ class FEForwardModel:
                 vals = _cubic(tk, r[key], ch.time_s)
                 d = {nm: _cubic(tk, r[dkey][..., j], ch.time_s) for j, nm in enumerate(col_names)}
                 true[cname] = (vals, d)
-            start = 0
-            for cname, (el, _) in meta[po.name]["embeds"].items():
-                P = len(el)
-                ch = po.channels[cname]
-                k = ch.values.shape[2]
-                raw = r["points"][:, start:start + P]
-                dp = r["d_points"][:, start:start + P]
-                if ch.window_m is not None:
-                    raw, dp = window_mean(raw, dp)
-                pts = np.moveaxis(_cubic(tk, raw, ch.time_s), 0, 1)[..., :k]
-                d = {nm: np.moveaxis(_cubic(tk, dp[..., j], ch.time_s), 0, 1)[..., :k]
-                     for j, nm in enumerate(col_names)}
-                true[cname] = (pts, d)
-                start += P
+            true.update(self._points(r, po, meta[po.name], tk, col_names))
             chans: dict[str, ChannelPrediction] = {}
             for cname, (vals, d) in true.items():
                 if cname == drive_name:

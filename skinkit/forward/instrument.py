@@ -27,6 +27,9 @@ API (model-agnostic; arrays in, arrays and derivative dicts out; shapes: tip cha
   recorded drive ``(T, 3)`` to what the skin saw (biases of that channel removed, then the
   tilt). A series entry on the driving channel is refused here: it couples the drive to the
   prediction, so the model itself must solve it (the lumped model does);
+* ``unrecord_points(entries, channel, recorded, shift) -> (P, k)``: the material reference
+  positions of tracked points whose reference was itself recorded (a measured reference frame:
+  the tracker's calibration error applies to it too), the similarity entries undone;
 * ``measure(entries, channel, time_s, values, d, channels, names) -> (recorded, derivatives)``:
   a predicted channel (skin frame) with the model's derivatives ``d`` to what the instrument
   records, the model's derivatives carried through and the instrument's own added for
@@ -250,6 +253,33 @@ def measure(entries: Sequence[Entry], channel: str, time_s: np.ndarray, values: 
     return v, out
 
 
+def similarity_parameters(entries: Sequence[Entry], channel: str) -> list[str]:
+    """The parameters of the ``similarity`` entries on points channel ``channel``, in order."""
+    return [e.parameter for e in entries if e.kind == "similarity" and e.channel == channel
+            and channel in _POINTS]
+
+
+def unrecord_points(entries: Sequence[Entry], channel: str, recorded: np.ndarray,
+                    shift: Mapping[str, float] | None = None) -> np.ndarray:
+    """Material positions ``(P, k)`` [m] of points whose recorded positions are ``recorded``
+    ``(P, k)``: the ``similarity`` entries of ``channel`` undone, last first. ``shift``: parameter ->
+    increment [SI] added to that entry's value (derivatives by differences of the embedding).
+
+    Why: when a track's reference is one of its own frames, the tracker's calibration error
+    distorts the reference as it does every other frame; the material points are where the
+    undistorted reference puts them, and frame 0 is then recorded exactly as measured."""
+    x = np.array(recorded, dtype=float)
+    shift = shift or {}
+    for e in reversed([e for e in entries if e.kind == "similarity" and e.channel == channel]):
+        v = e.value + float(shift.get(e.parameter, 0.0))
+        if e.mode == "scale":
+            x = x / (1 + v)
+        else:
+            c, s = np.cos(v), np.sin(v)
+            x[..., :2] = x[..., :2] @ np.array([[c, -s], [s, c]])     # the rotation's inverse
+    return x
+
+
 # Each step below takes the recorded values ``v`` so far and their derivatives ``out`` (updated
 # in place, both copies made by measure), and returns the values after the entry ``e``.
 
@@ -313,4 +343,5 @@ def _tilted(e: Entry, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence
     return v @ R
 
 
-__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parameter_unit", "parameters", "parse"]
+__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parameter_unit", "parameters", "parse",
+           "similarity_parameters", "unrecord_points"]

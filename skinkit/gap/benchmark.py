@@ -73,6 +73,9 @@ QUICK_EFFECTS = ("prestress", "preconditioning", "indenter-tilt", "force-drift")
 QUICK_NULLS = 2
 FULL_NULLS = 20
 FULL_PAIRS = 3
+#: version of the benchmark's definitions a journal's cases were made under (2: signatures with
+#: the sessions' measured reference frame, whitened along frames)
+DEFINITIONS = 2
 #: seeds of null sessions start here (apart from the effect cases' seeds)
 NULL_SEED0 = 1000
 
@@ -166,25 +169,33 @@ def _lab(spec: Mapping[str, Any]) -> Any:
 
 
 def _noiseless(lab: Any) -> Any:
-    """The lab's noiseless truth as observations, with the points' exact reference (no reference
-    frame: the signature is not whitened along frames) and the declared noise levels."""
+    """The lab's noiseless truth as observations at the declared noise levels, the points'
+    reference as the sessions have it: with a measured reference (the lab's default) the
+    noiseless frame 0 is the reference frame, so that the signature is the one a session shows
+    (whitened along frames, a distortion of the tracker seen in the reference too)."""
     from skinkit.lab.session import top_surface
     from skinkit.schemas import Channel, Observations, ProtocolObservations
 
     sensors = lab.truth.sensors
     surface = top_surface(lab.spec, lab.kind)
     ref = surface.track_reference() if (lab.kind == "fe" and surface.has_mesh) else None
+    measured = getattr(lab, "reference", "exact") == "measured"
     out = {}
     for p in lab.truth.planned:
         true = lab.truth.noiseless[p.protocol.name]
         chans = {c: Channel(c, p.time_s, np.asarray(true[c], float), noise=sensors.sigma(c),
                             noise_source="virtual lab (declared)") for c in ("tip_position", "tip_force")}
         if "points" in true and ref is not None:
-            chans["points"] = Channel("points", p.frames, np.asarray(true["points"], float),
-                                      noise=sensors.sigma("points"), noise_source="tracker",
-                                      reference=ref.copy())
+            v = np.asarray(true["points"], float)
+            r0, f0 = (v[:, 0].copy(), 0) if measured else (ref.copy(), None)
+            chans["points"] = Channel("points", p.frames, v, noise=sensors.sigma("points"),
+                                      noise_source="tracker", reference=r0, reference_frame=f0)
         out[p.protocol.name] = ProtocolObservations(p.protocol, chans)
     return Observations(out, None, "virtual lab, noiseless")
+
+
+def _references(obs: Any) -> list[np.ndarray]:
+    return [c.reference for po in obs for c in po.channels.values() if c.is_points]
 
 
 class _Base:
@@ -225,19 +236,28 @@ class _Base:
         from skinkit.schemas import ChannelPrediction, Prediction
 
         obs = _noiseless(lab)
-        res = self._objective(obs).residual(self.pred, jacobian=False)
+        pred = self.pred
+        same = zip(_references(obs), _references(self.obs), strict=True)
+        if not all(np.array_equal(a, b) for a, b in same):
+            # the truth's reference differs (a tracker's distortion seen in frame 0): the model
+            # tracks the material points the session's reference names
+            pred = self.model.predict(self.model.parameters(), obs)
+        res = self._objective(obs).residual(pred, jacobian=False)
         z = res.z
         zp = z - self.Q @ (self.Q.T @ z)
         protos: dict[str, dict[str, Any]] = {}
         for (p, c, sl) in res.blocks:
             ch = obs[p].channels[c]
-            cp = self.pred.protocols[p][c]
+            cp = pred.protocols[p][c]
             m = cp.mask(ch)
             v = np.array(ch.values, float)
             sig = np.broadcast_to(ch.noise, v.shape)
-            v[m] = v[m] + zp[sl] * sig[m]          # pred' − Y = σ z' (no whitening: exact reference)
+            a = np.zeros(v.shape)
+            a[m] = zp[sl]
+            # pred' − Y = σ W⁻¹ z': the residual that whitens to the projected signature
+            v[m] = v[m] + (sig * ch.unwhiten(a, m))[m]
             protos.setdefault(p, {})[c] = ChannelPrediction(v, predicted=cp.predicted)
-        loc = locate(obs, Prediction(protos, inputs=dict(self.pred.inputs)))
+        loc = locate(obs, Prediction(protos, inputs=dict(pred.inputs)))
         return {"raw": float(z @ z), "projected": float(zp @ zp), "cells": _occupied(loc.cells)}
 
 
@@ -893,7 +913,7 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     opts = {"max_effects": (1 if quick else 2) if max_effects is None else int(max_effects),
             "candidates": (2 if quick else 3) if candidates is None else int(candidates)}
     jr = _open_journal(journal, {"model": spec, "free": free, "magnitudes": {m: MAGNITUDES[m] for m in mags},
-                                 "diagnose": opts, "alpha": ALPHA}, say)
+                                 "diagnose": opts, "alpha": ALPHA, "definitions": DEFINITIONS}, say)
     pool = _Pool(parallel, scheduler)
     try:
         cals = _calibrations(pool, [{"spec": spec, "free": free, "effect": n, "workers": workers,

@@ -153,6 +153,18 @@ class Channel:
             c = np.where(m > 0, (1 - 1 / np.sqrt(1 + m)) * s / np.maximum(m, 1), 0.0)
         return np.where(mask, a - c[:, None, :], 0.0)
 
+    def unwhiten(self, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`whiten`: multiply by (I + 11ᵀ)^(1/2) = I + (√(1+m) − 1)/m 11ᵀ
+        along frames (residuals that whiten to ``a``); other channels unchanged."""
+        if not self.is_points or self.reference_frame is None:
+            return a
+        a = np.where(mask, a, 0.0)
+        m = mask.sum(axis=1)
+        s = a.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.where(m > 0, (np.sqrt(1 + m) - 1) * s / np.maximum(m, 1), 0.0)
+        return np.where(mask, a + c[:, None, :], 0.0)
+
     def normalised(self, predicted: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         """``(predicted - values) / noise`` on ``mask`` (default :meth:`fit_mask`), whitened
         along frames (:meth:`whiten`), 0 elsewhere; shape of ``values``."""

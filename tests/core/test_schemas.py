@@ -11,6 +11,7 @@ from skinkit.errors import SchemaError, UnitError
 from skinkit.schemas import (
     CameraModel,
     CameraRig,
+    Channel,
     EffectScore,
     FitResult,
     GapReport,
@@ -195,3 +196,27 @@ def test_gap_report_roundtrip_and_checks():
         EffectScore("x", score=1.0, p_value=2.0)
     with pytest.raises(SchemaError, match="GapReport.extra"):
         GapReport("m", extra={"named": []})
+
+
+def test_unwhiten_inverts_whiten_and_whitening_makes_reference_noise_white():
+    """A track whose reference is its frame 0: residuals over the other m frames share that
+    frame's noise, covariance σ²(I + 11ᵀ); whiten maps them to independent standard normals
+    and unwhiten is its exact inverse (masked entries stay 0)."""
+    rng = np.random.default_rng(3)
+    P, T = 400, 6
+    ref_noise = rng.standard_normal((P, 1, 3))
+    frame_noise = rng.standard_normal((P, T, 3))
+    r = frame_noise - ref_noise                      # what a residual against a noisy reference sees
+    ch = Channel("points", np.arange(T, dtype=float), np.zeros((P, T, 3)), noise=1.0,
+                 reference=np.zeros((P, 3)), reference_frame=0)
+    m = ch.fit_mask()
+    w = ch.whiten(r, m)
+    assert not m[:, 0].any() and np.all(w[:, 0] == 0)
+    cov = np.cov(w[:, 1:, 0].T)                      # (T-1, T-1): white within 4 standard errors
+    assert np.abs(cov - np.eye(T - 1)).max() < 4 * np.sqrt(2 / P)
+    a = rng.standard_normal((P, T, 3))
+    np.testing.assert_allclose(ch.whiten(ch.unwhiten(a, m), m), np.where(m, a, 0.0), atol=1e-12)
+    np.testing.assert_allclose(ch.unwhiten(ch.whiten(a, m), m), np.where(m, a, 0.0), atol=1e-12)
+    exact = Channel("points", np.arange(T, dtype=float), np.zeros((P, T, 3)), noise=1.0,
+                    reference=np.zeros((P, 3)))
+    assert exact.unwhiten(a, exact.fit_mask()) is a

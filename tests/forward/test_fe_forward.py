@@ -259,3 +259,50 @@ def test_instrument_parameters_match_central_differences(forward):
             if scale == 0:
                 continue
             assert np.abs(cp.d[nm] - fd).max() / scale < 2e-5, (nm, proto, c)
+
+
+def test_a_measured_reference_is_distorted_like_every_frame(forward):
+    """A tracker's scale and rotation error distorts the reference frame it measures as much as
+    any other frame: with the reference taken from frame 0, the points are embedded where the
+    undistorted reference puts them, so frame 0 is predicted exactly as recorded (the error
+    leaves only its share of the displacements), and the derivatives — the embedding's share
+    by differences of the interpolated field, step 1e-4 — match whole-prediction central
+    differences. Tolerance 1e-4 of the largest derivative: the embedding's difference step
+    moves a point 0.5 µm, across an element face at worst, where the field's gradient jumps
+    (quadratic elements: C0 only) — a relative error of the step's order."""
+    spec = copy.deepcopy(SPEC)
+    spec.pop("fields")
+    spec["instrument"] = [
+        {"kind": "similarity", "channel": "points", "mode": "scale", "parameter": "trk.scale", "value": 0.02},
+        {"kind": "similarity", "channel": "points", "mode": "rotation", "parameter": "trk.rot",
+         "value": 0.03},
+    ]
+    obs = session("force")
+    po = obs["normal"]
+    ch = po.channels["points"]
+    measured = Channel("points", ch.time_s, ch.values, noise=ch.noise, reference=REF, reference_frame=0)
+    obs = Observations({"normal": ProtocolObservations(po.protocol, {**po.channels, "points": measured})},
+                       None, "measured reference")
+    m = forward(spec)
+    pset = m.parameters()
+    names = ["trk.scale", "trk.rot"]
+    pred = m.predict(pset, obs, sensitivities=names)
+    pts = pred.protocols["normal"]["points"]
+    np.testing.assert_allclose(pts.values[:, 0], REF, atol=1e-12)
+    moved = np.abs(pts.values[:, -1] - REF).max()
+    assert moved > 1e-5                    # the skin did move: frame 0 is not trivially the reference
+    # the error is proportional to the displacement: 2 % of it, turned by 0.03 rad, not 2 % of |X|
+    exact = copy.deepcopy(obs)
+    exact["normal"].channels["points"] = Channel("points", ch.time_s, ch.values, noise=ch.noise,
+                                                 reference=REF)
+    off = m.predict(pset, exact).protocols["normal"]["points"].values
+    assert np.abs(off[:, 0] - REF).max() > 0.01 * np.linalg.norm(REF, axis=1).min()
+    for nm in names:
+        p = pset.param(nm)
+        h = 1e-6
+        up = m.predict(pset.with_values({nm: p.value + h}), obs).protocols["normal"]["points"].values
+        dn = m.predict(pset.with_values({nm: p.value - h}), obs).protocols["normal"]["points"].values
+        fd = (up - dn) / (2 * h)
+        scale = max(np.abs(fd).max(), np.abs(pts.d[nm]).max())
+        assert scale > 0
+        assert np.abs(pts.d[nm] - fd).max() / scale < 1e-4, nm
