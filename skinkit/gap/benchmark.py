@@ -815,9 +815,9 @@ def _open_journal(journal: str | os.PathLike[str] | None, settings: Mapping[str,
 
 
 def _calibrations(pool: _Pool, tasks: Sequence[Mapping[str, Any]], jr: Any,
-                  say: Callable[[str], None]) -> list[dict[str, Any]]:
+                  say: Callable[[str], None], recorded_only: bool = False) -> list[dict[str, Any]]:
     """The calibrations of ``tasks`` (one per effect, in order): from the journal ``jr`` when it
-    holds them, else run on ``pool`` (and recorded)."""
+    holds them, else run on ``pool`` (and recorded) — or left out (``recorded_only``)."""
     def cal_line(c: Mapping[str, Any]) -> None:
         if "skipped" in c:
             say(f"calibrate {c['effect']}: skipped ({c['skipped']})")
@@ -829,17 +829,21 @@ def _calibrations(pool: _Pool, tasks: Sequence[Mapping[str, Any]], jr: Any,
             jr.add_calibration(c)
 
     known = {} if jr is None else jr.calibrations
-    todo = [t for t in tasks if t["effect"] not in known]
+    todo = [] if recorded_only else [t for t in tasks if t["effect"] not in known]
     new = {c["effect"]: c for c in pool.map(calibrate, todo, cal_line)}
-    return [new[t["effect"]] if t["effect"] in new else known[t["effect"]] for t in tasks]
+    return [new[t["effect"]] if t["effect"] in new else known[t["effect"]] for t in tasks
+            if t["effect"] in new or t["effect"] in known]
 
 
 def _run_cases(pool: _Pool, payloads: Sequence[Mapping[str, Any]], jr: Any,
-               say: Callable[[str], None]) -> tuple[list[dict[str, Any]], int]:
+               say: Callable[[str], None], recorded_only: bool = False) -> tuple[list[dict[str, Any]], int]:
     """The records of ``payloads`` in their order, and how many came from the journal ``jr``;
-    the others run on ``pool`` in :func:`execution_order`, each recorded as it finishes."""
+    the others run on ``pool`` in :func:`execution_order`, each recorded as it finishes (or,
+    ``recorded_only``, are left out)."""
     known = {} if jr is None else jr.cases
     before = {p["id"]: known[p["id"]] for p in payloads if p["id"] in known}
+    if recorded_only:
+        return [before[p["id"]] for p in payloads if p["id"] in before], len(before)
     todo = execution_order([p for p in payloads if p["id"] not in before])
     n_done = [len(before)]
 
@@ -862,7 +866,7 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         effects: Sequence[str] | None = None, nulls: int | None = None, pairs: int | None = None,
         magnitudes: Sequence[str] | None = None, parallel: int | None = None,
         max_effects: int | None = None, candidates: int | None = None,
-        journal: str | os.PathLike[str] | None = None) -> dict[str, Any]:
+        journal: str | os.PathLike[str] | None = None, recorded_only: bool = False) -> dict[str, Any]:
     """Run the benchmark and score it (JSON-ready).
 
     ``quick``: the quick run (:data:`QUICK_EFFECTS` that apply and are visible, moderate
@@ -878,8 +882,10 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     default 2 quick, 3 full) go to each :func:`~skinkit.gap.diagnose.diagnose`. ``journal``: a
     file (:mod:`skinkit.gap.journal`) that records each calibration and case as it finishes; the
     ones it already holds are not run again (resuming a stopped run, or adding seeds or null
-    sessions to a finished one). Cases run seed by seed (a stopped run has whole seeds), longest
-    first within a seed, null sessions after the first seed. Keys:
+    sessions to a finished one); ``recorded_only``: run nothing, score the planned cases the
+    journal holds (``planned_cases`` says how many were planned). Cases run seed by seed (a
+    stopped run has whole seeds), longest first within a seed, null sessions after the first
+    seed. Keys:
     ``top1_accuracy``, ``null_false_alarm_rate``, ``localisation_accuracy``,
     ``magnitude_error_median``, ``shrinkage_error_median``, ``confusion``, ``cases`` (the
     records), ``wall_s``, and the details of :func:`score`, ``calibration``, ``skipped``.
@@ -912,17 +918,22 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         workers = 1          # the cases are the parallel unit: one process per FE prediction
     opts = {"max_effects": (1 if quick else 2) if max_effects is None else int(max_effects),
             "candidates": (2 if quick else 3) if candidates is None else int(candidates)}
+    if recorded_only and journal is None:
+        raise BenchmarkError("--recorded-only scores a journal's cases: give --journal FILE")
+    if recorded_only and not Path(journal).is_file():
+        raise BenchmarkError(f"--recorded-only: journal {journal} does not exist")
     jr = _open_journal(journal, {"model": spec, "free": free, "magnitudes": {m: MAGNITUDES[m] for m in mags},
                                  "diagnose": opts, "alpha": ALPHA, "definitions": DEFINITIONS}, say)
-    pool = _Pool(parallel, scheduler)
+    pool = _Pool(1, None) if recorded_only else _Pool(parallel, scheduler)
     try:
         cals = _calibrations(pool, [{"spec": spec, "free": free, "effect": n, "workers": workers,
-                                     "magnitudes": {m: MAGNITUDES[m] for m in mags}} for n in names], jr, say)
+                                     "magnitudes": {m: MAGNITUDES[m] for m in mags}} for n in names], jr, say,
+                             recorded_only)
         cases = plan(cals, magnitudes=mags, seeds=seeds, nulls=nulls, pairs=pairs)
         if not any(c["kind"] != "null" for c in cases) and names:
             say("no effect is visible on these protocols: only null sessions run")
         payloads = [dict(c, spec=spec, free=free, workers=workers, diagnose=opts) for c in cases]
-        records, n_resumed = _run_cases(pool, payloads, jr, say)
+        records, n_resumed = _run_cases(pool, payloads, jr, say, recorded_only)
     finally:
         pool.close()
         release()
@@ -933,7 +944,7 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
                 "calibration": {c["effect"]: c for c in cals},
                 "skipped": {c["effect"]: c["skipped"] for c in cals if "skipped" in c},
                 "cases": records, "wall_s": time.perf_counter() - t0,
-                "resumed_cases": n_resumed})
+                "resumed_cases": n_resumed, "planned_cases": len(payloads)})
     return out
 
 
@@ -948,7 +959,8 @@ def _summary_lines(res: Mapping[str, Any]) -> list[str]:
     def num(x: Any) -> str:
         return "-" if x is None else f"{100 * x:.1f} %"
 
-    lines = [f"model {res['model']} ({res['kind']}), {len(res['cases'])} cases, {res['wall_s'] / 60:.1f} min",
+    lines = [f"model {res['model']} ({res['kind']}), {len(res['cases'])} of {res['planned_cases']} planned "
+             f"cases, {res['wall_s'] / 60:.1f} min",
              f"top-1 attribution (separable, moderate): {pct(res['top1'])}",
              f"truth in the reported set (not separable, moderate): "
              f"{pct(res['by_magnitude']['moderate']['in_reported_set'])}",
@@ -996,11 +1008,14 @@ def _names(text: str | None) -> list[str] | None:
 @click.option("--journal", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="record each finished case in FILE (JSON lines) and skip the cases it already "
               "holds: resume a stopped run, or add seeds or null sessions to a finished one")
+@click.option("--recorded-only", is_flag=True, help="run nothing: score the cases the --journal holds "
+              "(a run under way or stopped)")
 def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, effects: str | None,
-              model: str, nulls: int | None, parallel: int, journal: str | None) -> None:
+              model: str, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool) -> None:
     """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
     res = run(quick, scheduler=scheduler, seeds=seeds, progress=lambda s: click.echo(s, err=True),
-              model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal)
+              model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal,
+              recorded_only=recorded_only)
     if as_json:
         click.echo(json.dumps(res, indent=1, default=float))
         return

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from skinkit.gap.benchmark import execution_order, run
+from skinkit.gap.benchmark import BenchmarkError, execution_order, run
 from skinkit.gap.journal import Journal, JournalError
 
 pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("gap_benchmark")]
@@ -52,6 +52,21 @@ def test_an_extended_run_reruns_nothing_recorded(first: tuple[Path, dict], tmp_p
     assert recs[0]["journal"] == "skinkit gap benchmark"
     assert sorted(r["case"]["id"] for r in recs if "case" in r) == ["force-drift/moderate/0", "null/1000",
                                                                      "null/1001"]
+
+
+def test_recorded_only_scores_the_journal_and_runs_nothing(first: tuple[Path, dict]) -> None:
+    path, res1 = first
+    size = path.stat().st_size
+    lines: list[str] = []
+    res = _run(path, nulls=5, lines=lines, recorded_only=True)
+    assert path.stat().st_size == size and not any(s.startswith(("case ", "calibrate")) for s in lines)
+    assert res["planned_cases"] == 6 and len(res["cases"]) == 2
+    assert res["null_false_alarm_rate"] == res1["null_false_alarm_rate"]
+    assert res["top1_accuracy"] == res1["top1_accuracy"]
+    with pytest.raises(BenchmarkError, match="--journal"):
+        run(False, model="lumped", recorded_only=True)
+    with pytest.raises(BenchmarkError, match="does not exist"):
+        run(False, model="lumped", recorded_only=True, journal=path.parent / "none.jsonl")
 
 
 def test_other_settings_or_another_file_are_refused(first: tuple[Path, dict], tmp_path: Path) -> None:
