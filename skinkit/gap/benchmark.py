@@ -16,7 +16,8 @@ sensitivities to its free parameters at the truth, and S(s) = |(I − J J⁺) z(
 χ² test's critical excess at α = 0.05, E = χ²₁₋α(ν) − ν (ν samples less free parameters); a
 magnitude is the scale s at which S(s) = k · E, with k = 2 ("near the detection limit") and
 k = 30 ("moderate"), found from S(1) (s = √(kE/S(1)), since S grows as s²) and refined by
-up to two secant steps on the real (non-linear) truth. s is capped where a parameter meets its
+up to :data:`CALIBRATION_STEPS` steps on the real (non-linear) truth, each with the growth
+exponent of S measured from the last two truths. s is capped where a parameter meets its
 admissible bound; an effect whose S stays below E there is *not visible* on these protocols
 (or is absorbed by the model's own parameters, e.g. a force offset when the model fits one)
 and is left out, with the reason, under ``skipped``.
@@ -64,6 +65,8 @@ _DOCS = Path(__file__).resolve().parents[2] / "docs" / "models"
 MAGNITUDES = {"near": 2.0, "moderate": 30.0}
 #: level of the global χ² test whose critical excess is the detection threshold
 ALPHA = 0.05
+#: truths solved at most per magnitude to bring its signature within 20 % of the target
+CALIBRATION_STEPS = 6
 #: share of a partition's signature that its occupied cells hold
 OCCUPIED_SHARE = 0.75
 #: axes on which localisation is judged
@@ -383,14 +386,23 @@ def _calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
     for label, k in payload["magnitudes"].items():
         target = k * crit
         s, got = s1, first
-        for _ in range(3):          # S ∝ s² to first order; secant-like refinements on the real truth
+        prev: tuple[float, float] | None = None
+        for _ in range(CALIBRATION_STEPS):
             if got["projected"] <= 0:
                 break
             if abs(got["projected"] / target - 1) < 0.2:
                 break
-            s_new = min(s * math.sqrt(target / got["projected"]), s_max)
+            # S ∝ s^p: p = 2 to first order, then the slope in log-log of the last two truths
+            # (an effect whose signature saturates, e.g. a support going from fixed to soft,
+            # has p well below 2 and the s² rule alone would not reach its target)
+            p = 2.0
+            if prev is not None and prev[1] > 0 and prev[0] != s:
+                slope = math.log(got["projected"] / prev[1]) / math.log(s / prev[0])
+                p = min(max(slope, 0.25), 4.0)
+            s_new = min(s * (target / got["projected"]) ** (1 / p), s_max)
             if s_new == s:
                 break
+            prev = (s, got["projected"])
             s = s_new
             try:
                 got = sig(s)
