@@ -13,7 +13,7 @@ TEST_REQS  := -e ".[fast,test,dev,bench,cluster]" -e ./plugins -e ./hardware
 INSTALL = if [ -x $(BIN)/uv ]; then $(BIN)/uv pip install --python $(BIN)/python $(1); \
           else $(BIN)/python -m pip install --progress-bar on $(1); fi
 
-.PHONY: venv venv-test demo test lint tox clean
+.PHONY: venv venv-test demo test test-gap-quick lint tox clean
 
 venv: $(RUN_STAMP)
 venv-test: $(TEST_STAMP)
@@ -39,6 +39,10 @@ demo: venv
 
 test: venv-test
 	$(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+
+# the quick FE gap benchmark (~9 min on 2 cores) and its figures: not in the default suite
+test-gap-quick: venv-test
+	SKINKIT_GAP_QUICK=1 $(BIN)/python -m pytest -q tests/gap/test_benchmark_quick.py
 
 lint: venv-test
 	$(BIN)/ruff check skinkit plugins hardware tests

@@ -629,6 +629,17 @@ def assess(rec: Mapping[str, Any]) -> dict[str, Any]:
     separable = (len(reported) <= 1) if first else not (true_cand.get("not_separable_from") or [])
     out["separable"] = separable
     out["reported_set"] = reported
+    orc, c2 = rec.get("oracle"), rep.get("chi2") or {}
+    if orc and c2.get("before") is not None:
+        # what the true structure gains over the fitted model on this session: when not even
+        # the oracle's refit improves χ² beyond noise, the session does not show the effect (the
+        # model's own parameters express it), and no diagnosis could attribute it
+        from scipy.stats import chi2 as chi2_dist
+
+        k = int(round(float(c2["dof_before"]) - float(orc["dof"])))
+        gain = float(c2["before"]) - float(orc["chi2"])
+        out["oracle_gain"] = {"chi2": gain, "dof": k}
+        out["visible"] = not (k > 0 and gain <= float(chi2_dist.ppf(1 - ALPHA, k)))
     if rec["kind"] == "effect":
         out["top1"] = first == truth[0]
         out["in_set"] = truth[0] in reported and len(reported) <= 2
@@ -689,8 +700,9 @@ def score(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         row[got] = row.get(got, 0) + 1
 
     def pick(kind: str, magnitude: str | None = None) -> list[tuple[Mapping[str, Any], dict[str, Any]]]:
+        # cases whose session did not show the effect (``visible`` false) are counted apart
         return [(r, v) for r, v in zip(records, verdicts, strict=True)
-                if r["kind"] == kind and not v.get("failed")
+                if r["kind"] == kind and not v.get("failed") and v.get("visible", True)
                 and (magnitude is None or r["magnitude"] == magnitude)]
 
     out: dict[str, Any] = {}
@@ -733,6 +745,9 @@ def score(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     out["shrinkage_errors"].update(unclipped_median=float(np.median(shr_u)) if shr_u else None,
                                    unclipped_max=float(np.max(shr_u)) if shr_u else None)
     out["confusion"] = confusion
+    out["not_visible"] = [{"id": r["id"], "named": v["named"], "oracle_gain": v["oracle_gain"]}
+                          for r, v in zip(records, verdicts, strict=True)
+                          if not v.get("failed") and v.get("visible") is False]
     walls = [r["wall_s"] for r in records]
     out["case_wall_s"] = {"median": float(np.median(walls)) if walls else None,
                           "max": float(np.max(walls)) if walls else None}
@@ -1006,6 +1021,11 @@ def _summary_lines(res: Mapping[str, Any]) -> list[str]:
                      f"{pct(res['by_magnitude']['near']['named_any'])}")
     for e, why in res["skipped"].items():
         lines.append(f"skipped {e}: {why}")
+    for c in res.get("not_visible", []):
+        g = c["oracle_gain"]
+        lines.append(f"not counted {c['id']}: the session does not show it (the true structure's refit gains "
+                     f"χ² {g['chi2']:.3g} on {g['dof']} parameters, within noise); named "
+                     f"{', '.join(c['named']) or 'none'}")
     lines.append("confusion (true -> named):")
     for t, row in sorted(res["confusion"].items()):
         ranked = sorted(row.items(), key=lambda kv: -kv[1])

@@ -106,3 +106,29 @@ def test_bad_inputs() -> None:
         run(True, model="lumped", effects=["prestress"], parallel=1)
     with pytest.raises(BenchmarkError, match="--model"):
         run(True, model="no/such/model.toml", parallel=1)
+
+
+def _record(case_id: str, named: list[str], before: float, oracle: float, extra: int) -> dict:
+    """A case record as :func:`run_case` writes it, reduced to what scoring reads."""
+    nu = 10_000
+    return {"id": case_id, "kind": "effect", "magnitude": "moderate", "seed": 0, "truth": ["viscoelastic"],
+            "truth_parameters": {"viscoelastic.g1": 0.4, "viscoelastic.tau1": 2.0}, "true_cells": {},
+            "report": {"named": named, "candidates": [], "gap": {"cells": []},
+                       "chi2": {"before": before, "dof_before": nu, "after": before, "dof_after": nu}},
+            "oracle": {"chi2": oracle, "dof": nu - extra, "estimates": {}}, "wall_s": 1.0}
+
+
+def test_a_session_that_does_not_show_its_effect_is_counted_apart() -> None:
+    """When not even a refit with the true structure improves χ² beyond noise (the likelihood-
+    ratio statistic within χ²₀.₉₅ of the added parameters: 5.99 for 2), the session does not show
+    the effect — the model's own parameters express it — and it is not an attribution miss."""
+    from skinkit.gap.benchmark import assess, score
+
+    hidden = _record("viscoelastic/moderate/0", [], before=10_050.0, oracle=10_047.5, extra=2)
+    shown = _record("viscoelastic/moderate/1", [], before=40_000.0, oracle=10_010.0, extra=2)
+    assert assess(hidden)["visible"] is False
+    assert assess(shown)["visible"] is True
+    res = score([hidden, shown])
+    assert res["top1"] == {**res["top1"], "k": 0, "n": 1}
+    assert [c["id"] for c in res["not_visible"]] == ["viscoelastic/moderate/0"]
+    assert res["not_visible"][0]["oracle_gain"] == {"chi2": pytest.approx(2.5), "dof": 2}
