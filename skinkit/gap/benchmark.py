@@ -416,12 +416,31 @@ def _calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
                               f"(noise units²), stays below the detection threshold {crit:.3g} "
                               f"up to scale {s:.3g}")
             return out
+        # the projection is a linearised fit: an effect the model's own parameters express
+        # exactly but non-linearly (a second Prony term at the skin's own τ) still leaves its
+        # curvature there, so a real fit to the noiseless truth has the last word
+        fitted = _fitted_excess(payload, effect_at(name, s))
+        if fitted < crit:
+            out["skipped"] = (f"absorbed: a fit of the model to the noiseless truth at scale {s:.3g} leaves "
+                              f"{fitted:.3g} (noise units²), below the detection threshold {crit:.3g} "
+                              f"(the linearised signature, {got['projected']:.3g}, is curvature the model's "
+                              "own parameters take up)")
+            return out
         out["magnitudes"][label] = {"scale": s, "effect": effect_at(name, s), "target": target,
-                                    "raw": got["raw"], "projected": got["projected"],
+                                    "raw": got["raw"], "projected": got["projected"], "fitted": fitted,
                                     "multiple": got["projected"] / crit, "capped": s >= s_max,
                                     "cells": got["cells"]}
     out["wall_s"] = time.perf_counter() - t0
     return out
+
+
+def _fitted_excess(payload: Mapping[str, Any], effect: Mapping[str, Any]) -> float:
+    """χ² (noise units²) the model without the effect leaves when fitted (its free parameters,
+    from the truth's values) to the noiseless truth with ``effect``: the excess a session would
+    show at most, beyond noise."""
+    obs = _noiseless(_lab(_with_effects(payload["spec"], [effect])))
+    free = payload["free"] if payload["free"] is not None else _base(payload["spec"], None).free
+    return _oracle(_lab(payload["spec"]), obs, free, [], payload.get("workers"))["chi2"]
 
 
 # -- one case -----------------------------------------------------------------------------------

@@ -62,6 +62,8 @@ def test_magnitudes_meet_their_target(result: dict) -> None:
     for e in EFFECTS:
         m = result["calibration"][e]["magnitudes"]["moderate"]
         assert m["capped"] or abs(m["multiple"] / MAGNITUDES["moderate"] - 1) < 0.2
+        # a real fit to the noiseless truth leaves at least the detection threshold (else skipped)
+        assert m["fitted"] >= result["calibration"][e]["critical_excess"]
 
 
 def test_null_sessions_rarely_name(result: dict) -> None:
