@@ -42,7 +42,7 @@ test: venv-test
 
 # the quick FE gap benchmark (~9 min on 2 cores) and its figures: not in the default suite
 test-gap-quick: venv-test
-	SKINKIT_GAP_QUICK=1 $(BIN)/python -m pytest -q tests/gap/test_benchmark_quick.py
+	SKINKIT_GAP_QUICK=1 $(BIN)/python -m pytest -q -s tests/gap/test_benchmark_quick.py
 
 lint: venv-test
 	$(BIN)/ruff check skinkit plugins hardware tests

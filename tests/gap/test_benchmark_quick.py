@@ -38,6 +38,7 @@ def quick(tmp_path_factory: pytest.TempPathFactory) -> dict:
     out = subprocess.run([exe, "gap", "benchmark", "--quick", "--json"], capture_output=True, text=True,
                          cwd=tmp_path_factory.mktemp("quick"), check=False)
     assert out.returncode == 0, out.stderr[-3000:]
+    print(out.stderr)          # the run's summary (``-s`` shows it)
     return json.loads(out.stdout)
 
 
