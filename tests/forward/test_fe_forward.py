@@ -329,7 +329,8 @@ def test_a_measured_reference_is_the_origin_of_every_predicted_frame(forward):
 
     def observe(values, reference, frame):
         c = Channel("points", ch.time_s, values, noise=5e-6, reference=reference, reference_frame=frame)
-        o = Observations({"normal": ProtocolObservations(po.protocol, {**po.channels, "points": c})}, None, "t")
+        protocol = ProtocolObservations(po.protocol, {**po.channels, "points": c})
+        o = Observations({"normal": protocol}, None, "t")
         return o, m.predict(m.parameters(), o).protocols["normal"]["points"].values
 
     _, exact = observe(np.repeat(grid[:, None], ch.time_s.size, 1), grid, None)
