@@ -419,7 +419,7 @@ def _calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
         # the projection is a linearised fit: an effect the model's own parameters express
         # exactly but non-linearly (a second Prony term at the skin's own τ) still leaves its
         # curvature there, so a real fit to the noiseless truth has the last word
-        fitted = _fitted_excess(payload, effect_at(name, s))
+        fitted = _fitted_excess(base, payload, effect_at(name, s))
         if fitted < crit:
             out["skipped"] = (f"absorbed: a fit of the model to the noiseless truth at scale {s:.3g} leaves "
                               f"{fitted:.3g} (noise units²), below the detection threshold {crit:.3g} "
@@ -434,13 +434,12 @@ def _calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _fitted_excess(payload: Mapping[str, Any], effect: Mapping[str, Any]) -> float:
-    """χ² (noise units²) the model without the effect leaves when fitted (its free parameters,
-    from the truth's values) to the noiseless truth with ``effect``: the excess a session would
-    show at most, beyond noise."""
+def _fitted_excess(base: _Base, payload: Mapping[str, Any], effect: Mapping[str, Any]) -> float:
+    """χ² (noise units²) the model without the effect (``base``: its lab and free parameters)
+    leaves when fitted, from the truth's values, to the noiseless truth with ``effect``: the
+    excess a session would show at most, beyond noise."""
     obs = _noiseless(_lab(_with_effects(payload["spec"], [effect])))
-    free = payload["free"] if payload["free"] is not None else _base(payload["spec"], None).free
-    return _oracle(_lab(payload["spec"]), obs, free, [], payload.get("workers"))["chi2"]
+    return _oracle(base.lab, obs, base.free, [], payload.get("workers"))["chi2"]
 
 
 # -- one case -----------------------------------------------------------------------------------

@@ -18,10 +18,8 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -34,9 +32,8 @@ pytestmark = [
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    exe = shutil.which("skinkit") or str(Path(sys.executable).with_name("skinkit"))
-    out = subprocess.run([exe, "gap", "benchmark", "--quick", "--json"], capture_output=True, text=True,
-                         cwd=tmp_path_factory.mktemp("quick"), check=False)
+    out = subprocess.run([sys.executable, "-m", "skinkit", "gap", "benchmark", "--quick", "--json"],
+                         capture_output=True, text=True, cwd=tmp_path_factory.mktemp("quick"), check=False)
     assert out.returncode == 0, out.stderr[-3000:]
     print(out.stderr)          # the run's summary (``-s`` shows it)
     return json.loads(out.stdout)
