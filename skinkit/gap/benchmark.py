@@ -531,7 +531,7 @@ def _slim(rep: Mapping[str, Any]) -> dict[str, Any]:
             for c in cells if c.get("significant")]
     return {"named": list(rep.get("named", []) or []), "fit": rep.get("fit", {}),
             "gap": {"significant": gap.get("significant"), "chi2_per_dof": gap.get("chi2_per_dof"),
-                    "cells": keep},
+                    "cells": keep, "gate": gap.get("gate")},
             "candidates": rep.get("candidates", []), "chi2": rep.get("chi2", {}),
             "shrinkage": {k: v for k, v in (rep.get("shrinkage") or {}).items() if k != "cells"},
             "rounds": [{"named": r.get("named"), "candidates": r.get("candidates", [])}
@@ -640,6 +640,7 @@ def assess(rec: Mapping[str, Any]) -> dict[str, Any]:
     out["named"] = named
     if not truth:
         out["false_alarm"] = bool(named)
+        out["gap_significant"] = bool((rep.get("gap") or {}).get("significant"))
         return out
     first = named[0] if named else None
     reported = [first, *((_candidate(rep, first) or {}).get("not_separable_from") or [])] if first else []
@@ -742,6 +743,8 @@ def score(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     fa = _rate(sum(v["false_alarm"] for _, v in nulls), len(nulls))
     out["null_false_alarm_rate"] = fa["rate"]
     out["null_false_alarm"] = fa
+    # the report's "significant gap" on sessions the model describes: its gate's level, ALPHA
+    out["null_gap_significant"] = _rate(sum(v.get("gap_significant", False) for _, v in nulls), len(nulls))
     pairs = pick("pair")
     out["pairs"] = {"both_named": _rate(sum(v["all_named"] for _, v in pairs), len(pairs)),
                     "one_named": _rate(sum(v["any_named"] for _, v in pairs), len(pairs))}
@@ -1027,6 +1030,8 @@ def _summary_lines(res: Mapping[str, Any]) -> list[str]:
              f"truth in the reported set (not separable, moderate): "
              f"{pct(res['by_magnitude']['moderate']['in_reported_set'])}",
              f"false alarms on null sessions: {pct(res['null_false_alarm'])}",
+             f"'significant gap' on null sessions (level {100 * res['alpha']:.0f} %): "
+             f"{pct(res.get('null_gap_significant') or {'n': 0})}",
              f"localisation: {pct(res['localisation'])}",
              f"magnitude error (median |relative|, moderate): {num(res['magnitude_error_median'])}",
              f"shrinkage error vs oracle (median |relative|, moderate): {num(res['shrinkage_error_median'])}"

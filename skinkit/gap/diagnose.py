@@ -11,7 +11,10 @@ held-out protocols stay out of the fit), then in rounds:
    the effect added (its parameters free, started a linearised step from the null) and compared
    by AIC and held-out error. An effect is **named** only when all of these hold:
 
-   * the gap is significant (step 1's global test);
+   * the gap is significant: the residual's family (step 1: the whole residual and every cell,
+     Holm) or the score tests' family (the best candidate's p·K) rejects, each at α/2, so that
+     on a session the model describes "significant gap" is said in at most α of sessions
+     (the two families at α each would allow 2α; measured 5 of 60 null sessions so);
    * its score test survives the correction over the K effects tested (p·K < α);
    * its refit lowers the AIC by more than :data:`AIC_MARGIN` (10: Burnham & Anderson's
      "essentially no support" for the worse model; for one added parameter under the null the
@@ -48,6 +51,7 @@ from skinkit.gap.score import (
     Sensitivities,
     collect,
     corrected,
+    directed_p,
     effect_table,
     separability,
     separating_protocol,
@@ -406,6 +410,9 @@ def _round(run: _Run, rnd: int) -> bool:
         run.rounds.append(entry)
         return False
     sens, tests, ok, mesh_only, top = _score(run, spec_r, values)
+    gate = _gate(loc, tests, run.alpha)
+    if not gate["significant"]:
+        top = []             # nothing will be named: no refit
     seps = separability(sens, tests, run.alpha, [t.effect for t in top])
     states = _refit_top(run, top, values, sens, entry)
     records = [_candidate(t, ok[t.effect], states.get(t.effect), current) for t in tests]
@@ -415,7 +422,7 @@ def _round(run: _Run, rnd: int) -> bool:
     entry["candidates"] = [c.to_dict() for c in records]
     entry["skipped"] = sens.skipped
     entry["notes"] = sens.notes
-    winner, reasons = _choose(run, entry, loc, tests, ok, records, states, rnd)
+    winner, reasons = _choose(run, entry, gate, tests, ok, records, states, rnd)
     for e in mesh_only:
         reasons[e] = ("what it would explain is the mesh's discretisation error (its score test fails "
                       "once that signature is projected out): refine the mesh (skinkit convergence)")
@@ -494,22 +501,22 @@ def _separate(run: _Run, seps: Sequence[dict[str, Any]], records: Sequence[Effec
         run.separation.append(sp_out)
 
 
-def _choose(run: _Run, entry: dict[str, Any], loc: Any, tests: Sequence[ScoreTest], ok: Mapping[str, bool],
-            records: Sequence[EffectScore], states: Mapping[str, dict[str, Any]], rnd: int
-            ) -> tuple[EffectScore | None, dict[str, str]]:
-    """The round's verdict: whether there is a gap (recorded in ``entry``), the refitted candidate
-    that qualifies with the lowest AIC (or None), and why each other refitted one does not."""
+def _choose(run: _Run, entry: dict[str, Any], gate: Mapping[str, Any], tests: Sequence[ScoreTest],
+            ok: Mapping[str, bool], records: Sequence[EffectScore], states: Mapping[str, dict[str, Any]],
+            rnd: int) -> tuple[EffectScore | None, dict[str, str]]:
+    """The round's verdict: whether there is a gap (``gate``, :func:`_gate`; recorded in
+    ``entry``), the refitted candidate that qualifies with the lowest AIC (or None), and why each
+    other refitted one does not."""
     reasons: dict[str, str] = {}
     winner = None
-    # a gap: the residual as a whole, or one of its cells, or along a candidate's signature
-    # (the score test is the more powerful test against that alternative); each at level alpha
-    directed = [t.effect for t in tests if ok[t.effect]]
-    gap_sig = bool(loc.significant or any(c.significant for c in loc.cells) or directed)
+    gap_sig = gate["significant"]
+    directed = [t.effect for t in tests if ok[t.effect]] if gap_sig else []
     entry["gap_significant"] = gap_sig
     entry["directed"] = directed
+    entry["gate"] = gate
     if rnd == 0:
-        run.gap0 = {"significant": gap_sig, "omnibus_significant": bool(loc.significant),
-                    "directed": directed}
+        run.gap0 = {"significant": gap_sig, "omnibus_significant": gate["omnibus"], "directed": directed,
+                    "gate": gate}
     if gap_sig:
         for c in records:
             if c.effect not in states:
@@ -520,6 +527,25 @@ def _choose(run: _Run, entry: dict[str, Any], loc: Any, tests: Sequence[ScoreTes
             elif winner is None or c.delta_aic < winner.delta_aic:
                 winner = c
     return winner, reasons
+
+
+def _gate(loc: Any, tests: Sequence[ScoreTest], alpha: float) -> dict[str, Any]:
+    """Whether there is a gap at family-wise level ``alpha``: in the residual as a whole or one of
+    its cells (one Holm family, p-value ``loc.family_p``), or along a candidate's signature (the
+    score test is the more powerful test against that alternative; :func:`directed_p`) — two
+    families, each at ``alpha``/2 (Bonferroni). When there is none, the located cells lose their
+    flags, so that a report never shows a significant cell beside "no significant gap" (a cell
+    claims its place only once the gate has opened: gatekeeping keeps the family-wise level)."""
+    half = alpha / 2
+    omnibus_p, score_p = float(loc.family_p), directed_p(tests)
+    omnibus = bool(omnibus_p <= half)
+    significant = omnibus or bool(score_p <= half)
+    if not significant:
+        loc.significant = False
+        for c in loc.cells:
+            c.significant = False
+    return {"significant": significant, "omnibus": omnibus, "omnibus_p": omnibus_p, "score_p": score_p,
+            "level": alpha, "each": half}
 
 
 def _name(run: _Run, winner: EffectScore, st: dict[str, Any], rnd: int) -> bool:

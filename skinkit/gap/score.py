@@ -466,6 +466,15 @@ def corrected(tests: Sequence[ScoreTest], alpha: float) -> dict[str, bool]:
             for t in tests}
 
 
+def directed_p(tests: Sequence[ScoreTest]) -> float:
+    """The score tests' family p-value: the smallest Bonferroni-adjusted p (p·K over the K
+    effects with a signature), so that :func:`corrected` at level α names some effect exactly
+    when it is ≤ α; 1 when no test has a positive statistic."""
+    K = max(sum(1 for t in tests if t.dof > 0), 1)
+    logs = [t.log_p + math.log(K) for t in tests if t.dof > 0 and t.statistic > 0]
+    return float(min(1.0, math.exp(min(logs)))) if logs else 1.0
+
+
 def cosine(a: np.ndarray, b: np.ndarray) -> float | None:
     """|cos| of the angle between two signatures (None if either is zero)."""
     na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
@@ -566,5 +575,5 @@ def separating_protocol(spec: Mapping[str, Any], observations: Observations, val
 
 
 __all__ = ["COS_NOT_SEPARABLE", "EffectColumns", "ScoreTest", "Sensitivities", "collect", "conditional_test",
-           "corrected", "cosine", "effect_table", "fitted_basis", "score_all", "score_test", "separability",
-           "separating_protocol", "with_effects"]
+           "corrected", "cosine", "directed_p", "effect_table", "fitted_basis", "score_all", "score_test",
+           "separability", "separating_protocol", "with_effects"]

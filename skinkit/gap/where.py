@@ -88,6 +88,9 @@ class GapLocation:
     ``point_map``: protocol -> ``(P,)`` χ²/dof per tracked point (NaN where unobserved).
     ``whiteness`` / ``cross_correlation``: ``"<protocol>/<channel>"`` -> test figures.
     ``input_band``: protocol -> ``(f_lo, f_hi)`` [Hz] holding 95 % of the drive's power.
+    ``family_p``: the family's p-value — the smallest ``alpha`` at which ``significant`` would
+    hold (the smallest Holm-adjusted p of a member above its dof), for a caller that combines
+    this family with other tests.
     """
 
     chi2: float
@@ -101,6 +104,7 @@ class GapLocation:
     cross_correlation: dict[str, dict] = field(default_factory=dict)
     noise_dof: float = float("inf")
     input_band: dict[str, tuple[float, float]] = field(default_factory=dict)
+    family_p: float = float("nan")
 
     def ranked(self) -> list[Cell]:
         """The significant cells, largest share of their partition's excess first."""
@@ -114,7 +118,7 @@ class GapLocation:
         """JSON-ready (NaN and inf become None)."""
         return {"chi2": self.chi2, "dof": self.dof, "chi2_per_dof": self.chi2_per_dof,
                 "p_value": self.p_value, "significant": bool(self.significant),
-                "noise_dof": _json_float(self.noise_dof),
+                "family_p": _json_float(self.family_p), "noise_dof": _json_float(self.noise_dof),
                 "cells": [c.to_dict() for c in self.cells],
                 "point_map": {k: [_json_float(x) for x in v] for k, v in self.point_map.items()},
                 "whiteness": {k: {a: _json_float(b) for a, b in v.items()}
@@ -548,22 +552,30 @@ def _p_values(chi2: np.ndarray, dof: np.ndarray, scale: np.ndarray,
     return p, pf
 
 
-def holm(p: np.ndarray, alpha: float) -> np.ndarray:
-    """Holm–Bonferroni rejections of the p-values ``p`` (NaN: never) at family-wise level ``alpha``."""
-    p = np.where(np.isfinite(p), p, 1.0)
+def holm_adjusted(p: np.ndarray) -> np.ndarray:
+    """Holm-adjusted p-values of ``p`` (NaN counts as 1): member i is rejected at family-wise
+    level α exactly when its adjusted value is ≤ α, so the smallest adjusted value over a set of
+    members is the family's p-value for "at least one of them"."""
+    p = np.where(np.isfinite(p), np.asarray(p, float), 1.0)
     K = p.size
     order = np.argsort(p, kind="stable")
-    ok = p[order] <= alpha / (K - np.arange(K))
-    k = K if ok.all() else int(np.argmin(ok))
-    out = np.zeros(K, bool)
-    out[order[:k]] = True
+    adj = np.minimum(np.maximum.accumulate(p[order] * (K - np.arange(K))), 1.0)
+    out = np.empty(K)
+    out[order] = adj
     return out
 
 
+def holm(p: np.ndarray, alpha: float) -> np.ndarray:
+    """Holm–Bonferroni rejections of the p-values ``p`` (NaN: never) at family-wise level ``alpha``."""
+    ok = holm_adjusted(p) <= alpha
+    return ok & np.isfinite(np.asarray(p, float))
+
+
 def _cells(table: _Table, n_params: int, alpha: float,
-           whole: tuple[float, float, float]) -> tuple[list[Cell], bool]:
-    """Every cell, tested; and whether the whole residual's test ``whole`` = (χ², dof, p) is
-    rejected, as one more member of the same Holm family."""
+           whole: tuple[float, float, float]) -> tuple[list[Cell], bool, float]:
+    """Every cell, tested; whether the whole residual's test ``whole`` = (χ², dof, p) is
+    rejected, as one more member of the same Holm family; and the family's p-value (the
+    smallest Holm-adjusted p of a member above its dof: 1 when none is)."""
     cells, pfs = [], []
     for part in table.partitions():
         n = part.nmat.sum(axis=1)
@@ -584,10 +596,14 @@ def _cells(table: _Table, n_params: int, alpha: float,
                               float(chi2[j] / dof[j]) if dof[j] > 0 else float("nan"), float(p[j]), False,
                               float(share[j]), int(round(n[j])), part.name, float(ndof[j])))
         pfs.append(pf)
-    sig = holm(np.concatenate([[whole[2]], *pfs]), alpha)
+    pall = np.concatenate([[whole[2]], *pfs])
+    adj = holm_adjusted(pall)
+    sig = (adj <= alpha) & np.isfinite(pall)
+    above = np.array([whole[0] > whole[1]] + [c.chi2 > c.dof for c in cells])
     for c, s in zip(cells, sig[1:], strict=True):
         c.significant = bool(s) and c.chi2 > c.dof
-    return cells, bool(sig[0]) and whole[0] > whole[1]
+    family_p = float(adj[above].min()) if above.any() else 1.0
+    return cells, bool(sig[0]) and whole[0] > whole[1], family_p
 
 
 def _ljung_box(full: np.ndarray, mask: np.ndarray, ax: int, h: int) -> tuple[float, float]:
@@ -731,12 +747,12 @@ def _locate(observations: Observations, prediction: Prediction, n_params: int, a
     p, pf = _p_values(np.array([chi2]), np.array([dof]), scale, ndof)
     white, cross = _series_tests(ss, alpha)
     bands = {s.protocol: s.drive.band for s in ss if s.drive is not None}
-    cells, whole = _cells(table, n_params, alpha, (chi2, dof, float(pf[0])))
+    cells, whole, family_p = _cells(table, n_params, alpha, (chi2, dof, float(pf[0])))
     # a gap: the whole residual or any cell, one Holm family, so that pure noise raises at most
     # alpha false alarms whichever the reader looks at
     gap = whole or any(c.significant for c in cells)
     return GapLocation(chi2, dof, chi2 / dof, float(p[0]), gap, cells, _point_map(ss, n_params, table.N),
-                       white, cross, float(ndof[0]), bands)
+                       white, cross, float(ndof[0]), bands, family_p)
 
 
 def cell_chi2(observations: Observations, prediction: Prediction, cells: Sequence[tuple[str, str]],
@@ -760,4 +776,4 @@ def cell_chi2(observations: Observations, prediction: Prediction, cells: Sequenc
 
 
 __all__ = ["AXES", "BANDS", "CYCLES", "PHASES", "Cell", "Drive", "GapLocation", "Samples", "cell_chi2",
-           "holm", "locate", "make_drive", "noise_dof", "samples"]
+           "holm", "holm_adjusted", "locate", "make_drive", "noise_dof", "samples"]

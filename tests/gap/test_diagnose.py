@@ -10,6 +10,7 @@ sessions). One small finite-element case runs the whole path end to end.
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
 import pytest
@@ -170,3 +171,32 @@ def _lab_fe(spec, effect):
     truth = copy.deepcopy(spec)
     truth["effects"] = [effect]
     return LabSessions(truth)
+
+
+def _score_test(effect: str, p: float, K_dof: int = 1):
+    from skinkit.gap.score import ScoreTest
+
+    return ScoreTest(effect, 10.0, K_dof, p, math.log(p), {}, np.zeros(1), ["x"], {}, [], {}, False)
+
+
+def test_the_gap_gate_is_one_level_over_both_families():
+    """"Significant gap" is the union of the residual's family (whole + cells, Holm) and the score
+    tests' family (Bonferroni over the K candidates): each at α/2, so the union is at α on a
+    session the model describes. A p-value between α/2 and α in either family alone leaves it
+    closed, and then no located cell is shown significant."""
+    from skinkit.gap.diagnose import _gate
+    from skinkit.gap.where import Cell, GapLocation
+
+    def loc(family_p: float) -> GapLocation:
+        cells = [Cell("protocol", "a", 130.0, 100.0, 1.3, 1e-3, True, 1.0, 100, "protocol")]
+        return GapLocation(130.0, 100.0, 1.3, 0.02, True, cells, family_p=family_p)
+
+    two = [_score_test("a", 0.02), _score_test("b", 0.5)]      # Bonferroni p: 2 · 0.02 = 0.04
+    g = _gate(l := loc(0.04), two, 0.05)
+    assert not g["significant"] and g["score_p"] == pytest.approx(0.04)
+    assert not l.significant and not any(c.significant for c in l.cells)
+    g = _gate(l := loc(0.02), two, 0.05)                        # the residual's family opens it
+    assert g["significant"] and g["omnibus"] and l.cells[0].significant
+    g = _gate(l := loc(0.5), [_score_test("a", 0.01), _score_test("b", 0.5)], 0.05)   # the score tests
+    assert g["significant"] and not g["omnibus"] and g["score_p"] == pytest.approx(0.02)
+    assert l.cells[0].significant          # open: each cell keeps its own Holm verdict

@@ -14,7 +14,18 @@ from scipy import stats
 
 from skinkit.errors import SkinkitError
 from skinkit.forward.observations import sample_noise
-from skinkit.gap.where import BANDS, CYCLES, PHASES, cell_chi2, holm, locate, make_drive, noise_dof, samples
+from skinkit.gap.where import (
+    BANDS,
+    CYCLES,
+    PHASES,
+    cell_chi2,
+    holm,
+    holm_adjusted,
+    locate,
+    make_drive,
+    noise_dof,
+    samples,
+)
 from skinkit.inverse.objective import Objective
 from skinkit.schemas import Channel, ChannelPrediction, Observations, Prediction, ProtocolObservations
 from skinkit.schemas.protocol import Protocol
@@ -145,6 +156,8 @@ def test_null_sessions_false_alarms(noise):
     for seed in range(n):
         obs, pred = session(100 + seed, noise=noise)
         g = locate(obs, pred)
+        # the family's p-value is the level at which the family would first reject
+        assert g.significant == (g.family_p <= ALPHA)
         glob += g.significant
         cells += any(c.significant for c in g.cells)
         naive += g.p_value < ALPHA
@@ -253,6 +266,17 @@ def test_holm():
     p = np.array([0.01, 0.04, 0.03, 0.005, np.nan])
     # sorted 0.005 <= 0.05/5, 0.01 <= 0.05/4, 0.03 > 0.05/3: the first two only
     assert holm(p, 0.05).tolist() == [True, False, False, True, False]
+    # adjusted values: 5·0.005, max(4·0.01, ·), max(3·0.03, ·), max(2·0.04, ·), NaN counts as 1
+    assert holm_adjusted(p) == pytest.approx([0.04, 0.09, 0.09, 0.025, 1.0])
+
+
+def test_holm_adjusted_rejects_exactly_where_holm_does():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        p = rng.uniform(0, 0.1, rng.integers(1, 30)) ** rng.uniform(1, 3)
+        adj = holm_adjusted(p)
+        for a in (0.001, 0.01, 0.025, 0.05, 0.1):
+            assert np.array_equal(holm(p, a), adj <= a)
 
 
 # -------------------------------------------------------------------------------------- bad input
