@@ -744,7 +744,7 @@ def score(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     out["null_false_alarm_rate"] = fa["rate"]
     out["null_false_alarm"] = fa
     # the report's "significant gap" on sessions the model describes: its gate's level, ALPHA
-    out["null_gap_significant"] = _rate(sum(v.get("gap_significant", False) for _, v in nulls), len(nulls))
+    out["null_gap_significant"] = _rate(sum(v["gap_significant"] for _, v in nulls), len(nulls))
     pairs = pick("pair")
     out["pairs"] = {"both_named": _rate(sum(v["all_named"] for _, v in pairs), len(pairs)),
                     "one_named": _rate(sum(v["any_named"] for _, v in pairs), len(pairs))}
@@ -1031,7 +1031,7 @@ def _summary_lines(res: Mapping[str, Any]) -> list[str]:
              f"{pct(res['by_magnitude']['moderate']['in_reported_set'])}",
              f"false alarms on null sessions: {pct(res['null_false_alarm'])}",
              f"'significant gap' on null sessions (level {100 * res['alpha']:.0f} %): "
-             f"{pct(res.get('null_gap_significant') or {'n': 0})}",
+             f"{pct(res['null_gap_significant'])}",
              f"localisation: {pct(res['localisation'])}",
              f"magnitude error (median |relative|, moderate): {num(res['magnitude_error_median'])}",
              f"shrinkage error vs oracle (median |relative|, moderate): {num(res['shrinkage_error_median'])}"

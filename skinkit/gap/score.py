@@ -458,21 +458,31 @@ def score_all(sens: Sensitivities, nuisance: np.ndarray | None = None) -> list[S
     return sorted(out, key=lambda t: (t.log_p, -t.statistic))
 
 
+def _n_tested(tests: Sequence[ScoreTest]) -> int:
+    """K of the Bonferroni correction: the effects that could be tested (those with a signature)."""
+    return max(sum(1 for t in tests if t.dof > 0), 1)
+
+
+def _log_adjusted(tests: Sequence[ScoreTest]) -> dict[str, float]:
+    """Effect -> log(p·K) of each test that can reject (a signature and a positive statistic),
+    in logs because p underflows."""
+    log_k = math.log(_n_tested(tests))
+    return {t.effect: t.log_p + log_k for t in tests if t.dof > 0 and t.statistic > 0}
+
+
 def corrected(tests: Sequence[ScoreTest], alpha: float) -> dict[str, bool]:
     """Effect -> whether its score test survives the Bonferroni correction over the K effects
     that could be tested (those with a signature): p·K < alpha, in logs (p underflows)."""
-    K = max(sum(1 for t in tests if t.dof > 0), 1)
-    return {t.effect: t.dof > 0 and t.statistic > 0 and t.log_p + math.log(K) < math.log(alpha)
-            for t in tests}
+    adj = _log_adjusted(tests)
+    return {t.effect: t.effect in adj and adj[t.effect] < math.log(alpha) for t in tests}
 
 
 def directed_p(tests: Sequence[ScoreTest]) -> float:
     """The score tests' family p-value: the smallest Bonferroni-adjusted p (p·K over the K
     effects with a signature), so that :func:`corrected` at level α names some effect exactly
-    when it is ≤ α; 1 when no test has a positive statistic."""
-    K = max(sum(1 for t in tests if t.dof > 0), 1)
-    logs = [t.log_p + math.log(K) for t in tests if t.dof > 0 and t.statistic > 0]
-    return float(min(1.0, math.exp(min(logs)))) if logs else 1.0
+    when it is < α; 1 when no test has a positive statistic."""
+    adj = _log_adjusted(tests)
+    return float(min(1.0, math.exp(min(adj.values())))) if adj else 1.0
 
 
 def cosine(a: np.ndarray, b: np.ndarray) -> float | None:
@@ -497,7 +507,7 @@ def separability(sens: Sensitivities, tests: Sequence[ScoreTest], alpha: float,
     ``b_given_a``) and ``separable`` (True when either survives the correction over the K
     tested effects). ``effects``: restrict pairs to those involving these."""
     by = {t.effect: t for t in tests}
-    K = max(sum(1 for t in tests if t.dof > 0), 1)
+    K = _n_tested(tests)
     out = []
     names = [t.effect for t in tests if t.dof > 0 and t.statistic > 0]
     for a, b in itertools.combinations(names, 2):

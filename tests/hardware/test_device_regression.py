@@ -33,6 +33,7 @@ on theirs or removed):
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from collections.abc import Callable
@@ -266,8 +267,6 @@ def record() -> Path:
     for name, scenario in SCENARIOS.items():
         for key, a in _arrays(scenario()).items():
             out[f"{name}__{key}"] = a
-    import hashlib
-
     path = _platform_recording(fp) or RECORDINGS / (
         f"device_regression_{hashlib.sha256(fp.tobytes()).hexdigest()[:8]}.npz")
     RECORDINGS.mkdir(parents=True, exist_ok=True)
