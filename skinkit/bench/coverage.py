@@ -30,14 +30,13 @@ import copy
 import json
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import click
 
 from skinkit.errors import SkinkitError
+from skinkit.examples import example_model
 
-_DOCS = Path(__file__).resolve().parents[2] / "docs" / "models"
 CASES = ("gel", "invivo", "twopad", "lumped")
 #: relative spread of each fit's start around the truth (the in vivo fit, at ~8 s per evaluation,
 #: is started closer: 7 evaluations from 20 % off, against about 5 from 10 %)
@@ -49,7 +48,7 @@ ONE_PERIOD = {"periods": 1}
 def _read(name: str) -> dict[str, Any]:
     from skinkit.fem.model import read_model
 
-    return read_model(_DOCS / name)
+    return read_model(example_model(name))
 
 
 def _session(spec: dict[str, Any], protocols: list[str], parameters: dict[str, Any]) -> dict[str, Any]:

@@ -15,15 +15,15 @@ from __future__ import annotations
 import json
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import click
 
+from skinkit.examples import example_model
+
 TABLE12 = ("normal_indentation", *(f"in_plane_{a:03d}" for a in range(0, 360, 30)),
            "out_of_plane_330", "out_of_plane_285", "out_of_plane_240")
 FREE = ("skin.c", "skin.k1", "skin.kappa", "skin.g1")
-_MODEL = Path(__file__).resolve().parents[2] / "docs" / "models" / "invivo_goh_qlv.toml"
 
 
 def spec(n_protocols: int = 16, periods: int = 3) -> dict[str, Any]:
@@ -32,7 +32,7 @@ def spec(n_protocols: int = 16, periods: int = 3) -> dict[str, Any]:
     from skinkit.fem.model import read_model
 
     # the benchmark's mesh (9,747 unknowns: issue 10's ~10,000 DOF), not the example file's
-    s = pin_mesh(read_model(_MODEL), [2, 2], n_inner=3, n_ring=3, grading=1.6)
+    s = pin_mesh(read_model(example_model("invivo_goh_qlv")), [2, 2], n_inner=3, n_ring=3, grading=1.6)
     s.pop("load", None)
     protos = list(TABLE12[:n_protocols])
     s["session"] = {"protocols": protos, "parameters": {p: {"periods": periods} for p in protos}}

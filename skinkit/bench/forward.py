@@ -25,9 +25,9 @@ from typing import Any
 import click
 import numpy as np
 
+from skinkit.examples import example_model
 from skinkit.schemas import Channel, Observations, ProtocolObservations
 
-_DOCS = Path(__file__).resolve().parents[2] / "docs" / "models"
 PROTOCOLS = ("normal_indentation", "in_plane_000", "in_plane_090", "out_of_plane_330")
 
 
@@ -73,13 +73,15 @@ PARALLEL_MESH = ((1, 1), {"n_inner": 2, "n_ring": 2, "grading": 1.6})
 INVIVO_MESH = ((2, 2), {"n_inner": 3, "n_ring": 3, "grading": 1.6})
 
 
-def run_parallel(model_path: Path = _DOCS / "invivo_quick.toml",
+def run_parallel(model_path: Path | None = None,
                  mesh: tuple | None = PARALLEL_MESH) -> dict[str, Any]:
-    """Part 1 of the module docstring (``mesh``: see :func:`_displacement_driven`)."""
+    """Part 1 of the module docstring (``mesh``: see :func:`_displacement_driven`); the model
+    file defaults to the shipped ``invivo_quick``."""
     from dask.distributed import LocalCluster
 
     from skinkit.forward import load
 
+    model_path = model_path or example_model("invivo_quick")
     spec = _displacement_driven(model_path, mesh)
     obs = trajectory_observations()
     out: dict[str, Any] = {"model": str(model_path), "protocols": list(PROTOCOLS)}
@@ -125,11 +127,13 @@ def _displacement_driven(path: Path, mesh: tuple | None = None) -> dict[str, Any
     return spec
 
 
-def run_invivo(model_path: Path = _DOCS / "invivo_goh_qlv.toml",
+def run_invivo(model_path: Path | None = None,
                sensitivities: bool = False, mesh: tuple | None = INVIVO_MESH) -> dict[str, Any]:
-    """Part 2 of the module docstring (``mesh``: see :func:`_displacement_driven`)."""
+    """Part 2 of the module docstring (``mesh``: see :func:`_displacement_driven`); the model
+    file defaults to the shipped ``invivo_goh_qlv``."""
     from skinkit.forward import load
 
+    model_path = model_path or example_model("invivo_goh_qlv")
     spec = _displacement_driven(model_path, mesh)
     spec["drive"] = {"max_step": "0.5 s"}
     obs = trajectory_observations(("normal_indentation",))

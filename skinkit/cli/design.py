@@ -8,8 +8,8 @@ from typing import Any
 
 import click
 
-from skinkit.cli._session import read_session, split_names
 from skinkit.errors import SkinkitError
+from skinkit.forward.session import read_session, split_names
 
 
 def read_fit(path: str) -> tuple[dict[str, float], list[str]]:

@@ -9,9 +9,9 @@ from pathlib import Path
 import click
 
 from skinkit.cli._paths import check_name, check_result_files
-from skinkit.cli._session import read_session, split_names
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
+from skinkit.forward.session import read_session, split_names
 
 
 def _checkpoint(path: Path, payload: dict) -> None:

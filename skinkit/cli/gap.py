@@ -8,9 +8,9 @@ from pathlib import Path
 import click
 
 from skinkit.cli._paths import check_result_files
-from skinkit.cli._session import split_names
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
+from skinkit.forward.session import split_names
 
 
 @click.group("gap")
@@ -153,7 +153,7 @@ def _add_lazy(name: str, target: str, summary: str) -> None:
     gap.add_command(_Lazy(name, help=summary, short_help=summary), name)
 
 
-_add_lazy("thesis-case", "skinkit.gap.thesis_case:thesis_case",
+_add_lazy("thesis-case", "skinkit.cli.gap_bench:thesis_case",
           "The thesis's case: pre-stress withheld from a GOH + QLV forearm model.")
-_add_lazy("benchmark", "skinkit.gap.benchmark:benchmark",
-          "The withheld-effect benchmark of the diagnosis (skinkit.gap.benchmark).")
+_add_lazy("benchmark", "skinkit.cli.gap_bench:benchmark",
+          "The withheld-effect benchmark of the diagnosis (skinkit.bench.gap_benchmark).")

@@ -11,8 +11,8 @@ from typing import Any
 import click
 
 from skinkit.cli._paths import check_result_files
-from skinkit.cli._session import read_session, split_names
 from skinkit.errors import SkinkitError
+from skinkit.forward.session import read_session, split_names
 
 
 def _session(model_file: str, session: str, holdout: str | None, workers: int | None) -> tuple[Any, Any]:

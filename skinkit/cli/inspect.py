@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import json
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import click
 
 from skinkit.store import open_experiment
+from skinkit.store.layout import created_text
 
 
 def _jsonable(v: Any) -> Any:
@@ -19,16 +19,6 @@ def _jsonable(v: Any) -> Any:
     if isinstance(v, bytes):
         return v.decode("utf-8", "replace")
     return v if isinstance(v, (int, float, str, bool, list, dict)) or v is None else str(v)
-
-
-def _created(stamp: str) -> str:
-    """An ISO time stamp to the second, in UTC when it says so."""
-    try:
-        t = datetime.fromisoformat(stamp)
-    except ValueError:
-        return stamp
-    zone = " UTC" if t.utcoffset() is not None and t.utcoffset().total_seconds() == 0 else ""
-    return t.strftime("%Y-%m-%d %H:%M:%S") + zone
 
 
 @click.command()
@@ -63,7 +53,7 @@ def _print(con: Any, summary: dict[str, Any], meta: dict[str, Any]) -> None:
     clean = "" if summary["closed_cleanly"] else "  [yellow](writer did not close the file)[/yellow]"
     con.print(f"[bold]{text(summary['path'])}[/bold]{clean}")
     con.print(f"  schema {text(summary['schema_version'])}, written by skinkit "
-              f"{text(summary['skinkit_version'])} on {text(_created(summary['created']))}")
+              f"{text(summary['skinkit_version'])} on {text(created_text(summary['created']))}")
     for k, v in meta.items():
         con.print(f"  {text(k)}: {value(v)}")
     records = summary["records"]

@@ -8,9 +8,9 @@ from pathlib import Path
 import click
 
 from skinkit.cli._paths import check_out_file
-from skinkit.cli._session import read_session
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
+from skinkit.forward.session import read_session
 
 
 @click.command("predict")

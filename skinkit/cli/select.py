@@ -6,8 +6,8 @@ import json
 
 import click
 
-from skinkit.cli._session import read_session
 from skinkit.errors import SkinkitError
+from skinkit.forward.session import read_session
 
 
 @click.command("select")

@@ -21,14 +21,24 @@ from typing import Any
 import numpy as np
 
 from skinkit import registry
-from skinkit.errors import PluginError, UnitError
+from skinkit.errors import PluginError
 from skinkit.fem import lawkit
 from skinkit.fem.bcs import BoundaryConditions, Rigid
 from skinkit.fem.errors import ModelError
 from skinkit.fem.mesh import FEMesh, block_mesh, disc_mesh
 from skinkit.fem.problem import Material, Problem
 from skinkit.fem.solver import SolverOptions
-from skinkit.units import is_known, si_unit, to_si
+from skinkit.fem.values import (  # noqa: F401  (re-exported: the model format's value readers)
+    GRADING_RANGE,
+    bounded,
+    flag,
+    integer,
+    quantity,
+    table,
+    text,
+    vector,
+)
+from skinkit.fem.values import grading as _grading
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -38,90 +48,6 @@ else:  # pragma: no cover
 TOP_KEYS = {"model", "geometry", "layers", "boundary", "indenter", "load", "solver", "output",
             # session-driven forward models (skinkit.forward) and candidate effects
             "effects", "fields", "bindings", "instrument", "surface", "drive", "session"}
-
-
-def quantity(value: Any, unit: str, entry: str) -> float:
-    """A scalar in SI ``unit`` from a number (already SI) or a ``"<number> <unit>"`` string."""
-    if isinstance(value, bool):
-        raise ModelError(entry, f"expected a quantity in {unit}, got {value!r}")
-    if isinstance(value, (int, float)):
-        return _finite(float(value), unit, entry)
-    if isinstance(value, str):
-        parts = value.strip().split(None, 1)
-        try:
-            x = float(parts[0])
-        except (ValueError, IndexError):
-            raise ModelError(entry, f"expected '<number> <unit>', got {value!r}") from None
-        if len(parts) < 2:
-            if unit == "1":
-                return _finite(x, unit, entry)
-            # a number in quotes without a unit is a unit left out, not a request for SI: 1.5 m
-            # where "1.5 mm" was meant is a silent factor of 1000
-            si = si_unit(unit) if is_known(unit) else unit
-            raise ModelError(entry, f"{value!r} has no unit; write '{value.strip()} <unit>' with a unit "
-                             f"of {si!r}, or a bare number (no quotes) for SI {si}")
-        u = parts[1].strip()
-        if not is_known(u):
-            raise ModelError(entry, f"unknown unit {u!r} in {value!r}")
-        try:
-            return _finite(float(to_si(x, u, unit, entry)), unit, entry)
-        except UnitError:
-            raise ModelError(entry, f"inconsistent units: {u!r} is not a unit of {si_unit(unit)!r}") from None
-    raise ModelError(entry, f"expected a quantity in {unit}, got {value!r}")
-
-
-def _finite(x: float, unit: str, entry: str) -> float:
-    if not math.isfinite(x):
-        raise ModelError(entry, f"must be a finite quantity in {unit}, got {x}")
-    return x
-
-
-def bounded(value: Any, unit: str, entry: str, lo: float, hi: float, *, lo_open: bool = True) -> float:
-    """A quantity in SI ``unit`` that must lie in ``(lo, hi]`` (``[lo, hi]`` if not ``lo_open``);
-    the error names the entry and the accepted range."""
-    x = quantity(value, unit, entry)
-    if (x <= lo if lo_open else x < lo) or x > hi:
-        raise ModelError(entry, f"must be in {'(' if lo_open else '['}{lo:g}, {hi:g}] {unit}, got {x:g}")
-    return x
-
-
-def integer(value: Any, entry: str, lo: int, hi: int) -> int:
-    """A whole number in ``[lo, hi]`` (a float with an integral value is accepted)."""
-    if isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ModelError(entry, f"expected a whole number in [{lo}, {hi}], got {value!r}")
-    if not lo <= value <= hi:
-        raise ModelError(entry, f"must be a whole number in [{lo}, {hi}], got {value}")
-    return value
-
-
-def flag(value: Any, entry: str) -> bool:
-    """A TOML boolean (``true`` / ``false``)."""
-    if not isinstance(value, bool):
-        raise ModelError(entry, f"expected true or false, got {value!r}")
-    return value
-
-
-def table(value: Any, entry: str) -> dict[str, Any]:
-    """A TOML table (mapping), copied."""
-    if not isinstance(value, Mapping):
-        raise ModelError(entry, f"expected a table, got {value!r}")
-    return dict(value)
-
-
-def text(value: Any, entry: str) -> str:
-    """A non-empty string."""
-    if not isinstance(value, str) or not value.strip():
-        raise ModelError(entry, f"expected a non-empty string, got {value!r}")
-    return value
-
-
-def vector(value: Any, unit: str, entry: str, n: int = 3) -> np.ndarray:
-    """A length-``n`` vector of quantities."""
-    if not isinstance(value, (list, tuple)) or len(value) != n:
-        raise ModelError(entry, f"expected a list of {n} quantities, got {value!r}")
-    return np.array([quantity(v, unit, f"{entry}[{i}]") for i, v in enumerate(value)])
 
 
 def _get(d: Mapping[str, Any], key: str, entry: str, default: Any = ...):
@@ -389,16 +315,6 @@ def check_thinness(mesh: FEMesh) -> None:
         raise ModelError("geometry", f"the mesh has elements {edge:.3g} m thin in a model {extent:.3g} m "
                          f"across (less than {MIN_EDGE_RATIO:g} of it): a length of [geometry] or a layer "
                          "thickness is far too small next to the others")
-
-
-#: accepted grading exponents (``geometry.grading``, ``inner_grading``, ``layer_grading``,
-#: ``pad_grading``): 1 is uniform; beyond 10 the finest element is a sliver of the coarsest
-GRADING_RANGE = (1.0, 10.0)
-
-
-def _grading(g: Mapping[str, Any], key: str, default: float = 1.0) -> float:
-    """A grading exponent of ``[geometry]`` in :data:`GRADING_RANGE` (default: ``default``)."""
-    return bounded(g.get(key, default), "1", f"geometry.{key}", *GRADING_RANGE, lo_open=False)
 
 
 def _mesh(spec: Mapping[str, Any], layers: list[tuple[str, float, int]]) -> tuple[FEMesh, float | None]:

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -35,7 +35,6 @@ import scipy.sparse as sp
 from skinkit.fem import lawkit, viscoelastic
 from skinkit.fem.assembly import element_tangent, element_tangent_apply, first_elasticity, full_vector
 from skinkit.fem.problem import Problem
-from skinkit.fem.solver import NewtonSolver
 from skinkit.fem.tensors import push_with
 from skinkit.fem.threads import single_threaded_blas
 
@@ -47,6 +46,9 @@ PRESTRESS_NAMES = ("prestretch.l1", "prestretch.l2", "prestretch.angle")
 _CS = 1e-30
 #: ways of solving with the converged tangent (see HistorySensitivity)
 METHODS = ("iterative", "direct")
+
+if TYPE_CHECKING:  # the solver runs this module's trackers; annotations only here
+    from skinkit.fem.solver import NewtonSolver
 
 
 def _b5(a) -> np.ndarray:

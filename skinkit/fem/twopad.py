@@ -145,13 +145,13 @@ def twopad_from_spec(g: Mapping[str, Any], layers: Sequence[tuple[str, float, in
     ``(name, thickness [m], element layers)`` top down. An unknown key or a bad value raises
     :class:`ModelError` naming ``geometry.<key>``.
     """
-    from skinkit.fem.model import quantity, vector
+    from skinkit.fem.values import quantity, vector
 
     extra = sorted(set(g) - _KEYS)
     if extra:
         raise ModelError(f"geometry.{extra[0]}",
                          f"unknown key for kind 'twopad'; allowed are {sorted(_KEYS)}")
-    from skinkit.fem.model import _grading
+    from skinkit.fem.values import grading as _grading
 
     size = vector(g.get("size", [0.100, 0.050]), "m", "geometry.size", 2)
     for key in ("grading", "pad_grading", "layer_grading"):

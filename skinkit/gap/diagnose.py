@@ -361,7 +361,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         name = str(getattr(base, "name", "model"))
         present = [str(t.get("name")) for t in (spec.get("effects") or []) if isinstance(t, Mapping)]
         if not isinstance(observations, Observations):
-            from skinkit.cli._session import read_session
+            from skinkit.forward.session import read_session
             source = str(observations)
             observations = read_session(base, observations, ",".join(holdout) or None,
                                         protocols=",".join(protocols) if protocols else None)

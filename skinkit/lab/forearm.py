@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import copy
 import math
-from pathlib import Path
 from typing import Any
+
+from skinkit.examples import example_model
 
 #: the effect the model lacks (the truth file holds it; no step before the comparison reads it)
 PRESTRESS = {"name": "prestress", "l1": 1.10, "l2": 1.03, "angle": math.radians(20.0)}
@@ -33,7 +34,6 @@ QUICK_PROTOCOL_PARAMETERS = {"periods": 1, "camera_rate": 0.25}
 #: the thesis's free parameters (7.6)
 FREE = ("skin.c", "skin.k1", "skin.kappa", "skin.g1")
 
-_MODEL_FILE = Path(__file__).resolve().parents[2] / "docs" / "models" / "invivo_quick.toml"
 
 
 def model_spec(quick: bool = False) -> dict[str, Any]:
@@ -44,7 +44,7 @@ def model_spec(quick: bool = False) -> dict[str, Any]:
 
     # the virtual forearm's own mesh (1,815 unknowns), whatever the example file's: the demo
     # and the chain stay fast and their numbers reproducible
-    spec = pin_mesh(read_model(_MODEL_FILE), [1, 1], n_inner=1, n_ring=2, grading=1.6)
+    spec = pin_mesh(read_model(example_model("invivo_quick")), [1, 1], n_inner=1, n_ring=2, grading=1.6)
     spec.pop("load", None)
     spec["model"] = {"name": "forearm-goh-qlv"}
     protocols = list(QUICK_PROTOCOLS if quick else PROTOCOLS)
@@ -72,3 +72,13 @@ def disc_radius_m(spec: dict[str, Any]) -> float:
 
 __all__ = ["FREE", "PRESTRESS", "PROTOCOLS", "PROTOCOL_PARAMETERS", "QUICK_PROTOCOLS",
            "QUICK_PROTOCOL_PARAMETERS", "disc_radius_m", "model_spec", "truth_spec"]
+
+
+def canonical_prestress(l1: float, l2: float, angle: float) -> tuple[float, float, float]:
+    """``(λ1, λ2, θ)`` [1, 1, rad] with λ1 ≥ λ2 and θ in (−π/2, π/2]: the same pre-stretch."""
+    if l2 > l1:
+        l1, l2, angle = l2, l1, angle + math.pi / 2
+    angle = (angle + math.pi / 2) % math.pi - math.pi / 2
+    if angle <= -math.pi / 2:
+        angle += math.pi
+    return l1, l2, angle

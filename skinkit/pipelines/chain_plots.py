@@ -23,7 +23,7 @@ def truth_figure(out: Path, summary: dict[str, Any], table: list[dict[str, Any]]
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from skinkit.pipelines.chain import SESSION, tracked_against_truth
+    from skinkit.pipelines.chain_truth import SESSION, tracked_against_truth
 
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5), constrained_layout=True)
     with open_experiment(out / SESSION) as exp:

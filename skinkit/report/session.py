@@ -6,6 +6,7 @@ from typing import Any
 
 from skinkit.report.common import Section, kv_table, note, value_text
 from skinkit.store.experiment import Experiment
+from skinkit.store.layout import created_text
 
 
 def _text(v: Any) -> str:
@@ -19,11 +20,9 @@ def _text(v: Any) -> str:
 def section(exp: Experiment, summary: dict[str, Any]) -> Section:
     """The file (path, schema, writer, creation time, whether its writer closed it) and the free
     metadata of ``/session``; ``summary`` is :meth:`Experiment.summary`. Always present."""
-    from skinkit.cli.inspect import _created
-
     rows = [("file", str(summary["path"])), ("schema version", str(summary["schema_version"])),
             ("written by", f"skinkit {summary['skinkit_version']}"),
-            ("created", _created(str(summary["created"]))),
+            ("created", created_text(str(summary["created"]))),
             ("closed cleanly by its writer", "yes" if summary["closed_cleanly"] else
              "no (the writer died; unfinished records are marked incomplete)")]
     meta = exp.metadata()

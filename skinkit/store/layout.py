@@ -36,6 +36,8 @@ dies at; ``committed`` is updated after each block's data are flushed.
 
 from __future__ import annotations
 
+from datetime import datetime
+
 FORMAT = "skinkit-experiment"
 SCHEMA_VERSION = "1.0"
 #: major versions this reader understands
@@ -51,3 +53,14 @@ CALIBRATIONS = "calibrations"
 GAPS = "gaps"
 ATTEMPTS = "attempts"
 SESSION = "session"
+
+
+def created_text(stamp: str) -> str:
+    """The ``created`` attribute (an ISO 8601 time stamp) to the second, for people: ``"2026-11-24 09:12:03 UTC"``
+    (UTC when the stamp says so; a stamp that does not parse is returned as it is)."""
+    try:
+        t = datetime.fromisoformat(stamp)
+    except ValueError:
+        return stamp
+    zone = " UTC" if t.utcoffset() is not None and t.utcoffset().total_seconds() == 0 else ""
+    return t.strftime("%Y-%m-%d %H:%M:%S") + zone

@@ -21,7 +21,7 @@ import math
 
 import pytest
 
-from skinkit.gap.benchmark import (
+from skinkit.bench.gap_benchmark import (
     MAGNITUDES,
     BenchmarkError,
     clopper_pearson,
@@ -124,7 +124,7 @@ def test_a_session_that_does_not_show_its_effect_is_counted_apart() -> None:
     """When not even a refit with the true structure improves χ² beyond noise (the likelihood-
     ratio statistic within χ²₀.₉₅ of the added parameters: 5.99 for 2), the session does not show
     the effect — the model's own parameters express it — and it is not an attribution miss."""
-    from skinkit.gap.benchmark import assess, score
+    from skinkit.bench.gap_benchmark import assess, score
 
     hidden = _record("viscoelastic/moderate/0", [], before=10_050.0, oracle=10_047.5, extra=2)
     shown = _record("viscoelastic/moderate/1", [], before=40_000.0, oracle=10_010.0, extra=2)

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from skinkit.gap.benchmark import BenchmarkError, execution_order, run
-from skinkit.gap.journal import Journal, JournalError
+from skinkit.bench.gap_benchmark import BenchmarkError, execution_order, run
+from skinkit.bench.gap_journal import Journal, JournalError
 
 pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("gap_benchmark")]
 

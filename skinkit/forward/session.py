@@ -1,5 +1,5 @@
-"""What the commands that read a session share: comma-separated name lists, and reading the
-session along the axis the model acts on."""
+"""Reading a session for a model: the records it names, along the axis the model acts on, with
+held-out protocols marked; and the comma-separated name lists the commands take."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def read_session(model: Any, session: str | os.PathLike[str], holdout: str | Non
     ``holdout`` (comma-separated protocols) marked held out, records split into ``segments``
     first, a one-axis CSV read along ``axis`` (default: the model's own axis when it is x, y or
     z, else z)."""
-    from skinkit.forward import read_observations
+    from skinkit.forward.observations import read_observations
 
     if axis is None:
         axis = str(getattr(model, "axis", "z"))

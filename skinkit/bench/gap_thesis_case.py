@@ -1,4 +1,4 @@
-"""The thesis's case of the gap diagnosis (issue 11): the skin's natural pre-stress withheld.
+"""The thesis's case of the gap diagnosis: the skin's natural pre-stress withheld.
 
 A virtual in vivo session whose truth is the coarse layered forearm model
 (``docs/models/invivo_quick.toml`` as the coverage study coarsens it: one inner element ring, one
@@ -15,25 +15,13 @@ convention (λ1 ≥ λ2, θ in (−90°, 90°]) before they are compared.
 from __future__ import annotations
 
 import copy
-import json
 import math
-import sys
 import time
 from typing import Any
 
-import click
+from skinkit.lab.forearm import canonical_prestress
 
 TRUTH = {"name": "prestress", "l1": 1.10, "l2": 1.03, "angle": math.radians(20.0)}
-
-
-def canonical_prestress(l1: float, l2: float, angle: float) -> tuple[float, float, float]:
-    """``(λ1, λ2, θ)`` [1, 1, rad] with λ1 ≥ λ2 and θ in (−π/2, π/2]: the same pre-stretch."""
-    if l2 > l1:
-        l1, l2, angle = l2, l1, angle + math.pi / 2
-    angle = (angle + math.pi / 2) % math.pi - math.pi / 2
-    if angle <= -math.pi / 2:
-        angle += math.pi
-    return l1, l2, angle
 
 
 def run(seed: int = 0, workers: int | None = 2, progress: Any = None) -> dict[str, Any]:
@@ -68,26 +56,3 @@ def run(seed: int = 0, workers: int | None = 2, progress: Any = None) -> dict[st
     out["ranking"] = [(c["effect"], c["score"]) for c in report["candidates"]]
     out["report"] = report
     return out
-
-
-@click.command("thesis-case")
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="noise seed")
-@click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True, help="worker processes")
-@click.option("--json", "as_json", is_flag=True, help="print JSON (the whole report under 'report')")
-def thesis_case(seed: int, workers: int, as_json: bool) -> None:
-    """The thesis's case: pre-stress withheld from a GOH + QLV model of a virtual forearm session."""
-    res = run(seed, workers, progress=lambda m: click.echo(f"  {m}", err=True))
-    if as_json:
-        click.echo(json.dumps(res, indent=1, default=str))
-        return
-    for line in res["report"].get("messages", []):
-        click.echo(line)
-    if "prestress" in res:
-        p, e = res["prestress"], res["prestress_error"]
-        click.echo(f"prestress identified: λ1 {p['l1']:.4f} (truth 1.10), λ2 {p['l2']:.4f} (1.03), "
-                   f"θ {math.degrees(p['angle']):.2f}° (20°); θ error {e['angle_deg']:+.2f}°")
-    click.echo(f"{res['wall_s']:.0f} s", err=True)
-
-
-if __name__ == "__main__":   # pragma: no cover
-    thesis_case(sys.argv[1:])

@@ -95,12 +95,12 @@ class Journal:
             os.fsync(f.fileno())
 
     def add_calibration(self, cal: Mapping[str, Any]) -> None:
-        """Record a finished calibration (a :func:`~skinkit.gap.benchmark.calibrate` result)."""
+        """Record a finished calibration (a :func:`~skinkit.bench.gap_cases.calibrate` result)."""
         self.calibrations[cal["effect"]] = _canonical(cal)
         self._append({"calibration": cal})
 
     def add_case(self, rec: Mapping[str, Any]) -> None:
-        """Record a finished case (a :func:`~skinkit.gap.benchmark.run_case` record)."""
+        """Record a finished case (a :func:`~skinkit.bench.gap_cases.run_case` record)."""
         self.cases[rec["id"]] = _canonical(rec)
         self._append({"case": rec})
 

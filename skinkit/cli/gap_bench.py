@@ -1,0 +1,73 @@
+"""``skinkit gap benchmark`` and ``skinkit gap thesis-case``: the diagnosis's benchmarks."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import click
+
+from skinkit.bench.gap_benchmark import run as benchmark_run
+from skinkit.bench.gap_benchmark import summary_lines
+from skinkit.bench.gap_cases import BenchmarkError
+from skinkit.bench.gap_thesis_case import run as thesis_case_run
+
+
+def _names(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    out = [s.strip() for s in text.split(",") if s.strip()]
+    if not out:
+        raise BenchmarkError("--effects: no effect named")
+    return out
+
+
+@click.command("benchmark")
+@click.option("--quick", is_flag=True, help="the quick run (a handful of effects at moderate magnitude, "
+              "two null sessions; measured time in docs/gap-benchmark.md)")
+@click.option("--scheduler", default=None, metavar="ADDRESS", help="run the cases on this Dask scheduler")
+@click.option("--json", "as_json", is_flag=True, help="print JSON (progress lines go to stderr)")
+@click.option("--seeds", type=click.IntRange(1), default=None, help="seeds per effect and magnitude "
+              "(default 1 quick, 3 full)")
+@click.option("--effects", default=None, metavar="NAME,...", help="only these effects in the truths")
+@click.option("--model", default="quick", show_default=True,
+              help="preset (quick: coarse in vivo; lumped: extension-relaxation) or a model file")
+@click.option("--nulls", type=click.IntRange(0), default=None,
+              help="null sessions (default 2 quick, 20 full)")
+@click.option("--parallel", type=click.IntRange(1), default=2, show_default=True,
+              help="cases run at once (worker processes; without --scheduler)")
+@click.option("--journal", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="record each finished case in FILE (JSON lines) and skip the cases it already "
+              "holds: resume a stopped run, or add seeds or null sessions to a finished one")
+@click.option("--recorded-only", is_flag=True, help="run nothing: score the cases the --journal holds "
+              "(a run under way or stopped)")
+def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, effects: str | None,
+              model: str, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool) -> None:
+    """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
+    res = benchmark_run(quick, scheduler=scheduler, seeds=seeds, progress=lambda s: click.echo(s, err=True),
+              model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal,
+              recorded_only=recorded_only)
+    if as_json:
+        click.echo(json.dumps(res, indent=1, default=float))
+        return
+    for line in summary_lines(res):
+        click.echo(line)
+
+
+@click.command("thesis-case")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="noise seed")
+@click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True, help="worker processes")
+@click.option("--json", "as_json", is_flag=True, help="print JSON (the whole report under 'report')")
+def thesis_case(seed: int, workers: int, as_json: bool) -> None:
+    """The thesis's case: pre-stress withheld from a GOH + QLV model of a virtual forearm session."""
+    res = thesis_case_run(seed, workers, progress=lambda m: click.echo(f"  {m}", err=True))
+    if as_json:
+        click.echo(json.dumps(res, indent=1, default=str))
+        return
+    for line in res["report"].get("messages", []):
+        click.echo(line)
+    if "prestress" in res:
+        p, e = res["prestress"], res["prestress_error"]
+        click.echo(f"prestress identified: λ1 {p['l1']:.4f} (truth 1.10), λ2 {p['l2']:.4f} (1.03), "
+                   f"θ {math.degrees(p['angle']):.2f}° (20°); θ error {e['angle_deg']:+.2f}°")
+    click.echo(f"{res['wall_s']:.0f} s", err=True)
