@@ -6,7 +6,7 @@ robot runs against real time.
 what a user waits for), best of ``--repeat``. ``robot_realtime_factor`` is simulated
 seconds per wall second of the ``sim`` driver (skinkit-hardware) running a short normal
 indentation (one 1.5 mm sinusoid of ``--robot-seconds``) after homing, in this process;
-above 1 the simulation runs faster than the robot would. The targets (issue 16) are
+above 1 the simulation runs faster than the robot would. The targets are
 ``plugins_s < 1`` and ``robot_realtime_factor >= 1``; the figures depend on the machine's
 load (reported) and on whether Python may cache bytecode (without a cache every start-up
 compiles every module it imports).
@@ -25,7 +25,7 @@ import click
 
 from skinkit.cli._types import FiniteFloat
 
-#: targets of issue 16
+#: the targets: a listing answers within a second; the simulated robot keeps up with real time
 PLUGINS_TARGET_S = 1.0
 REALTIME_TARGET = 1.0
 

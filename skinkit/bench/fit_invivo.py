@@ -1,4 +1,4 @@
-"""``skinkit bench fit-invivo``: the in vivo scale of identification (issue 10).
+"""``skinkit bench fit-invivo``: the in vivo scale of identification.
 
 Four GOH + QLV parameters of the layered in vivo model (``docs/models/invivo_goh_qlv.toml``,
 about 10,000 unknowns) identified from the 16 protocols of thesis Table 12 (normal indentation,
@@ -31,7 +31,7 @@ def spec(n_protocols: int = 16, periods: int = 3) -> dict[str, Any]:
     from skinkit.fem.discretisation import pin_mesh
     from skinkit.fem.model import read_model
 
-    # the benchmark's mesh (9,747 unknowns: issue 10's ~10,000 DOF), not the example file's
+    # the benchmark's mesh (9,747 unknowns: the ~10,000 unknowns of an in vivo fit), not the example file's
     s = pin_mesh(read_model(example_model("invivo_goh_qlv")), [2, 2], n_inner=3, n_ring=3, grading=1.6)
     s.pop("load", None)
     protos = list(TABLE12[:n_protocols])

@@ -1,6 +1,6 @@
 """Output paths of CLI commands: checked before work starts, written under a temporary name
 and renamed into place on success, so a refused or failed command leaves nothing behind and
-never changes an existing file (issue 15)."""
+never changes an existing file."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Click parameter types with the ranges the CLI promises (issue 15): finite numbers only."""
+"""Click parameter types with the ranges the CLI promises: finite numbers only."""
 
 from __future__ import annotations
 

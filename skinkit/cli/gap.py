@@ -1,4 +1,4 @@
-"""``skinkit gap``: diagnose the sim-to-real gap of a calibrated model (issue 11)."""
+"""``skinkit gap``: diagnose the sim-to-real gap of a calibrated model."""
 
 from __future__ import annotations
 

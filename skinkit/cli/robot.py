@@ -199,7 +199,7 @@ def run(
                 exp_.discard_empty_record(protocol.name)
         raise
     except BaseException as exc:
-        # the run was attempted: the file says so, whatever stopped it (issue 13 item 8)
+        # the run was attempted: the file says so, whatever stopped it
         _record_attempt(path, protocol, driver, attempt, exc)
         raise
     finally:

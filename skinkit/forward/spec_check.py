@@ -1,6 +1,6 @@
 """Check the model-file tables the forward models read but ``skinkit solve`` does not build
 from: ``[session]``, ``[surface]``, ``[drive]``, ``[[instrument]]``, ``[[fields]]``,
-``[[effects]]`` and ``bindings`` (issue 15).
+``[[effects]]`` and ``bindings``.
 
 :func:`check_description` runs when a description is read (``read_description``, ``skinkit
 solve``), before any work, so that a misspelt key, a value of the wrong type or outside its

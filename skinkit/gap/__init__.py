@@ -1,4 +1,4 @@
-"""Sim-to-real gap diagnosis (issue 11): where a calibrated model misses a session, which
+"""Sim-to-real gap diagnosis: where a calibrated model misses a session, which
 unmodelled effect causes it, and how far the gap shrinks once that effect is added.
 
 * :mod:`skinkit.gap.where` — step 1: the noise-normalised residual by protocol, channel, phase,

@@ -1,4 +1,4 @@
-"""The sim-to-real gap diagnosis of a calibrated model (issue 11): where, which effect, how far.
+"""The sim-to-real gap diagnosis of a calibrated model: where, which effect, how far.
 
 :func:`diagnose` fits the model's free parameters to the session (exactly as ``skinkit fit``:
 held-out protocols stay out of the fit), then in rounds:

@@ -1,4 +1,4 @@
-"""The self-contained HTML report of a gap diagnosis (issue 11, step 4).
+"""The self-contained HTML report of a gap diagnosis.
 
 :func:`write_html` takes the report dict that ``skinkit gap diagnose --json`` prints (the pinned
 shape of ``docs/gap.md``, plus the optional keys ``gap.whiteness``, ``gap.cross_correlation``,

@@ -1,4 +1,4 @@
-"""Which unmodelled effect: score (Lagrange-multiplier) tests at every candidate's null (issue 11, step 2).
+"""Which unmodelled effect: score (Lagrange-multiplier) tests at every candidate's null.
 
 The calibrated model is loaded once more with every candidate effect added at its **null** value
 (where the model with the effect *is* the model without it: same predictions, to rounding) and

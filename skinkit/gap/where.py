@@ -1,4 +1,4 @@
-"""Where a calibrated model misses: the noise-normalised residual decomposed along axes (issue 11, step 1).
+"""Where a calibrated model misses: the noise-normalised residual decomposed along axes.
 
 The residual is exactly the fit's (:meth:`skinkit.inverse.objective.Objective.residual` with the
 ``"noise"`` weighting): z = whiten((y_pred − Y)/σ) on the entries ``ChannelPrediction.mask`` keeps,

@@ -1,6 +1,5 @@
 """How much of a calibrated finite-element model's residual, and of its parameters, is
-discretisation error (issue 14: the thesis accepted a mesh only when the points moved within
-70 µm of a mesh with twice the unknowns).
+discretisation error.
 
 At the fitted parameters the model is solved once more on a mesh refined ``factor`` times in
 every direction. With the coarse and fine predictions ``y_h`` and ``y_{h/f}`` and an assumed
@@ -9,7 +8,7 @@ convergence order ``p``, Richardson's estimate of the coarse prediction's error 
     e = (y_{h/f} − y_h) · fᵖ / (fᵖ − 1)            (exact minus coarse)
 
 (``order = 1`` by default: at a bonded punch's edge the stress is singular and uniform
-refinement converges with an observed order of 1.3, issue 14; an order taken lower than the
+refinement converges with an observed order of 1.3; an order taken lower than the
 true one overestimates the error, so the estimate errs on the safe side).
 
 In the fit's whitened residual space (``z`` and ``J`` of the noise-weighted objective):

@@ -275,7 +275,7 @@ def _options(optimiser: str, ftol: float, xtol: float, max_iterations: int) -> d
 
 
 def fit_json(result: FitResult) -> dict[str, Any]:
-    """The ``skinkit fit --json`` shape (issue 10)."""
+    """The ``skinkit fit --json`` shape."""
     se = result.se
     ident = result.identifiability.get("identifiable", {})
     pars = {}

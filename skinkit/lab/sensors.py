@@ -21,7 +21,7 @@ Robot (``hardware/skinkit_hardware``, ``params.py`` and ``device.py``), logged a
   component, σ the channel's declared noise.
 
 Tracker: independent Gaussian noise per axis and frame, :data:`TRACK_SIGMA_M` = the 7.0 µm
-RMS 3D error of the rendered calibrate → profile → track chain (issue 3's closing note)
+RMS 3D error of the rendered calibrate → profile → track chain
 split evenly over three axes. Profiler: Gaussian noise on the height, :data:`PROFILE_SIGMA_M`
 = the 6.5 µm RMS of the same chain's automatic profile against the truth.
 """
@@ -57,8 +57,7 @@ FT_RESOLUTION_N = 5.8e-3
 FT_NOISE_N = 0.6 * FT_RESOLUTION_N
 #: samples averaged by the tare (zero) of each channel before a protocol: 0.1 s at 1 kHz
 TARE_SAMPLES = 100
-#: 3D tracks against the truth, RMS of the error vector [m] (issue 3: rendered session,
-#: calibrate -> profile -> track, "tracks 7.0 um RMS vs truth")
+#: 3D tracks against the truth, RMS of the error vector [m]
 TRACK_RMS_3D_M = 7.0e-6
 TRACK_SIGMA_M = TRACK_RMS_3D_M / math.sqrt(3.0)
 #: automatic profile against the truth, RMS of the height error [m] (same note: 6.5 um)

@@ -1,4 +1,4 @@
-"""The session report (issue 12): one self-contained HTML file with every result an experiment
+"""The session report: one self-contained HTML file with every result an experiment
 file holds — metadata, robot records, lumped fits, calibration, images, surface profiles,
 tracks, model fits with their identifiability, and gap reports (``skinkit report``).
 

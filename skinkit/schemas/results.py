@@ -210,14 +210,14 @@ class EffectScore:
         return cls(**known, extra=d)
 
 
-#: the keys of a gap report's JSON form pinned by issue 11 (others may be added)
+#: the keys of a gap report's JSON form that other tools consume (others may be added)
 GAP_KEYS = ("model", "session", "fit", "gap", "candidates", "named", "shrinkage")
 
 
 @dataclass
 class GapReport:
     """Where a calibrated model misses a session, which unmodelled effect explains it, how far
-    the gap shrinks once that effect is added (issue 11). Every residual is noise-normalised
+    the gap shrinks once that effect is added. Every residual is noise-normalised
     (each sample over its channel's noise), so force, motion and surface channels are
     commensurate and χ²/ν = 1 is the noise level.
 

@@ -56,8 +56,9 @@ SESSION = "session"
 
 
 def created_text(stamp: str) -> str:
-    """The ``created`` attribute (an ISO 8601 time stamp) to the second, for people: ``"2026-11-24 09:12:03 UTC"``
-    (UTC when the stamp says so; a stamp that does not parse is returned as it is)."""
+    """The ``created`` attribute (an ISO 8601 time stamp) to the second, for people:
+    ``"2026-11-24 09:12:03 UTC"`` (UTC when the stamp says so; a stamp that does not parse is
+    returned as it is)."""
     try:
         t = datetime.fromisoformat(stamp)
     except ValueError:

@@ -432,10 +432,10 @@ ALTERNATIVE = ("fit a quasi-static or viscoelastic model to it instead, e.g. "
                "extension-relaxation record")
 
 
-def not_stochastic_reason(issues: list[str]) -> str | None:
+def not_stochastic_reason(warnings_seen: list[str]) -> str | None:
     """Why a record is not a broadband stochastic force test, or ``None`` if nothing says so.
 
-    ``issues`` are the ``"WarningName: message"`` strings of :class:`Signals` (or of a
+    ``warnings_seen`` are the ``"WarningName: message"`` strings of :class:`Signals` (or of a
     result). A :class:`NarrowbandInputWarning` (the force holds little power above 1 % of
     Nyquist, as in a ramp-and-hold, relaxation or slow cyclic test) or a
     :class:`NonCausalWarning` (position leads force: the force is not the input) means the
@@ -443,7 +443,7 @@ def not_stochastic_reason(issues: list[str]) -> str | None:
     """
     for category in NOT_STOCHASTIC:
         prefix = f"{category.__name__}: "
-        for msg in issues:
+        for msg in warnings_seen:
             if msg.startswith(prefix):
                 text = msg[len(prefix):]
                 # the measured fact, without the warning's own advice
@@ -452,10 +452,10 @@ def not_stochastic_reason(issues: list[str]) -> str | None:
     return None
 
 
-def refuse_if_not_stochastic(issues: list[str], record: str) -> None:
+def refuse_if_not_stochastic(warnings_seen: list[str], record: str) -> None:
     """Raise :class:`NotStochasticError` (one line: why, and which analysis fits instead)
-    when :func:`not_stochastic_reason` finds a reason in ``issues``."""
-    why = not_stochastic_reason(issues)
+    when :func:`not_stochastic_reason` finds a reason in ``warnings_seen``."""
+    why = not_stochastic_reason(warnings_seen)
     if why is not None:
         raise NotStochasticError(f"{record} is not a broadband stochastic force test ({why}); "
                                  "K, B, I would be meaningless, so none are given: "

@@ -1,4 +1,4 @@
-"""The CLI boundary (issue 15, item 4): bad input is one line and exit 2; anything else is
+"""The CLI boundary: bad input is one line and exit 2; anything else is
 one line and exit 3 (or the traceback with --debug); Ctrl-C is one line and exit 130."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Bad options of robot run / emulate, recover, import-csv, sysid and bench (issue 15):
+"""Bad options of robot run / emulate, recover, import-csv, sysid and bench:
 one ``error:`` line naming the option, exit 2, nothing written, no file changed."""
 
 from __future__ import annotations

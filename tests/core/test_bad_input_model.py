@@ -1,4 +1,4 @@
-"""Model files and ``skinkit solve`` / ``convergence`` (issue 15, items 1-3): every bad entry is
+"""Model files and ``skinkit solve`` / ``convergence``: every bad entry is
 one ``error:`` line naming the entry and its accepted range, exit status 2, before any work;
 a refused or failed solve leaves no file behind and never changes an existing one."""
 

@@ -1,4 +1,4 @@
-"""Issue 15, the examples left after the first pass: each bad input is one ``error:`` line
+"""More bad input, command by command: each bad input is one ``error:`` line
 (exit 2) naming what is wrong, refused before work and leaving no file behind.
 
 sysid's IRF size and a record declaring rows it never stored, ``--incremental`` on a record

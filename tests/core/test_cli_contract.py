@@ -1,4 +1,4 @@
-"""The CLI contract as a property (issue 15, item 5).
+"""The CLI contract as a property.
 
 Invocations are generated from the documented options (the click commands are introspected:
 each ranged, typed or choice option gets values outside its type or range) and small model

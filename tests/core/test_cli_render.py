@@ -1,5 +1,5 @@
 """Terminal output: units survive rich markup, tables fit 80 columns, numbers are rounded
-to their significance (issue 16)."""
+to their significance."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The built-in plugins (``plugins/``) and the hardware layer (``hardware/``) use only the
-declared plugin API (issue 13 item 2): the core modules and one small kit per plugin kind,
+declared plugin API: the core modules and one small kit per plugin kind,
 each listed in ``docs/plugin-authors.md``. Checked on the source (ast), so a private import
 fails here before any third-party author copies it."""
 

@@ -18,9 +18,11 @@ def test_every_import_goes_down_a_ring_and_none_forms_a_cycle():
 
 def test_a_deliberate_upward_import_inside_a_function_is_caught():
     sources = rings.module_sources(PACKAGE)
-    sources["skinkit.gap.diagnose"] += "\n\ndef _sneaky():\n    from skinkit.cli import main\n    return main\n"
+    sources["skinkit.gap.diagnose"] += ("\n\ndef _sneaky():\n"
+                                        "    from skinkit.cli import main\n    return main\n")
     found = rings.violations(sources)
-    assert any(v.startswith("skinkit.gap.diagnose:") and "skinkit.cli (command line)" in v for v in found), found
+    assert any(v.startswith("skinkit.gap.diagnose:") and "skinkit.cli (command line)" in v
+               for v in found), found
 
 
 def test_click_in_an_engine_is_caught():

@@ -1,4 +1,4 @@
-"""Listing commands import only what they list (issue 16): ``skinkit plugins`` reads
+"""Listing commands import only what they list: ``skinkit plugins`` reads
 entry-point metadata and imports no plugin (nor numpy); ``skinkit robot protocols`` builds
 no programme (no scipy). Checked on the modules a fresh interpreter has imported, not on
 wall time, so the tests hold on a loaded machine."""

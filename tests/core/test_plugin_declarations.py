@@ -1,4 +1,4 @@
-"""The core learns plugin details from the plugins' own declarations (issue 13 item 3): a
+"""The core learns plugin details from the plugins' own declarations: a
 profiler's ``options``, a driver's wire cost, a law's verification cases."""
 
 from __future__ import annotations

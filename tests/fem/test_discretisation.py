@@ -1,4 +1,4 @@
-"""Discretisation error (issue 14, item 1): Richardson extrapolation, refined model descriptions,
+"""Discretisation error: Richardson extrapolation, refined model descriptions,
 the estimate in ``skinkit convergence`` / ``skinkit solve``, ``[solver] discretisation_tolerance``,
 the grading keys, and the example meshes meeting 5 % on the tip force at their documented loads."""
 

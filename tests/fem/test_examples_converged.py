@@ -1,4 +1,4 @@
-"""The example models meet 5 % on the tip quantity at their documented loads (issue 14 acceptance).
+"""The example models meet 5 % on the tip quantity at their documented loads.
 
 Each finite-element example in ``docs/models`` is solved at its documented load (one static
 ramp to the programme's peak: the sinusoid's peak depth or force, the ramp's end) on meshes

@@ -1,4 +1,4 @@
-"""Law parameters checked from the physics (issue 14 item 3): each built-in law refuses what has
+"""Law parameters checked from the physics: each built-in law refuses what has
 no positive small-strain shear or bulk stiffness (and Ogden's μᵢαᵢ ≤ 0 or αᵢ = 0, QLV's
 Σ gᵢ ≥ 1) naming the parameter; the conformance kit checks that what a law's declared ranges
 and conditions admit responds physically, so a third-party law that forgets a condition fails."""

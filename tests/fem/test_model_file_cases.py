@@ -1,4 +1,4 @@
-"""Issue 14's model-file cases, each through ``skinkit solve`` on a small file derived from an
+"""Model-file cases, each through ``skinkit solve`` on a small file derived from an
 example in docs/models: one ``error:`` line naming the file's own entry and exit status 2, or a
 solve whose sensitivities list every parameter of the model. No NumPy warning reaches the user."""
 

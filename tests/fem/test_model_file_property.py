@@ -1,4 +1,4 @@
-"""Property test of model files (issue 14 acceptance): random types, signs, units, missing and
+"""Property test of model files: random types, signs, units, missing and
 extra keys applied to every example model file in docs/models never produce a traceback or an
 internal error through ``skinkit solve`` — either the model solves, or one ``error:`` line with
 exit status 2 says what is wrong (and where, for an entry of the file).

@@ -1,4 +1,4 @@
-"""Sensitivities without a tangent assembly at the converged states (issue 10, bench fit).
+"""Sensitivities without a tangent assembly at the converged states.
 
 The sensitivity pass solves ``K du/dp = -∂r/∂p`` with the converged tangent ``K`` by conjugate
 gradients preconditioned with the Newton loop's last factorisation and matrix-free products

@@ -1,5 +1,5 @@
 """The two-pad FE model solves the whole healthy extension record (to 8.7 mm of pull) driven by
-its measured pad displacement, and predicts the 2D tracked points (issue 9).
+its measured pad displacement, and predicts the 2D tracked points.
 
 The record lies beside the checkout (``../shared/data/real``); without it the test is skipped.
 Nothing here compares with copied numbers: the hand-chosen parameters are not fitted, so the

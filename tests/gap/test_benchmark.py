@@ -1,4 +1,4 @@
-"""The withheld-effect benchmark (issue 11, step 6) on the lumped preset: seconds per case.
+"""The withheld-effect benchmark on the lumped preset: seconds per case.
 
 One small run (two effects at moderate magnitude, three null sessions, one seed; the
 extension-relaxation lumped model pulled through three 10 s cycles, 30,001 force samples) is

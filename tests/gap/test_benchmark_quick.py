@@ -1,4 +1,4 @@
-"""``skinkit gap benchmark --quick --json`` through the command line, and its figures (issue 11).
+"""``skinkit gap benchmark --quick --json`` through the command line, and its figures.
 
 The quick run is four effects at moderate magnitude on ``docs/models/invivo_quick.toml``'s
 coarse in vivo case and two null sessions: about 9 minutes on the 2 cores, which would double the

@@ -1,4 +1,4 @@
-"""Issue 14: the gap diagnosis never names an effect for a residual that discretisation
+"""The gap diagnosis never names an effect for a residual that discretisation
 explains. Truth: a small neo-Hookean disc solved on a mesh refined 2x (no effect at all); model:
 the same disc on its own, coarse mesh. The mesh is stiff, so the calibrated model leaves a residual
 far above the noise, and candidate effects that soften the response (a thinner skin, a

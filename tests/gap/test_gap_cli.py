@@ -1,4 +1,4 @@
-"""``skinkit gap diagnose`` (issue 11, step 5): the JSON shape pinned by the issue, the report
+"""``skinkit gap diagnose``: the JSON shape pinned by the issue, the report
 stored in the experiment file and written to --out, and bad inputs as one line with exit status 2.
 
 The session is a virtual-lab experiment file (``skinkit.lab.session.make_session``) of a lumped

@@ -1,4 +1,4 @@
-"""The self-contained HTML report of a gap diagnosis (issue 11, step 4).
+"""The self-contained HTML report of a gap diagnosis.
 
 Report dicts are built by hand in the shape ``skinkit gap diagnose --json`` prints (Contract 2 of
 the gap package): a significant gap with a named effect, per-point maps and a non-separable pair;

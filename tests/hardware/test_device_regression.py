@@ -1,4 +1,4 @@
-"""The device model reproduces a recorded run bit for bit (issue 13 item 7).
+"""The device model reproduces a recorded run bit for bit.
 
 Ten short scenarios with fixed seeds drive :class:`~skinkit_hardware.device.Device` directly
 (no host code in the way) through every branch of its control tick: a position programme

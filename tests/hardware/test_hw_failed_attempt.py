@@ -1,5 +1,5 @@
 """A robot run that fails before (or while) recording still leaves the experiment file with
-the protocol, the attempt and the reason (issue 13 item 8), and the CLI says it in one line.
+the protocol, the attempt and the reason, and the CLI says it in one line.
 The serial driver runs against a real pseudo-terminal: one nobody answers on, and the
 emulator process killed as the run starts."""
 

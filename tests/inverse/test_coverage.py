@@ -1,4 +1,4 @@
-"""Coverage of the fit's 95 % intervals on virtual sessions of known truth (issue 10, "Honest recovery").
+"""Coverage of the fit's 95 % intervals on virtual sessions of known truth.
 
 The lumped relaxation case runs in full here (100 seeds, 4 free parameters: 400 parameter-seed
 pairs). Under exact coverage the inside count is binomial(400, 0.95) if pairs were independent:

@@ -1,4 +1,4 @@
-"""Issue 14 (acceptance line 2): a parameter identified on the default (coarse) mesh from a
+"""A parameter identified on the default (coarse) mesh from a
 virtual session generated on a fine mesh is biased by the discretisation; the bias must lie
 within the discretisation error the fit reports.
 

@@ -1,4 +1,4 @@
-"""Objective grids, profile likelihoods and the plots of a fit (issue 10, items 3 and 6).
+"""Objective grids, profile likelihoods and the plots of a fit.
 
 Virtual sessions: a lumped exponential (Fung) element with a force-sensor zero, F = a(e^(bx) − 1)
 + offset, driven by two ramps of the recorded position (50 Hz, 30 s, force noise 5 mN); its

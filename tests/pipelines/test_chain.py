@@ -1,4 +1,4 @@
-"""The main job end to end (issue 12): a quick variant of ``skinkit demo`` on the virtual forearm.
+"""The main job end to end: a quick variant of ``skinkit demo`` on the virtual forearm.
 
 The truth is the layered GOH + QLV forearm with the skin's natural pre-stress; the model the chain
 identifies lacks it. The chain must find that out from the experiment file alone: the gap
@@ -83,10 +83,10 @@ def _closing_table_compares_every_step(chain):
     assert {"lumped", "cameras", "identify", "diagnose"} <= steps
     assert all(k in s["times_s"] for k in ("acquire", "lumped", "cameras", "identify", "diagnose", "report"))
     rows = {(r["step"], r["result"]): r for r in s["table"]}
-    # issue 4's bounds for the lumped identification on these records: 3 % on K, B, I
+    # the required bounds for the lumped identification on these records: 3 % on K, B, I
     for k in ("K", "B", "I"):
         assert abs(rows[("lumped", k)]["error"]) < 3.0, rows[("lumped", k)]
-    # issue 5's bounds for the automatic profile and the 3D tracks: 20 um RMS
+    # the required bounds for the automatic profile and the 3D tracks: 20 um RMS
     assert rows[("cameras", "profile height RMS error")]["found"] < 20.0
     assert rows[("cameras", "track RMS error vs point motion")]["found"] < 20.0
     # the subset-mean model is what the identification uses: it must be the closer one

@@ -1,4 +1,4 @@
-"""``skinkit report`` (issue 12, item 2): one self-contained HTML file with every result an
+"""``skinkit report``: one self-contained HTML file with every result an
 experiment file holds, checked against the file it was made from (tests/report/conftest.py
 builds the file with the real commands) and against what the file's objects are by construction.
 """

@@ -1,4 +1,4 @@
-"""The session report in a real browser (issue 12 acceptance): headless Chromium (Debian's
+"""The session report in a real browser: headless Chromium (Debian's
 ``chromium`` package) loads the written HTML file, and from its DOM and its screenshot every
 section rendered, every figure is a PNG that decodes, and the page is not blank.
 

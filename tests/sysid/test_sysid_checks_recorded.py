@@ -1,5 +1,5 @@
 """``check_signals`` gives, bit for bit, the outputs recorded before it was split into named
-steps (issue 13 item 7): every branch (gaps, jitter, short and long NaN runs, clipping,
+steps: every branch (gaps, jitter, short and long NaN runs, clipping,
 saturation flags, a narrowband input, a short record, each refusal) on seeded inputs.
 
 A pure refactor must not change one bit, so the check is exact: the signals' SHA-256, the

@@ -1,5 +1,5 @@
-"""Module-level caches hand out read-only arrays, stay bounded and hit on exact keys (issue 13
-item 6): a caller that wrote into a cached array would change every later render."""
+"""Module-level caches hand out read-only arrays, stay bounded and hit on exact keys: a caller that
+wrote into a cached array would change every later render."""
 
 from __future__ import annotations
 

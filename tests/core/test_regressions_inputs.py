@@ -1,4 +1,4 @@
-"""Regressions for the correctness defects of issue 13: no mutation of inputs, bugs not disguised."""
+"""Regressions for correctness defects: no mutation of inputs, bugs not disguised."""
 
 from __future__ import annotations
 
