@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit.schemas.robot import FLAG_SAMPLES_LOST
@@ -137,6 +138,6 @@ def _store_accounting(experiment: Any, summary: RunSummary) -> None:
         return
     try:
         setter(summary.protocol, samples_lost=int(summary.lost),
-               link=json.loads(json.dumps(summary.to_dict(), default=str)))
+               link=json.loads(jsonio.dumps(summary.to_dict(), default=str)))
     except Exception:  # noqa: BLE001 - never mask the run's own error with an accounting failure
         pass

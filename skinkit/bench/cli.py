@@ -14,7 +14,6 @@ compiles every module it imports).
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -23,6 +22,7 @@ from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
 
 #: the targets: a listing answers within a second; the simulated robot keeps up with real time
@@ -109,7 +109,7 @@ def bench_cli(repeat: int, robot_seconds: float, as_json: bool) -> None:
     of --repeat) and the simulated robot's real-time factor; targets < 1 s and >= 1."""
     res = run(repeat, robot_seconds)
     if as_json:
-        click.echo(json.dumps(res, indent=1))
+        click.echo(jsonio.dumps(res, indent=1))
         return
     from rich.console import Console
     from rich.table import Table

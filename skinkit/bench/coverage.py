@@ -27,13 +27,13 @@ protocols are trajectories: the programme is the drive, exact in the virtual ses
 from __future__ import annotations
 
 import copy
-import json
 import time
 from collections.abc import Callable
 from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.examples import example_model
 
@@ -190,7 +190,7 @@ def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: 
             click.echo(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s", err=True)
         out[c] = run_case(c, seeds, start, workers, first_seed, progress)
     if as_json:
-        click.echo(json.dumps({"cases": out, "wall_s": time.perf_counter() - t0}, indent=1))
+        click.echo(jsonio.dumps({"cases": out, "wall_s": time.perf_counter() - t0}, indent=1))
         return
     click.echo("case       DOF seeds pairs inside coverage  expected (95 %)  chi2/dof evals  per fit   total")
     for c in cases:

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import time
 
 import click
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.fem.assembly import DEFAULT_INTORDER
 from skinkit.fem.bcs import BoundaryConditions
 from skinkit.fem.mesh import block_mesh
@@ -143,7 +143,7 @@ def bench_fem(n: int, linear: str, as_json: bool) -> None:
     """Seconds per Newton iteration, skinkit against sfepy, same mesh and law."""
     res = run(n, linear)
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
         return
     click.echo(f"{res['dof']} dofs, {res['elements']} 27-node hexahedra, "
                f"linear solver {res['linear_solver']}")

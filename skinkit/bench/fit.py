@@ -18,13 +18,13 @@ measured time over that of a plain prediction, at the truth.
 from __future__ import annotations
 
 import copy
-import json
 import time
 from typing import Any
 
 import click
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
 
 SPEC: dict[str, Any] = {
@@ -134,7 +134,7 @@ def bench_fit(as_json: bool, seed: int) -> None:
     """Analytic-Jacobian fit vs finite differences vs derivative-free, same problem and start."""
     res = run(seed)
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
         return
     click.echo(f"{res['n_params']} parameters; a prediction with sensitivities costs "
                f"{res['sensitivity_cost_ratio']:.2f} plain predictions")

@@ -12,13 +12,13 @@ iterations per step, from one prediction with sensitivities at the optimum).
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.examples import example_model
 
 TABLE12 = ("normal_indentation", *(f"in_plane_{a:03d}" for a in range(0, 360, 30)),
@@ -98,7 +98,7 @@ def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool
     """Four GOH + QLV parameters from the Table 12 protocols at in vivo scale: wall time, where it goes."""
     res = run(n_protocols, periods, workers, log=sys.stderr)
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
         return
     r = res
     click.echo(f"{r['n_params']} parameters from {r['n_protocols']} protocols x {r['periods']} periods, "

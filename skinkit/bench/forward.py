@@ -17,7 +17,6 @@ steps): wall time, Newton iterations per step, assembly against linear-solve tim
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from typing import Any
 import click
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.examples import example_model
 from skinkit.schemas import Channel, Observations, ProtocolObservations
 
@@ -160,7 +160,7 @@ def bench_forward(as_json: bool, skip_invivo: bool) -> None:
         res["invivo"] = inv
         res["invivo_newton_per_step"] = inv["newton_per_step"]
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
         return
     click.echo(f"session: {len(res['protocols'])} protocols of {res['model']} ({res['n_dof']} dof, "
                f"{res['n_parameters']} sensitivities)")

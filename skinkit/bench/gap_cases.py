@@ -47,7 +47,6 @@ oracle; time per case. Rates come with Clopper–Pearson 95 % intervals.
 from __future__ import annotations
 
 import copy
-import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -56,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.errors import EffectError, ForwardError, SkinkitError
 from skinkit.examples import example_model
 
@@ -156,7 +156,7 @@ _BASES: dict[str, Any] = {}
 
 
 def _key(obj: Any) -> str:
-    return json.dumps(obj, sort_keys=True, default=str)
+    return jsonio.dumps(obj, sort_keys=True, default=str)
 
 
 def _lab(spec: Mapping[str, Any]) -> Any:

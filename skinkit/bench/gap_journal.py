@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from skinkit import jsonio
 from skinkit.errors import SkinkitError
 
 MAGIC = "skinkit gap benchmark"
@@ -31,7 +32,7 @@ class JournalError(SkinkitError):
 
 def _canonical(obj: Any) -> Any:
     """``obj`` as it reads back from JSON (tuples become lists, keys strings), for comparison."""
-    return json.loads(json.dumps(obj, sort_keys=True, default=str))
+    return json.loads(jsonio.dumps(obj, sort_keys=True, default=str))
 
 
 class Journal:
@@ -88,7 +89,7 @@ class Journal:
                 raise JournalError(f"journal {self.path}, line {no}: neither a calibration nor a case")
 
     def _append(self, item: Mapping[str, Any]) -> None:
-        line = json.dumps(item, default=float, allow_nan=True) + "\n"
+        line = jsonio.dumps(item, default=float, allow_nan=True) + "\n"
         with open(self.path, "a", encoding="utf-8") as f:
             f.write(line)
             f.flush()

@@ -20,7 +20,6 @@ the offered rate; the ratio uses the offered rate scaled by that factor.
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import time
@@ -28,6 +27,7 @@ from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
@@ -136,7 +136,7 @@ def bench_robot(duration: float, as_json: bool) -> None:
     ]
     rows = [measure(link, rate, hz, duration) for link, rate, hz in configs]
     if as_json:
-        click.echo(json.dumps({"robot_links": rows}, indent=1))
+        click.echo(jsonio.dumps({"robot_links": rows}, indent=1))
         return
     from rich.console import Console
     from rich.table import Table

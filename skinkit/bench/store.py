@@ -7,7 +7,6 @@ block; the peer appends the same blocks to a plain chunked h5py file and flushes
 
 from __future__ import annotations
 
-import json
 import tempfile
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ import click
 import h5py
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit.store import create_experiment
 
@@ -75,7 +75,7 @@ def bench_store(blocks: int, block: int, as_json: bool) -> None:
     """Crash-safe record appending (skinkit) against plain h5py appending, same blocks."""
     res = run(blocks, block)
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
         return
     click.echo(f"{res['samples']} samples x {res['channels']} channels in blocks of {res['block']}:")
     click.echo(f"  skinkit (SWMR, committed marker): {res['skinkit_samples_per_s']:,.0f} samples/s")

@@ -3,13 +3,14 @@ correlation/pseudo-inverse IRF against plain least squares on the full Toeplitz 
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from typing import Any
 
 import click
 import numpy as np
+
+from skinkit import jsonio
 
 
 def _best(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
@@ -85,7 +86,7 @@ def bench_sysid(repeat: int, seed: int, threads: int, as_json: bool) -> None:
         r = run(repeat=repeat, seed=seed)
     r["blas_threads"] = threads if threadpool_limits is not None else 0
     if as_json:
-        click.echo(json.dumps(r, indent=2))
+        click.echo(jsonio.dumps(r, indent=2))
         return
     click.echo(f"record: {r['record']['duration_s']} s at {r['record']['rate_hz']:g} Hz "
                f"({r['record']['samples']} samples), IRF {r['irf_lags']} lags")

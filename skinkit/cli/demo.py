@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import click
+
+from skinkit import jsonio
 
 
 def _fmt(v: Any, unit: str) -> str:
@@ -69,7 +70,7 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, as_json: bool) -> 
 
         summary = run_chain(out_dir, seed=seed, quick=quick, workers=workers, progress=progress)
     if as_json:
-        click.echo(json.dumps(summary, indent=1, default=float))
+        click.echo(jsonio.dumps(summary, indent=1, default=float))
         return
     gap = summary["diagnose"]
     click.echo(f"experiment file: {summary['experiment_file']}  (truth kept apart: {summary['truth_file']})")

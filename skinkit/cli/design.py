@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session, split_names
 
@@ -76,7 +77,7 @@ def design(model_file: str, session: str, free: str | None, at: str | None, cand
             model.close()
     res["session"] = str(session)
     if as_json:
-        click.echo(json.dumps(res, indent=2, default=float))
+        click.echo(jsonio.dumps(res, indent=2, default=float))
         return
     click.echo(f"{res['model']} on {session}: candidates ranked by the gain in log det of the "
                "Fisher information")

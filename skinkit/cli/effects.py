@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
+from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
 
 
@@ -32,7 +31,7 @@ def list_effects(as_json: bool) -> None:
             {"name": p.name, "unit": p.unit, "null": null.get(p.name), "typical": p.value,
              "lower": p.lower, "upper": p.upper} for p in e.parameters()]}
     if as_json:
-        click.echo(json.dumps(out, indent=2))
+        click.echo(jsonio.dumps(out, indent=2))
         return
     for name, d in out.items():
         if "error" in d:
@@ -103,7 +102,7 @@ def visibility(model_file: str, session: str | None, names: str | None, threshol
                             threshold, load=lambda s: load(s, workers=workers),
                             progress=None if as_json else (lambda n: click.echo(f"  {n} ...", err=True)))
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
         return
     for name, e in res["effects"].items():
         if not e["applicable"]:

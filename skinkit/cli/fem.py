@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.cli._paths import check_result_dir, staged_dir
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -96,7 +96,7 @@ def solve(model_file: str, out_dir: str | None, overwrite: bool, as_json: bool, 
         files = write_outputs(model, sol, info, tmp, vtu=not no_vtu)
         info["files"] = {k: str(out / Path(v).relative_to(tmp)) for k, v in files.items()}
     if as_json:
-        click.echo(json.dumps(info, indent=2))
+        click.echo(jsonio.dumps(info, indent=2))
         return
     last = info["steps"][-1]
     click.echo(f"{model.name}: {info['dof']} dofs, {len(info['steps'])} steps, "
@@ -145,7 +145,7 @@ def verify(as_json: bool, cases: tuple[str, ...]) -> None:
     res = V.run(list(cases) or None,
                 progress=None if as_json else (lambda n: click.echo(f"  running {n} ...", err=True)))
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
     else:
         for c in res["cases"]:
             click.echo(f"{'PASS' if c['passed'] else 'FAIL'} {c['name']}: error {c['error']:.3g} "
@@ -220,7 +220,7 @@ def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bo
     with staged_dir(out) as tmp:
         _write_convergence(res, rows, key, tmp)
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(jsonio.dumps(res, indent=2))
         return
     for r in rows:
         if r.get("relative_error") is not None:
@@ -269,7 +269,7 @@ def _estimate_levels(rows: list[dict], key: str, order: float | None) -> dict:
 
 
 def _write_convergence(res: dict, rows: list[dict], key: str, out: Path) -> None:
-    (out / "convergence.json").write_text(json.dumps(res, indent=2))
+    (out / "convergence.json").write_text(jsonio.dumps(res, indent=2))
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._paths import check_name, check_result_files
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -17,7 +18,7 @@ from skinkit.forward.session import read_session, split_names
 def _checkpoint(path: Path, payload: dict) -> None:
     """Write ``payload`` as JSON atomically (a kill leaves the previous checkpoint whole)."""
     tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(payload))
+    tmp.write_text(jsonio.dumps(payload))
     os.replace(tmp, path)
 
 
@@ -170,7 +171,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     if hasattr(model, "close"):
         model.close()
     if as_json:
-        click.echo(json.dumps(best, indent=2, default=float))
+        click.echo(jsonio.dumps(best, indent=2, default=float))
         return
     _echo_summary(best, model.name, session, best_result.wall_s, names, out)
 

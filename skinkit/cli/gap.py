@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._paths import check_result_files
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -99,7 +99,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     if stores:
         d["stored_as"] = name
     if as_json:
-        click.echo(json.dumps(d, indent=2, allow_nan=False))
+        click.echo(jsonio.dumps(d, indent=2, allow_nan=False))
         return
     _print(d, written)
 

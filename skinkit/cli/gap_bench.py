@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import math
 
 import click
 
+from skinkit import jsonio
 from skinkit.bench.gap_benchmark import run as benchmark_run
 from skinkit.bench.gap_benchmark import summary_lines
 from skinkit.bench.gap_cases import BenchmarkError
@@ -48,7 +48,7 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
               model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal,
               recorded_only=recorded_only)
     if as_json:
-        click.echo(json.dumps(res, indent=1, default=float))
+        click.echo(jsonio.dumps(res, indent=1, default=float))
         return
     for line in summary_lines(res):
         click.echo(line)
@@ -62,7 +62,7 @@ def thesis_case(seed: int, workers: int, as_json: bool) -> None:
     """The thesis's case: pre-stress withheld from a GOH + QLV model of a virtual forearm session."""
     res = thesis_case_run(seed, workers, progress=lambda m: click.echo(f"  {m}", err=True))
     if as_json:
-        click.echo(json.dumps(res, indent=1, default=str))
+        click.echo(jsonio.dumps(res, indent=1, default=str))
         return
     for line in res["report"].get("messages", []):
         click.echo(line)

@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._paths import check_result_files
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session, split_names
@@ -149,12 +150,12 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
         g = attach_covariance(g, fitted["names"], fitted["covariance"], fitted["values"], fitted["inflation"])
     g = _clean({**g, "session": str(session)})
     out.mkdir(parents=True, exist_ok=True)
-    (out / "grid.json").write_text(json.dumps(g, indent=1))
+    (out / "grid.json").write_text(jsonio.dumps(g, indent=1))
     png = grid_plot(g, out / "grid.png")
     if hasattr(model, "close"):
         model.close()
     if as_json:
-        click.echo(json.dumps(g, indent=2))
+        click.echo(jsonio.dumps(g, indent=2))
         return
     a, b = names
     mn = g["minimum"]
@@ -209,12 +210,12 @@ def profile(model_file: str, session: str, name: str, free: str | None, n: int, 
                             weighting=weighting, progress=_say)
     pr = _clean({**pr, "session": str(session)})
     out.mkdir(parents=True, exist_ok=True)
-    (out / "profile.json").write_text(json.dumps(pr, indent=1))
+    (out / "profile.json").write_text(jsonio.dumps(pr, indent=1))
     png = profile_plot(pr, out / "profile.png")
     if hasattr(model, "close"):
         model.close()
     if as_json:
-        click.echo(json.dumps(pr, indent=2))
+        click.echo(jsonio.dumps(pr, indent=2))
         return
     unit = pr["unit"]
     lo, hi = pr["interval"]

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.store import open_experiment
 from skinkit.store.layout import created_text
 
@@ -36,7 +36,7 @@ def inspect(file: Path, as_json: bool) -> None:
         meta = exp.metadata()
     if as_json:
         summary["session"] = {k: _jsonable(v) for k, v in meta.items()}
-        click.echo(json.dumps(summary, indent=2))
+        click.echo(jsonio.dumps(summary, indent=2))
         return
     from rich.console import Console
 

@@ -3,11 +3,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
-from skinkit import registry
+from skinkit import jsonio, registry
 
 #: what the listing says when it has not imported the plugins
 NOT_LOADED_NOTE = ("listed from entry-point metadata, no plugin imported; "
@@ -38,7 +36,7 @@ def plugins(as_json: bool, groups: tuple[str, ...], check: bool) -> None:
     if as_json:
         out = {"groups": {g: [s.to_dict() for s in st] for g, st in rep.items()},
                "checked": check}
-        click.echo(json.dumps(out, indent=2))
+        click.echo(jsonio.dumps(out, indent=2))
         return
     from rich import box
     from rich.console import Console

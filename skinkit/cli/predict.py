@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._paths import check_out_file
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
@@ -79,7 +79,7 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
     if hasattr(model, "close"):
         model.close()
     if as_json:
-        click.echo(json.dumps(summary, indent=2, default=float))
+        click.echo(jsonio.dumps(summary, indent=2, default=float))
         return
     click.echo(f"{model.name} on {session}: chi2/sample {summary['chi2_per_sample']:.3g} over "
                f"{summary['samples']} samples (noise alone: {summary['noise_only_range_999'][0]:.3g}.."
@@ -109,7 +109,7 @@ def _write(path: Path, pred, summary: dict) -> None:
     tmp = path.with_name(path.name + ".part")
     try:
         with h5py.File(tmp, "w") as f:
-            f.attrs["summary"] = json.dumps(summary, default=float)
+            f.attrs["summary"] = jsonio.dumps(summary, default=float)
             for proto, cname, cp in pred.items():
                 g = f.require_group(f"{proto}/{cname}")
                 g.create_dataset("values", data=cp.values)

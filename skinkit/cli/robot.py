@@ -15,6 +15,7 @@ from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import OptionError, RefusedError, SkinkitError
 
@@ -58,7 +59,7 @@ def protocols(as_json: bool) -> None:
     items = catalogue()
     if as_json:
         click.echo(
-            json.dumps(
+            jsonio.dumps(
                 {
                     "protocols": [
                         {
@@ -226,7 +227,7 @@ def _record_attempt(path: Path, protocol: Any, driver: Any, attempt: dict[str, A
             kept = protocol.name in exp.record_names()
             facts["samples"] = exp.record_info(protocol.name)["samples"] if kept else 0
             facts["record"] = protocol.name if kept else None
-            exp.add_attempt(protocol, **json.loads(json.dumps(facts, default=str)))
+            exp.add_attempt(protocol, **json.loads(jsonio.dumps(facts, default=str)))
     except (SkinkitError, OSError) as write_exc:  # never hide the run's own error behind this
         click.echo(f"warning: the failed attempt could not be written to {path}: {write_exc}", err=True)
 
@@ -282,7 +283,7 @@ def _drop_if_empty(path: Path) -> None:
 
 def _report(summary: Any, protocol: Any, path: Path, as_json: bool) -> None:
     if as_json:
-        click.echo(json.dumps(summary.to_dict(), indent=1))
+        click.echo(jsonio.dumps(summary.to_dict(), indent=1))
     else:
         click.echo(f"{protocol.name}: {summary.samples} samples, {summary.duration_s:.2f} s -> {path}")
     if summary.lost:

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
+from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session
 
@@ -60,7 +59,7 @@ def select(model_file: str, session: str, subsets: str, weighting: str, holdout:
             model.close()
     res["session"] = str(session)
     if as_json:
-        click.echo(json.dumps(res, indent=2, default=float))
+        click.echo(jsonio.dumps(res, indent=2, default=float))
         return
     click.echo(f"{res['model']} on {session}: {len(res['fitted_protocols'])} fitted protocol(s), "
                f"{weighting} weighting; ranked by {rank_by}")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import warnings
 from pathlib import Path
@@ -10,6 +9,7 @@ from typing import Any
 
 import click
 
+from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
@@ -172,7 +172,7 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
                                                     default_bands(sig.rate_hz),
                                                     plot_dir / "sysid_comparison.png")))
     if as_json:
-        click.echo(json.dumps(out, indent=2))
+        click.echo(jsonio.dumps(out, indent=2))
     else:
         _table(out, model)
     if out["errors"]:
@@ -245,7 +245,7 @@ def _incremental(rec: Any, record: Path, axis: str, memory_s: float | None, robo
                        err=True)
     out = _clean(out)
     if as_json:
-        click.echo(json.dumps(out, indent=2))
+        click.echo(jsonio.dumps(out, indent=2))
         return
     from rich.console import Console
     from rich.table import Table

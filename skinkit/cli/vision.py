@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Collection, Mapping
@@ -11,6 +10,7 @@ from typing import Any
 import click
 from click.core import ParameterSource
 
+from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
@@ -59,7 +59,7 @@ def track(ref_image: str, cur_image: str, points_csv: str, subset_px: int, track
             for p, d, q, v, r in zip(pts, res.displacement_px, res.quality, res.valid, res.reason,
                                      strict=True)]
     if as_json:
-        click.echo(json.dumps({"points": rows}, indent=1))
+        click.echo(jsonio.dumps({"points": rows}, indent=1))
         return
     for row in rows:
         if row["valid"]:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.fem.mesh import FEMesh
 from skinkit.fem.solver import Solution
 
@@ -40,11 +40,11 @@ def write_hdf5(path: Path, mesh: FEMesh, sol: Solution, info: dict[str, Any]) ->
     ``/displacement`` (steps, N, 3) [m], ``/tip_displacement``, ``/tip_force``, ``/iterations``."""
     with h5py.File(path, "w") as f:
         f.attrs["model"] = info["model"]
-        f.attrs["summary"] = json.dumps(info)
+        f.attrs["summary"] = jsonio.dumps(info)
         f["mesh/nodes"] = mesh.nodes
         f["mesh/elements"] = mesh.elements
         f["mesh/region"] = mesh.region
-        f["mesh"].attrs["regions"] = json.dumps(mesh.regions)
+        f["mesh"].attrs["regions"] = jsonio.dumps(mesh.regions)
         f["times"] = sol.times
         f["displacement"] = sol.u.reshape(len(sol.times), -1, 3)
         nan3 = np.full(3, np.nan)
@@ -58,7 +58,7 @@ def write_hdf5(path: Path, mesh: FEMesh, sol: Solution, info: dict[str, Any]) ->
         if "sensitivities" in sol.extra and sol.extra["sensitivities"]:
             sens = sol.extra["sensitivities"]
             f["sensitivity/displacement"] = np.array([sv.du for sv in sens])  # (steps, n_dof, n_par)
-            f["sensitivity"].attrs["parameters"] = json.dumps(sens[0].names)
+            f["sensitivity"].attrs["parameters"] = jsonio.dumps(sens[0].names)
 
 
 def write_vtu_series(out: Path, mesh: FEMesh, sol: Solution, stem: str = "step") -> Path:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -10,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.fem.model import Model
 from skinkit.fem.output import summary, write_hdf5, write_vtu_series
 from skinkit.fem.solver import NewtonSolver, Solution
@@ -59,7 +59,7 @@ def write_outputs(model: Model, sol: Solution, info: dict[str, Any], out: Path,
     write_hdf5(out / "result.h5", model.mesh, sol, info)
     if vtu:
         files["vtu"] = str(write_vtu_series(out, model.mesh, sol))
-    (out / "summary.json").write_text(json.dumps(info, indent=2))
+    (out / "summary.json").write_text(jsonio.dumps(info, indent=2))
     return files
 
 

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.gap.score import (
     ScoreTest,
@@ -739,14 +740,13 @@ def _messages(loc: Any, gap: Mapping[str, Any], cands: Sequence[EffectScore], na
 
 def write_report(report: GapReport, out_dir: str | os.PathLike[str]) -> list[Path]:
     """``gap.json`` (and ``gap.html`` when :mod:`skinkit.gap.html` is installed) in ``out_dir``."""
-    import json
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = report.to_dict()
     path = out / "gap.json"
     tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(d, indent=2, allow_nan=False))
+    tmp.write_text(jsonio.dumps(d, indent=2, allow_nan=False))
     os.replace(tmp, path)
     written = [path]
     try:

@@ -23,7 +23,6 @@ import base64
 import contextlib
 import html
 import io
-import json
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -32,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.errors import SchemaError, StoreError
 
 #: the order in which the residual axes are shown (others, if any, follow alphabetically)
@@ -698,7 +698,7 @@ def _section_rounds(report: Mapping[str, Any]) -> str:
                      _t(_num(r.get("chi2_per_dof")), _f(r.get("chi2_per_dof"))),
                      _t(r.get("named") or "—", str(r.get("named") or "")), _t(notes or "—", None)])
     table = _table(["round", "effects in the model", "χ²/ν", "named", "why the others were not named"], rows)
-    items = "".join(f"<li><pre>{_e(json.dumps(r, indent=1, default=_json_default))}</pre></li>"
+    items = "".join(f"<li><pre>{_e(jsonio.dumps(r, indent=1, default=_json_default))}</pre></li>"
                     for r in rounds)
     return ('<section id="rounds"><h2>Naming rounds</h2><p>After an effect is named the diagnosis is '
             "repeated on the model with it, to look for a second.</p>" + table
@@ -761,7 +761,7 @@ def render_html(report: Mapping[str, Any], *, title: str | None = None) -> str:
     nav = "".join(f'<a href="#{i}">{_e(t)}</a>' for i, t in
                   (("verdict", "verdict"), ("fit", "fit"), ("residual", "where"), ("maps", "maps"),
                    ("scores", "which"), ("shrinkage", "how far"), ("separation", "not separable")))
-    raw = json.dumps(report, indent=1, default=_json_default)
+    raw = jsonio.dumps(report, indent=1, default=_json_default)
     sub = " · ".join(x for x in (f"model {model}" if model else "", f"session {session}" if session else "")
                      if x)
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"

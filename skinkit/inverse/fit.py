@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit import registry
+from skinkit import jsonio, registry
 from skinkit.errors import PluginError, SkinkitError
 from skinkit.inverse.identifiability import analyse
 from skinkit.inverse.objective import Objective, Residual, held_out_rms
@@ -111,7 +111,7 @@ class _Evaluations:
         tmp = self.directory / f".eval-{k:05d}.part.npz"
         J = rec["J"] if rec["J"] is not None else np.zeros(0)
         np.savez(tmp, x=x, z=rec["z"], J=J, ok=rec["ok"], error=rec.get("error", ""),
-                 blocks=json.dumps(rec.get("blocks", [])))
+                 blocks=jsonio.dumps(rec.get("blocks", [])))
         os.replace(tmp, path)
 
 

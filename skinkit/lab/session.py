@@ -20,7 +20,6 @@ mesh keeps well-shaped elements under its fixed rim).
 from __future__ import annotations
 
 import copy
-import json
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -30,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.lab.sensors import JACOBIAN_HOME, LOG_RATE_HZ, SensorModel
 from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations, SurfaceProfile
@@ -267,7 +267,7 @@ def _default_protocols(spec: Mapping[str, Any], kind: str, model: Any) -> list[s
     own = getattr(model, "default_protocols", None)
     if own:
         return list(own)
-    words = json.dumps(spec.get("lumped", {}), default=str).lower()
+    words = jsonio.dumps(spec.get("lumped", {}), default=str).lower()
     if any(w in words for w in ("kbi", "k-b-i", "wiener", "dynamic", "inertia")):
         return list(DEFAULT_DYNAMIC_PROTOCOLS)
     return list(DEFAULT_LUMPED_PROTOCOLS)
@@ -545,7 +545,7 @@ def write_session(vs: VirtualSession, out: str | os.PathLike[str], truth_out: st
     done: list[Path] = []
     try:
         _write_session(tmp_h5, vs.planned, vs.recorded, profile, vs.sensors.sigma("points"), progress)
-        tmp_js.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+        tmp_js.write_text(jsonio.dumps(doc, indent=1, allow_nan=False) + "\n")
         os.replace(tmp_h5, out)
         done.append(out)
         os.replace(tmp_js, truth_out)

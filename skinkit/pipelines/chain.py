@@ -23,7 +23,6 @@ and rig descriptions a lab would have); ``summary.json`` holds the closing table
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable
@@ -32,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.pipelines.chain_truth import SESSION, TRUTH, compare
 from skinkit.store import open_experiment
 
@@ -118,7 +118,7 @@ def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress 
     truth = dict(vs.truth, session_file=str(session), lumped=lumped.to_dict(),
                  cameras={"rig": "ring of 4 at 55 deg, 125 mm", "speckle_cell_m": 0.00045,
                           "sensor_noise": 0.01})
-    truth_path.write_text(json.dumps(truth, indent=1, allow_nan=False) + "\n")
+    truth_path.write_text(jsonio.dumps(truth, indent=1, allow_nan=False) + "\n")
     progress("acquire: render cameras", 1.0)
     return {"protocols": [p.protocol.name for p in vs.planned], "images": [s.name for s in sequences],
             "frames_per_protocol": {p.protocol.name: int(p.frames.size) for p in imaged},
@@ -271,7 +271,7 @@ def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: 
 
     summary["plots"] = [str(truth_figure(out, summary, summary["table"]))]
     progress("compare with the truth", 1.0)
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    (out / "summary.json").write_text(jsonio.dumps(summary, indent=1, default=float))
     return summary
 
 

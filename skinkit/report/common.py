@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.gap.html import _CSS, _JS
 from skinkit.gap.html import _array_uri as array_uri
 from skinkit.gap.html import _e as e
@@ -87,7 +88,6 @@ def value_text(v: Any, digits: int = 4, limit: int = MAX_VALUE_CHARS) -> str:
 
 
 def _value_text(v: Any, digits: int) -> str:
-    import json
 
     if isinstance(v, bool) or v is None:
         return str(v)
@@ -97,7 +97,7 @@ def _value_text(v: Any, digits: int) -> str:
                                                    for x in v):
         return "[" + ", ".join(num(x, digits) for x in v) + "]"
     if isinstance(v, (list, tuple, Mapping)):
-        return json.dumps(v, default=str)
+        return jsonio.dumps(v, default=str)
     return str(v)
 
 

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from skinkit import jsonio
 from skinkit.errors import SchemaError
 from skinkit.units import is_known
 
@@ -79,7 +79,7 @@ class Protocol:
 
     def to_json(self) -> str:
         """The protocol as canonical JSON (sorted keys)."""
-        return json.dumps(self.to_dict(), sort_keys=True)
+        return jsonio.dumps(self.to_dict(), sort_keys=True)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Protocol:

@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 import h5py
 import numpy as np
 
-from skinkit import __version__
+from skinkit import __version__, jsonio
 from skinkit.errors import SchemaError, StoreError
 from skinkit.schemas import (
     CameraModel,
@@ -365,7 +365,7 @@ class Experiment:
             raise self._err(f"/{L.RECORDS}/{protocol.name}", "a record of this protocol already exists")
         g = records.create_group(check_name(protocol.name, "record name"))
         g.attrs["protocol"] = protocol.to_json()
-        g.attrs["channels"] = json.dumps(list(channels))
+        g.attrs["channels"] = jsonio.dumps(list(channels))
         g.attrs["rate_hz"] = float("nan") if rate_hz is None else float(rate_hz)
         g.attrs["complete"] = False
         g.create_dataset("time_s", shape=(0,), maxshape=(None,), chunks=(chunk,), dtype="f8")
@@ -434,7 +434,7 @@ class Experiment:
         extra = self._json_attr(g, "extra", dict) if "extra" in g.attrs else {}
         extra.update(items)
         try:
-            g.attrs["extra"] = json.dumps(extra, allow_nan=True)
+            g.attrs["extra"] = jsonio.dumps(extra, allow_nan=True)
         except TypeError as exc:
             raise SchemaError(f"{kind} {name!r} attrs", f"not JSON-ready ({exc})") from None
         f.flush()
@@ -506,7 +506,7 @@ class Experiment:
         if not isinstance(protocol, Protocol):
             raise SchemaError("add_attempt.protocol", f"must be a Protocol, got {type(protocol).__name__}")
         try:
-            payload = json.dumps(facts, allow_nan=True)
+            payload = jsonio.dumps(facts, allow_nan=True)
         except TypeError as exc:
             raise SchemaError("add_attempt.facts", f"not JSON-ready ({exc})") from None
         g = self._writable().require_group(L.ATTEMPTS)
@@ -585,7 +585,7 @@ class Experiment:
         w, h = (int(s) for s in image_size)
         ncam = len(camera_names)
         g = f.require_group(L.IMAGES).create_group(name)
-        g.attrs["camera_names"] = json.dumps(list(camera_names))
+        g.attrs["camera_names"] = jsonio.dumps(list(camera_names))
         g.attrs["complete"] = False
         frames = g.create_dataset("frames", shape=(0, ncam, h, w), maxshape=(None, ncam, h, w),
                                   chunks=(1, 1, h, w), dtype=dtype)
@@ -734,7 +734,7 @@ class Experiment:
     # -- results -------------------------------------------------------------------------
     def _write_json(self, base: str, name: str, payload: dict[str, Any]) -> None:
         g = self._replace_group(base, name)
-        g.attrs["json"] = json.dumps(payload, allow_nan=True)
+        g.attrs["json"] = jsonio.dumps(payload, allow_nan=True)
         self._f.flush()
 
     def write_fit(self, name: str, fit: FitResult) -> None:

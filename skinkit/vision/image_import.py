@@ -14,7 +14,6 @@ import created is removed), so a failed import leaves the experiment file as it 
 from __future__ import annotations
 
 import glob
-import json
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from skinkit import jsonio
 from skinkit.store import layout as L
 from skinkit.vision import VisionError
 from skinkit.vision.imageio import read_gray
@@ -257,7 +257,7 @@ def _finish(path: Path, tmp: str, name: str, ok: bool, created: bool, plan: Fram
             del f[src]
             return
         f.move(src, f"{L.IMAGES}/{name}")
-        f[f"{L.IMAGES}/{name}"].attrs["source"] = json.dumps({
+        f[f"{L.IMAGES}/{name}"].attrs["source"] = jsonio.dumps({
             "matched_by": plan.matched_by,
             "first_files": [str(p) for p in plan.files[0]],
             "last_files": [str(p) for p in plan.files[-1]]})

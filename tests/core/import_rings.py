@@ -32,6 +32,9 @@ RINGS: dict[str, int] = {
     # the command line
     "cli": 4, "__main__": 4,
 }
+#: modules placed apart from their package's ring: the command kit hands click types to command
+#: authors, so it stands with the command line
+MODULE_RINGS: dict[str, int] = {"skinkit.plugin.commands": 4}
 RING_NAMES = {0: "contract", 1: "engines", 2: "plugin surface", 3: "applications", 4: "command line"}
 #: third-party packages allowed only from a ring and up
 THIRD_PARTY_FLOOR = {"click": 4}
@@ -102,6 +105,9 @@ def ring_of(module: str) -> int | None:
     """The ring of a skinkit module (None: not in the package) or a third-party floor."""
     if module == "skinkit":
         return 0
+    for name, ring in MODULE_RINGS.items():
+        if module == name or module.startswith(name + "."):
+            return ring
     if module.startswith("skinkit."):
         return RINGS.get(module.split(".")[1])
     top = module.split(".")[0]
