@@ -38,15 +38,14 @@ demo: venv
 	$(BIN)/skinkit demo --out demo-output
 
 # two test workers on two cores: one BLAS/OpenMP/MKL thread each, or their spinning threads
-# oversubscribe the cores (measured 2026-11-24, numpy 2.4.6 / OpenBLAS 0.3.31: 10 min 43 s in CI
-# with the libraries' default threads, 8 min 44 s with one)
+# oversubscribe the cores (the suite took a fifth longer with the libraries' default threads)
 TEST_THREADS := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 test: venv-test
 	$(TEST_THREADS) $(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
 
-# the quick FE gap benchmark (~9 min on 2 cores) and its figures: kept out of `make test` (which
-# stays under 10 minutes); CI (.ci/run) runs it after the suite
+# the quick FE gap benchmark and its figures: kept out of `make test` (which stays under
+# 10 minutes); CI (.ci/run) runs it after the suite
 test-gap-quick: venv-test
 	SKINKIT_GAP_QUICK=1 $(BIN)/python -m pytest -q -s tests/gap/test_benchmark_quick.py
 
