@@ -190,6 +190,16 @@ class ForwardModel(typing.Protocol):
     and points (the channel that drives the model is not predicted). ``sensitivities``:
     False, True (every parameter) or a list of parameter names; derivatives come in
     ``ChannelPrediction.d`` per SI unit of each parameter.
+
+    Lifecycle: a model may hold resources between predictions (worker processes);
+    ``close()`` releases them and may be called any number of times. A model is a context
+    manager that closes itself on exit::
+
+        with skinkit.forward.load("model.toml") as model:
+            pred = model.predict(model.parameters(), observations)
+
+    The forward models subclass this protocol and inherit ``close`` (nothing to release),
+    ``__enter__`` and ``__exit__``; a model with resources overrides ``close``.
     """
 
     name: str
@@ -200,6 +210,16 @@ class ForwardModel(typing.Protocol):
 
     def predict(self, params: ParameterSet, observations: Any, sensitivities: Any = False) -> Any:
         """The predicted channels of every protocol of ``observations`` (with sensitivities on request)."""
+
+    def close(self) -> None:
+        """Release what the model holds between predictions; idempotent (nothing by default)."""
+        return None
+
+    def __enter__(self) -> ForwardModel:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
 
 
 #: entry-point group -> interface class

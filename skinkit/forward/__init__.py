@@ -4,11 +4,12 @@
 and returns a :class:`skinkit.interfaces.ForwardModel`: the finite-element model
 (``[model] kind = "fe"``, the default; :mod:`skinkit.forward.fe`) or a lumped model
 (``kind = "lumped"``; :mod:`skinkit.forward.lumped`). ``read_observations(SESSION)`` reads
-what a session measured. Then::
+what a session measured. A model may hold worker processes between predictions: close it
+(``close()``, idempotent) or use it as a context manager. Then::
 
-    model = load("docs/models/invivo_quick.toml")
     obs = read_observations("session.h5")
-    pred = model.predict(model.parameters(), obs, sensitivities=True)
+    with load("docs/models/invivo_quick.toml") as model:
+        pred = model.predict(model.parameters(), obs, sensitivities=True)
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Any
 
 from skinkit.errors import ForwardError
 from skinkit.forward.observations import read_observations
+from skinkit.interfaces import ForwardModel
 
 
 def read_description(path_or_spec: str | os.PathLike[str] | Mapping[str, Any]) -> dict[str, Any]:
@@ -47,8 +49,9 @@ def model_kind(spec: Mapping[str, Any]) -> str:
 
 
 def load(path_or_spec: str | os.PathLike[str] | Mapping[str, Any], *, workers: int | None = None,
-         scheduler: Any = None) -> Any:
+         scheduler: Any = None) -> ForwardModel:
     """The forward model of a model file or description, with its ``[[effects]]`` applied.
+    Close it when done (``close()`` or ``with load(...) as model:``).
 
     ``workers``: worker processes for the protocols of a session (default: one per core;
     1: in this process); ``scheduler``: a Dask scheduler address (or cluster) instead.
@@ -63,19 +66,10 @@ def load(path_or_spec: str | os.PathLike[str] | Mapping[str, Any], *, workers: i
     if kind == "lumped":
         from skinkit.forward.lumped import build_lumped
 
-        return build_lumped(spec, effects) if _takes_effects(build_lumped) else build_lumped(spec)
+        return build_lumped(spec, effects)
     from skinkit.forward.fe import FEForwardModel
 
     return FEForwardModel(spec, effects, workers=workers, scheduler=scheduler)
 
 
-def _takes_effects(fn: Any) -> bool:
-    import inspect
-
-    try:
-        return len(inspect.signature(fn).parameters) >= 2
-    except (TypeError, ValueError):
-        return False
-
-
-__all__ = ["load", "model_kind", "read_description", "read_observations"]
+__all__ = ["ForwardModel", "load", "model_kind", "read_description", "read_observations"]

@@ -33,6 +33,7 @@ import numpy as np
 from skinkit.errors import ForwardError, SchemaError
 from skinkit.forward import drive as drive_mod
 from skinkit.forward.effects import AppliedEffect, apply_all
+from skinkit.interfaces import ForwardModel
 from skinkit.schemas import ChannelPrediction, Observations, Parameter, ParameterSet, Prediction
 
 #: default largest solver step [s]: 20 steps per period of the thesis's 0.1 Hz protocols
@@ -196,8 +197,11 @@ def _cubic(t_knots: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
     return CubicSpline(t_knots, y, axis=0)(t)
 
 
-class FEForwardModel:
-    """A finite-element model file as a :class:`skinkit.interfaces.ForwardModel` (module docstring)."""
+class FEForwardModel(ForwardModel):
+    """A finite-element model file as a :class:`skinkit.interfaces.ForwardModel` (module docstring).
+
+    With several workers it keeps a process pool between predictions; ``close()`` (or leaving
+    a ``with`` block) shuts it down, and a later prediction starts a new one."""
 
     kind = "fe"
 
@@ -539,7 +543,8 @@ class FEForwardModel:
                               scheduler=self.scheduler)
 
     def close(self) -> None:
-        """Shut the worker processes down (they are kept between predictions otherwise)."""
+        """Shut the worker processes down (they are kept between predictions otherwise);
+        idempotent."""
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None

@@ -48,6 +48,7 @@ from skinkit.forward import lumped_dynamic as dyn
 from skinkit.forward import lumped_elements as el
 from skinkit.forward.effects import AppliedEffect, apply_all
 from skinkit.forward.lumped_spec import ELASTIC, LumpedSpec, check_values, parse_lumped
+from skinkit.interfaces import ForwardModel
 from skinkit.schemas import ChannelPrediction, Observations, Parameter, ParameterSet, Prediction
 
 #: complex step [SI of the parameter]: far below rounding of any value, so exact to rounding
@@ -107,8 +108,11 @@ def _interp(t_to: np.ndarray, t_from: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.stack(cols, axis=1).reshape((len(t_to),) + y.shape[1:])
 
 
-class LumpedForwardModel:
-    """A lumped model description as a :class:`skinkit.interfaces.ForwardModel` (module docstring)."""
+class LumpedForwardModel(ForwardModel):
+    """A lumped model description as a :class:`skinkit.interfaces.ForwardModel` (module docstring).
+
+    It holds nothing between predictions: ``close()`` (inherited) does nothing, so a lumped
+    model may be used after it and in any number of ``with`` blocks."""
 
     kind = "lumped"
 

@@ -72,8 +72,8 @@ def effect_visibility(spec: Mapping[str, Any], observations: Observations,
     load = load or default_load
     base_spec = copy.deepcopy(dict(spec))
     base_spec.pop("effects", None)
-    base = load(base_spec)
-    ref = base.predict(base.parameters(), observations)
+    with load(base_spec) as base:
+        ref = base.predict(base.parameters(), observations)
     kind = model_kind(base_spec)
     names = list(effects) if effects is not None else applicable_effects(kind)
     out: dict[str, Any] = {"threshold": threshold, "protocols": observations.names, "effects": {}}
@@ -84,28 +84,23 @@ def effect_visibility(spec: Mapping[str, Any], observations: Observations,
         with_null = copy.deepcopy(base_spec)
         with_null["effects"] = [{"name": name}]
         try:
-            m0 = load(with_null)
-            null_change = _rel_change(m0.predict(m0.parameters(), observations), ref)
+            with load(with_null) as m0:
+                null_change = _rel_change(m0.predict(m0.parameters(), observations), ref)
         except (EffectError, ForwardError) as exc:   # e.g. `fibres` on a skin with a fibre law already
             out["effects"][name] = {"applicable": False, "reason": str(exc), "visible": False}
             continue
         typical = {p.name: p.value for p in plugin.parameters()}
         with_typ = copy.deepcopy(base_spec)
         with_typ["effects"] = [{"name": name, **typical}]
-        m1 = load(with_typ)
-        change = _max_change(m1.predict(m1.parameters(), observations), ref, observations, noise)
+        with load(with_typ) as m1:
+            change = _max_change(m1.predict(m1.parameters(), observations), ref, observations, noise)
         seen = {p: [c for c, v in chans.items() if v > threshold] for p, chans in change.items()}
         out["effects"][name] = {"applicable": True, "typical": typical, "null_relative_change": null_change,
                                 "change_in_noise": change,
                                 "seen_by": {p: cs for p, cs in seen.items() if cs},
                                 "visible": any(seen.values())}
-        for mdl in (m0, m1):
-            if hasattr(mdl, "close"):
-                mdl.close()
     out["invisible"] = [n for n, e in out["effects"].items() if e["applicable"] and not e["visible"]]
     out["not_applicable"] = {n: e["reason"] for n, e in out["effects"].items() if not e["applicable"]}
-    if hasattr(base, "close"):
-        base.close()
     return out
 
 

@@ -102,11 +102,6 @@ def _merge(a: Prediction, b: Prediction | None) -> Prediction:
                       dict(a.info))
 
 
-def _close(model: Any) -> None:
-    if model is not None and hasattr(model, "close"):
-        model.close()
-
-
 def _values(result: FitResult) -> dict[str, float]:
     return {p.name: float(p.value) for p in result.parameters}
 
@@ -226,7 +221,7 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
         r = fit(model, observations, free, start={n: ps[n] for n in free})
         state = _state(model, r, observations, held)
     finally:
-        _close(model)
+        model.close()
     state["added"] = added
     state["table"] = effect_table(test.effect, _values(r))
     return state
@@ -387,7 +382,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         r0 = fit(base, observations, theta)
         state0 = _state(base, r0, observations, held)
     finally:
-        _close(base)
+        base.close()
     return {"name": name, "source": source, "observations": observations, "held": held, "present": present,
             "theta": theta, "candidates": cands, "result": r0, "state0": state0, "base": base}
 

@@ -142,11 +142,6 @@ def _only(pred: Prediction, names: Sequence[str]) -> Prediction:
                       pred.info)
 
 
-def _close(model: Any) -> None:
-    if model is not None and hasattr(model, "close"):
-        model.close()
-
-
 def _load_group(spec: Mapping[str, Any], effects: Sequence[str], load: Callable[..., Any]) -> Any:
     return load(with_effects(spec, [{"name": e} for e in effects]))
 
@@ -202,7 +197,7 @@ def _predict_group(spec: Mapping[str, Any], group: list[str], load: Callable[...
         pred = model.predict(ps, fitted, sensitivities=names)
         return model, pred, names
     except BaseException:
-        _close(model)
+        model.close()
         raise
 
 
@@ -216,7 +211,7 @@ def _predict_apart(spec: Mapping[str, Any], effects: Sequence[str], load: Callab
     good = []
     for e in effects:
         try:
-            _close(_load_group(spec, [e], load))
+            _load_group(spec, [e], load).close()
             good.append(e)
         except SkinkitError as exc1:
             skipped[e] = str(exc1)
@@ -267,7 +262,7 @@ def _columns(results: Sequence[tuple[list[str], Any, Prediction, list[str]]], fi
                 columns[e] = cols
     finally:
         for _, model, _, _ in results:
-            _close(model)
+            model.close()
     return z0, J_theta, base_pred, columns, n_forward
 
 
@@ -577,7 +572,7 @@ def separating_protocol(spec: Mapping[str, Any], observations: Observations, val
             if cs is not None:
                 rows.append({"protocol": c, "cosine": cs})
     finally:
-        _close(model)
+        model.close()
     if not rows:
         return None
     rows.sort(key=lambda r: r["cosine"])

@@ -207,7 +207,7 @@ def _drive_with(model: Any, params: ParameterSet, obs: Observations, drive: str)
     try:
         pred = twin.predict(params, obs)
     finally:
-        if twin is not model and hasattr(twin, "close"):
+        if twin is not model:
             twin.close()
     po = next(iter(obs))
     chans = dict(po.channels)

@@ -172,9 +172,7 @@ def error_in_residual(model: Any, observations: Observations, params: ParameterS
             params = fine_model.parameters().with_values(dict(params))
         fine = fine_model.predict(params, fitted, sensitivities=False)
     finally:
-        close = getattr(fine_model, "close", None)
-        if callable(close):
-            close()
+        fine_model.close()
     exact = extrapolated(coarse, fine, factor, order)
     obj = Objective(model, fitted, [], weighting)
     zc, zx = obj.residual(coarse, jacobian=False).z, obj.residual(exact, jacobian=False).z

@@ -350,12 +350,11 @@ def run_truth(truth: Any, planned: Sequence[PlannedProtocol], sensors: SensorMod
             results.update(_predict_group(model, obs, {p.protocol.name: p.drive for p in group}))
         except BaseException:
             for m in {id(x): x for x in (model, first) if x is not None and x is not truth}.values():
-                if hasattr(m, "close"):
-                    m.close()
+                m.close()
             raise
         if first is None:
             first = model
-        elif model is not truth and hasattr(model, "close"):
+        elif model is not truth:
             model.close()
     if progress:
         progress("truth model", 1.0)
@@ -501,7 +500,7 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
         description = _description(model, spec, kind)
         parameters = model.parameters().to_list()
     finally:
-        if model is not truth and hasattr(model, "close"):
+        if model is not truth:
             model.close()
     profile_true = surface.profile_points()
     recorded, offsets, profile = _record(planned, noiseless, profile_true, sensors, int(seed))
