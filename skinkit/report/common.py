@@ -27,10 +27,11 @@ from skinkit.gap.html import _pct as pct
 from skinkit.gap.html import _png_uri as png_uri
 from skinkit.gap.html import _t as t
 from skinkit.gap.html import _table as table
+from skinkit.units import is_dimensionless_text
 
 __all__ = ["CSS", "JS", "MAX_PLOT_POINTS", "MAX_PLOT_SAMPLES", "MAX_VALUE_CHARS", "Section", "array_uri",
            "decimate", "e", "f", "figure", "img", "kv_table", "mpl", "note", "num", "p", "pct", "plural",
-           "png_uri", "slug", "t", "table", "value_text", "warn_list"]
+           "png_uri", "quantity_text", "slug", "t", "table", "unit_text", "value_text", "warn_list"]
 
 #: at most this many samples of a signal are drawn (more add nothing at a figure's resolution)
 MAX_PLOT_SAMPLES = 20_000
@@ -99,6 +100,18 @@ def _value_text(v: Any, digits: int) -> str:
     if isinstance(v, (list, tuple, Mapping)):
         return jsonio.dumps(v, default=str)
     return str(v)
+
+
+def unit_text(unit: str | None) -> str:
+    """A unit for a unit column: ``""`` for a dimensionless quantity (no bare ``1``)."""
+    return "" if is_dimensionless_text(unit) else str(unit).strip()
+
+
+def quantity_text(v: Any, unit: str | None, digits: int = 4) -> str:
+    """A value with its unit for people: ``"12.5 kPa"``; a dimensionless value bare."""
+    u = unit_text(unit)
+    s = value_text(v, digits)
+    return f"{s} {u}" if u else s
 
 
 def decimate(n: int, limit: int = MAX_PLOT_SAMPLES) -> slice:

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from skinkit.errors import SchemaError
-from skinkit.units import Q, to_si
+from skinkit.units import Q, format_quantity, to_si
 
 
 def _fmt(shape: tuple[int | str, ...]) -> str:
@@ -80,7 +80,7 @@ def as_float(value: Any, field: str, unit: str, lo: float | None = None, hi: flo
             return x
         raise SchemaError(field, "is NaN")
     if lo is not None and x < lo:
-        raise SchemaError(field, f"{x:g} {unit} is below its minimum {lo:g}")
+        raise SchemaError(field, f"{format_quantity(x, unit)} is below its minimum {lo:g}")
     if hi is not None and x > hi:
-        raise SchemaError(field, f"{x:g} {unit} is above its maximum {hi:g}")
+        raise SchemaError(field, f"{format_quantity(x, unit)} is above its maximum {hi:g}")
     return x

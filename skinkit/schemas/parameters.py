@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from skinkit.errors import SchemaError
-from skinkit.units import is_known, si_unit, to_si
+from skinkit.units import format_quantity, is_known, si_unit, to_si
 
 
 @dataclass(frozen=True)
@@ -52,12 +52,38 @@ class Parameter:
         if vals["lower"] > vals["upper"]:
             raise SchemaError(f, f"lower bound {vals['lower']:g} is above upper bound {vals['upper']:g}")
         if not vals["lower"] <= vals["value"] <= vals["upper"]:
-            raise SchemaError(f"{f}.value", f"{vals['value']:g} {si} is outside its bounds "
+            raise SchemaError(f"{f}.value", f"{format_quantity(vals['value'], si)} is outside its bounds "
                               f"[{vals['lower']:g}, {vals['upper']:g}]")
         object.__setattr__(self, "unit", si)
         for key, x in vals.items():
             object.__setattr__(self, key, x)
         object.__setattr__(self, "free", bool(self.free))
+
+    def __str__(self) -> str:
+        """For people: ``"skin.mu = 1e+04 Pa"``, ``"skin.k1 = 0.5 (fixed)"`` (a dimensionless
+        value bare, without a unit after it)."""
+        return f"{self.name} = {self.describe()}"
+
+    def describe(self, spec: str = "g") -> str:
+        """The value with its unit, formatted with ``spec``, and ``(fixed)`` when not free."""
+        return format_quantity(self.value, self.unit, spec) + ("" if self.free else " (fixed)")
+
+
+#: the sibling keys that say why a bound is None
+_REASONS = ("lower_reason", "upper_reason")
+UNBOUNDED = "unbounded"
+
+
+def bound_entries(lower: float, upper: float) -> dict[str, Any]:
+    """``lower`` and ``upper`` as JSON entries: an infinite bound is None with a sibling
+    ``<side>_reason`` = ``"unbounded"``."""
+    out: dict[str, Any] = {}
+    for side, x in (("lower", lower), ("upper", upper)):
+        infinite = math.isinf(x)
+        out[side] = None if infinite else x
+        if infinite:
+            out[f"{side}_reason"] = UNBOUNDED
+    return out
 
 
 class ParameterSet:
@@ -99,7 +125,7 @@ class ParameterSet:
         return isinstance(other, ParameterSet) and list(self) == list(other)
 
     def __repr__(self) -> str:
-        inner = ", ".join(f"{p.name}={p.value:g} {p.unit}{'' if p.free else ' (fixed)'}" for p in self)
+        inner = ", ".join(f"{p.name}={p.describe()}" for p in self)
         return f"ParameterSet({inner})"
 
     @property
@@ -142,11 +168,10 @@ class ParameterSet:
         return ParameterSet(replace(p, value=values.get(p.name, p.value)) for p in self)
 
     def to_list(self) -> list[dict[str, Any]]:
-        """JSON-ready list of dicts (infinite bounds as None)."""
-        def b(x: float) -> float | None:
-            return None if math.isinf(x) else x
-        return [{"name": p.name, "value": p.value, "unit": p.unit, "lower": b(p.lower),
-                 "upper": b(p.upper), "free": p.free} for p in self]
+        """JSON-ready list of dicts. An infinite bound is None, with ``lower_reason`` /
+        ``upper_reason`` ``"unbounded"`` beside it (strict JSON has no infinity)."""
+        return [{"name": p.name, "value": p.value, "unit": p.unit, **bound_entries(p.lower, p.upper),
+                 "free": p.free} for p in self]
 
     @classmethod
     def from_list(cls, items: Iterable[Mapping[str, Any]]) -> ParameterSet:
@@ -155,7 +180,7 @@ class ParameterSet:
         for i, d in enumerate(items):
             if not isinstance(d, Mapping) or "name" not in d or "value" not in d:
                 raise SchemaError(f"ParameterSet[{i}]", "needs at least 'name' and 'value'")
-            extra = set(d) - {"name", "value", "unit", "lower", "upper", "free"}
+            extra = set(d) - {"name", "value", "unit", "lower", "upper", "free", *_REASONS}
             if extra:
                 raise SchemaError(f"ParameterSet[{i}]", f"unknown key(s) {sorted(extra)}")
             out.append(Parameter(

@@ -95,6 +95,7 @@ class FitResult:
             "aic": self.aic,
             "aicc": self.aicc,
             "se": self.se,
+            **_se_reasons(self.se),
             "correlation": None if self.correlation is None else np.asarray(self.correlation).tolist(),
             "identifiability": self.identifiability,
             "chi2_per_dof": self.chi2_per_dof,
@@ -113,7 +114,25 @@ class FitResult:
         """The fit result of :meth:`to_dict`'s dict."""
         d = dict(d)
         d["parameters"] = ParameterSet.from_list(d["parameters"])
+        reasons = d.pop("se_reason", None) or {}
+        if reasons and d.get("se") is not None:
+            # a standard error written as null because it is infinite comes back infinite
+            back = {SE_UNDETERMINED: math.inf, SE_NOT_A_NUMBER: math.nan}
+            d["se"] = {k: (back.get(reasons.get(k), v) if v is None else v) for k, v in d["se"].items()}
         return cls(**d)
+
+
+#: why a standard error is written as null (strict JSON has no infinity)
+SE_UNDETERMINED = "undetermined: the data do not move this parameter (infinite standard error)"
+SE_NOT_A_NUMBER = "not computed (not a number)"
+
+
+def _se_reasons(se: dict[str, Any] | None) -> dict[str, Any]:
+    """``{"se_reason": {name: reason}}`` for the standard errors that are not finite numbers
+    (written as null); empty when every one is finite."""
+    bad = {k: SE_NOT_A_NUMBER if math.isnan(float(v)) else SE_UNDETERMINED for k, v in (se or {}).items()
+           if isinstance(v, (float, np.floating)) and not math.isfinite(float(v))}
+    return {"se_reason": bad} if bad else {}
 
 
 def _finite_or_none(x: Any) -> Any:
