@@ -20,11 +20,6 @@ import sys
 import time
 from typing import Any
 
-import click
-
-from skinkit import jsonio
-from skinkit.cli._types import FiniteFloat
-
 #: the targets: a listing answers within a second; the simulated robot keeps up with real time
 PLUGINS_TARGET_S = 1.0
 REALTIME_TARGET = 1.0
@@ -98,40 +93,23 @@ def run(repeat: int = 3, robot_seconds: float = 2.0) -> dict[str, Any]:
     }
 
 
-@click.command("cli")
-@click.option("--repeat", default=3, show_default=True, type=click.IntRange(1),
-              help="runs per command; the best is reported")
-@click.option("--robot-seconds", default=2.0, show_default=True, type=FiniteFloat(0.1),
-              help="simulated length of the robot run [s]")
-@click.option("--json", "as_json", is_flag=True)
-def bench_cli(repeat: int, robot_seconds: float, as_json: bool) -> None:
-    """Wall time of `skinkit plugins` and `skinkit robot protocols` (fresh interpreter, best
-    of --repeat) and the simulated robot's real-time factor; targets < 1 s and >= 1."""
-    res = run(repeat, robot_seconds)
-    if as_json:
-        click.echo(jsonio.dumps(res, indent=1))
-        return
-    from rich.console import Console
-    from rich.table import Table
-
-    def mark(ok: bool | None) -> str:
-        return "-" if ok is None else ("[green]yes[/green]" if ok else "[red]no[/red]")
-
-    t = Table(title="command-line speed")
-    for col in ("figure", "measured", "target", "met"):
-        t.add_column(col)
-    t.add_row("skinkit plugins", f"{res['plugins_s']:.2f} s", f"< {PLUGINS_TARGET_S:g} s",
-              mark(res["meets_targets"]["plugins"]))
-    t.add_row("skinkit robot protocols", f"{res['robot_protocols_s']:.2f} s", "", "")
-    t.add_row("skinkit --version (start-up)", f"{res['version_s']:.2f} s", "", "")
+def table_rows(res: dict[str, Any]) -> list[tuple[str, str, str, bool | None]]:
+    """(figure, measured, target, met) per row of a table of :func:`run`'s figures."""
     rtf = res["robot_realtime_factor"]
-    t.add_row("sim robot real-time factor", "-" if rtf is None else f"{rtf:.2f}",
-              f">= {REALTIME_TARGET:g}", mark(res["meets_targets"]["robot"]))
-    con = Console()
-    con.print(t)
+    return [("skinkit plugins", f"{res['plugins_s']:.2f} s", f"< {PLUGINS_TARGET_S:g} s",
+             res["meets_targets"]["plugins"]),
+            ("skinkit robot protocols", f"{res['robot_protocols_s']:.2f} s", "", None),
+            ("skinkit --version (start-up)", f"{res['version_s']:.2f} s", "", None),
+            ("sim robot real-time factor", "-" if rtf is None else f"{rtf:.2f}", f">= {REALTIME_TARGET:g}",
+             res["meets_targets"]["robot"])]
+
+
+def context_lines(res: dict[str, Any]) -> list[str]:
+    """What the figures depend on: the machine's load, the bytecode cache, a skipped robot run."""
     load = res["load_average_1min"]
     cache = "on" if res["bytecode_cache"] else "off (every start-up compiles what it imports)"
-    con.print(("" if load is None else f"load average {load:.1f} on {res['cpu_count']} CPUs; ")
-              + f"bytecode cache {cache}")
+    out = [("" if load is None else f"load average {load:.1f} on {res['cpu_count']} CPUs; ")
+           + f"bytecode cache {cache}"]
     if "skipped" in res["robot"]:
-        con.print(f"robot: skipped ({res['robot']['skipped']})")
+        out.append(f"robot: skipped ({res['robot']['skipped']})")
+    return out

@@ -31,9 +31,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import click
-
-from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.examples import example_model
 
@@ -166,34 +163,29 @@ def _line(res: dict[str, Any]) -> str:
             f"{res['wall_s'] / 60:6.1f} min\n        {per}")
 
 
-@click.command("coverage")
-@click.option("--case", "case", type=click.Choice([*CASES, "all"]), default="all", show_default=True,
-              help="which truth")
-@click.option("--seeds", type=click.IntRange(1), default=20, show_default=True,
-              help="virtual sessions per case")
-@click.option("--start", type=click.Choice(["perturbed", "truth"]), default="perturbed", show_default=True,
-              help="each fit's start: the truth perturbed by ~20 % per parameter, or the truth")
-@click.option("--first-seed", type=click.IntRange(0), default=0, show_default=True,
-              help="seeds are first-seed, first-seed + 1, ...")
-@click.option("--workers", type=click.IntRange(1), default=None, help="worker processes per FE prediction")
-@click.option("--json", "as_json", is_flag=True, help="print JSON")
-def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None,
-                   as_json: bool) -> None:
-    """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
+def run(case: str = "all", seeds: int = 20, start: str = "perturbed", first_seed: int = 0,
+        workers: int | None = None, say: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Every case named by ``case`` (one of :data:`CASES` or ``"all"``): ``{"cases": {name:
+    run_case(...)}, "wall_s": ...}``; ``say`` receives one progress line per fitted seed."""
     cases = list(CASES) if case == "all" else [case]
     out: dict[str, Any] = {}
     t0 = time.perf_counter()
     for c in cases:
-        def progress(i: int, n: int, rec: dict[str, Any], c: str = c) -> None:   # on stderr, also with --json
+        def progress(i: int, n: int, rec: dict[str, Any], c: str = c) -> None:
+            if say is None:
+                return
             k = sum(rec["inside"].values())
             status = "failed" if "error" in rec else f"{k}/{len(rec['inside'])} inside"
-            click.echo(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s", err=True)
+            say(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s")
         out[c] = run_case(c, seeds, start, workers, first_seed, progress)
-    if as_json:
-        click.echo(jsonio.dumps({"cases": out, "wall_s": time.perf_counter() - t0}, indent=1))
-        return
-    click.echo("case       DOF seeds pairs inside coverage  expected (95 %)  chi2/dof evals  per fit   total")
-    for c in cases:
-        click.echo(_line(out[c]))
-    click.echo(f"expected: the central 95 % of the inside count if the intervals were exact (binomial); "
-               f"{out[cases[0]]['note']}")
+    return {"cases": out, "wall_s": time.perf_counter() - t0}
+
+
+def summary_lines(res: dict[str, Any]) -> list[str]:
+    """The figures of :func:`run` as lines of text (a table, one case per row)."""
+    cases = list(res["cases"])
+    out = ["case       DOF seeds pairs inside coverage  expected (95 %)  chi2/dof evals  per fit   total"]
+    out += [_line(res["cases"][c]) for c in cases]
+    out.append(f"expected: the central 95 % of the inside count if the intervals were exact (binomial); "
+               f"{res['cases'][cases[0]]['note']}")
+    return out

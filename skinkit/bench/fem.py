@@ -16,10 +16,8 @@ import contextlib
 import io
 import time
 
-import click
 import numpy as np
 
-from skinkit import jsonio
 from skinkit.fem.assembly import DEFAULT_INTORDER
 from skinkit.fem.bcs import BoundaryConditions
 from skinkit.fem.mesh import block_mesh
@@ -134,22 +132,13 @@ def run(n: int = 7, linear: str = "auto") -> dict:
             "sfepy_time_stats": sf["time_stats"]}
 
 
-@click.command("fem")
-@click.option("--n", type=click.IntRange(1, 30), default=7, show_default=True,
-              help="elements per side (7 -> 10,125 dofs)")
-@click.option("--linear", default="auto", show_default=True, help="linear solver: auto, pardiso, splu")
-@click.option("--json", "as_json", is_flag=True, help="print JSON")
-def bench_fem(n: int, linear: str, as_json: bool) -> None:
-    """Seconds per Newton iteration, skinkit against sfepy, same mesh and law."""
-    res = run(n, linear)
-    if as_json:
-        click.echo(jsonio.dumps(res, indent=2))
-        return
-    click.echo(f"{res['dof']} dofs, {res['elements']} 27-node hexahedra, "
-               f"linear solver {res['linear_solver']}")
-    click.echo(f"skinkit {res['skinkit_s_per_newton']:.3f} s/iteration "
-               f"(assembly {res['assembly_s']:.3f} s of which tangent {res['tangent_assembly_s']:.3f} s, "
-               f"solve {res['solve_s']:.3f} s)")
-    click.echo(f"sfepy   {res['sfepy_s_per_newton']:.3f} s/iteration")
-    click.echo(f"speedup {res['speedup']:.2f}x; max relative displacement difference "
-               f"{res['max_rel_disp_diff']:.2e}")
+def summary_lines(res: dict) -> list[str]:
+    """The figures of :func:`run` as lines of text."""
+    return [f"{res['dof']} dofs, {res['elements']} 27-node hexahedra, "
+            f"linear solver {res['linear_solver']}",
+            f"skinkit {res['skinkit_s_per_newton']:.3f} s/iteration "
+            f"(assembly {res['assembly_s']:.3f} s of which tangent {res['tangent_assembly_s']:.3f} s, "
+            f"solve {res['solve_s']:.3f} s)",
+            f"sfepy   {res['sfepy_s_per_newton']:.3f} s/iteration",
+            f"speedup {res['speedup']:.2f}x; max relative displacement difference "
+            f"{res['max_rel_disp_diff']:.2e}"]

@@ -21,10 +21,8 @@ import copy
 import time
 from typing import Any
 
-import click
 import numpy as np
 
-from skinkit import jsonio
 from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
 
 SPEC: dict[str, Any] = {
@@ -126,21 +124,14 @@ def run(seed: int = 0) -> dict[str, Any]:
     return out
 
 
-@click.command("fit")
-@click.option("--json", "as_json", is_flag=True, help="print JSON")
-@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
-              help="noise seed of the virtual session")
-def bench_fit(as_json: bool, seed: int) -> None:
-    """Analytic-Jacobian fit vs finite differences vs derivative-free, same problem and start."""
-    res = run(seed)
-    if as_json:
-        click.echo(jsonio.dumps(res, indent=2))
-        return
-    click.echo(f"{res['n_params']} parameters; a prediction with sensitivities costs "
-               f"{res['sensitivity_cost_ratio']:.2f} plain predictions")
+def summary_lines(res: dict[str, Any]) -> list[str]:
+    """The figures of :func:`run` as lines of text."""
+    out = [f"{res['n_params']} parameters; a prediction with sensitivities costs "
+           f"{res['sensitivity_cost_ratio']:.2f} plain predictions"]
     for label, title in (("skinkit", "skinkit (analytic)"), ("fd", "finite differences"), ("dfo", "BOBYQA")):
-        click.echo(f"  {title:22s} {res[f'{label}_forward_equivalents']:7.1f} forward-solve equivalents "
+        out.append(f"  {title:22s} {res[f'{label}_forward_equivalents']:7.1f} forward-solve equivalents "
                    f"({res[f'{label}_forward_solves']} solves), {res[f'{label}_wall_s']:7.1f} s, "
                    f"largest parameter error {100 * res[f'{label}_param_error']:.2f} %")
-    click.echo(f"  finite differences need {res['fd_over_skinkit']:.1f}x, "
+    out.append(f"  finite differences need {res['fd_over_skinkit']:.1f}x, "
                f"BOBYQA {res['dfo_over_skinkit']:.1f}x the forward-solve equivalents of skinkit")
+    return out

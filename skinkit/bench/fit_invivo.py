@@ -12,13 +12,9 @@ iterations per step, from one prediction with sensitivities at the optimum).
 
 from __future__ import annotations
 
-import sys
 import time
 from typing import Any
 
-import click
-
-from skinkit import jsonio
 from skinkit.examples import example_model
 
 TABLE12 = ("normal_indentation", *(f"in_plane_{a:03d}" for a in range(0, 360, 30)),
@@ -88,26 +84,17 @@ def run(n_protocols: int = 16, periods: int = 3, workers: int = 2, seed: int = 0
             "linear_solve_s_summed": solve, "newton_per_step": newton}
 
 
-@click.command("fit-invivo")
-@click.option("--protocols", "n_protocols", type=click.IntRange(1, 16), default=16, show_default=True,
-              help="the first N of the 16 Table 12 protocols")
-@click.option("--periods", type=click.IntRange(min=1), default=3, show_default=True)
-@click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True)
-@click.option("--json", "as_json", is_flag=True, help="print JSON")
-def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool) -> None:
-    """Four GOH + QLV parameters from the Table 12 protocols at in vivo scale: wall time, where it goes."""
-    res = run(n_protocols, periods, workers, log=sys.stderr)
-    if as_json:
-        click.echo(jsonio.dumps(res, indent=2))
-        return
+def summary_lines(res: dict[str, Any]) -> list[str]:
+    """The figures of :func:`run` as lines of text."""
     r = res
-    click.echo(f"{r['n_params']} parameters from {r['n_protocols']} protocols x {r['periods']} periods, "
-               f"{r['n_dof']} unknowns, {r['workers']} workers: fit {r['wall_s_fit'] / 60:.1f} min "
-               f"({r['n_forward']} evaluations with sensitivities, {r['wall_s_per_evaluation']:.0f} s each); "
-               f"session {r['wall_s_session'] / 60:.1f} min")
-    click.echo(f"  one prediction with sensitivities {r['one_prediction_with_sensitivities_s']:.0f} s: "
-               f"assembly {r['assembly_s_summed']:.0f} s, linear solves {r['linear_solve_s_summed']:.0f} s "
-               f"(summed over protocols), {r['newton_per_step']:.2f} Newton iterations per step")
+    out = [f"{r['n_params']} parameters from {r['n_protocols']} protocols x {r['periods']} periods, "
+           f"{r['n_dof']} unknowns, {r['workers']} workers: fit {r['wall_s_fit'] / 60:.1f} min "
+           f"({r['n_forward']} evaluations with sensitivities, {r['wall_s_per_evaluation']:.0f} s each); "
+           f"session {r['wall_s_session'] / 60:.1f} min",
+           f"  one prediction with sensitivities {r['one_prediction_with_sensitivities_s']:.0f} s: "
+           f"assembly {r['assembly_s_summed']:.0f} s, linear solves {r['linear_solve_s_summed']:.0f} s "
+           f"(summed over protocols), {r['newton_per_step']:.2f} Newton iterations per step"]
     for n in FREE:
-        click.echo(f"  {n:12s} truth {res['truth'][n]:.5g}  estimate {res['estimate'][n]:.5g} "
+        out.append(f"  {n:12s} truth {res['truth'][n]:.5g}  estimate {res['estimate'][n]:.5g} "
                    f"± {1.96 * res['se'][n]:.2g}  (z {res['z'][n]:+.2f})")
+    return out

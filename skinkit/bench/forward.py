@@ -21,10 +21,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-import click
 import numpy as np
 
-from skinkit import jsonio
 from skinkit.examples import example_model
 from skinkit.schemas import Channel, Observations, ProtocolObservations
 
@@ -149,29 +147,29 @@ def run_invivo(model_path: Path | None = None,
             "sensitivities": sensitivities}
 
 
-@click.command("forward")
-@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
-@click.option("--skip-invivo", is_flag=True, help="Only the parallel part (the in vivo part takes minutes).")
-def bench_forward(as_json: bool, skip_invivo: bool) -> None:
-    """Forward model: serial vs 2 workers vs Dask (identical, speed-up); the in vivo 0.1 Hz protocol."""
+def run(skip_invivo: bool = False) -> dict[str, Any]:
+    """Both parts of the module docstring (part 2 unless ``skip_invivo``); JSON-ready figures."""
     res = run_parallel()
     if not skip_invivo:
         inv = run_invivo()
         res["invivo"] = inv
         res["invivo_newton_per_step"] = inv["newton_per_step"]
-    if as_json:
-        click.echo(jsonio.dumps(res, indent=2))
-        return
-    click.echo(f"session: {len(res['protocols'])} protocols of {res['model']} ({res['n_dof']} dof, "
-               f"{res['n_parameters']} sensitivities)")
-    click.echo(f"  serial     {res['wall_s_serial']:8.2f} s")
-    click.echo(f"  2 workers  {res['wall_s_2_workers']:8.2f} s   speed-up {res['speedup_2_workers']:.2f}x")
-    click.echo(f"  Dask       {res['wall_s_dask']:8.2f} s   speed-up {res['speedup_dask']:.2f}x")
-    click.echo(f"  identical numbers: {res['identical']} (max |difference| {res['max_abs_difference']:.3g})")
-    click.echo(f"  Newton iterations per step: {res['newton_per_step']:.2f}")
+    return res
+
+
+def summary_lines(res: dict[str, Any]) -> list[str]:
+    """The figures of :func:`run` as lines of text."""
+    out = [f"session: {len(res['protocols'])} protocols of {res['model']} ({res['n_dof']} dof, "
+           f"{res['n_parameters']} sensitivities)",
+           f"  serial     {res['wall_s_serial']:8.2f} s",
+           f"  2 workers  {res['wall_s_2_workers']:8.2f} s   speed-up {res['speedup_2_workers']:.2f}x",
+           f"  Dask       {res['wall_s_dask']:8.2f} s   speed-up {res['speedup_dask']:.2f}x",
+           f"  identical numbers: {res['identical']} (max |difference| {res['max_abs_difference']:.3g})",
+           f"  Newton iterations per step: {res['newton_per_step']:.2f}"]
     if "invivo" in res:
         v = res["invivo"]
-        click.echo(f"in vivo 0.1 Hz normal indentation ({v['n_dof']} dof, {v['steps']} steps): "
+        out.append(f"in vivo 0.1 Hz normal indentation ({v['n_dof']} dof, {v['steps']} steps): "
                    f"{v['wall_s']:.1f} s, {v['newton_per_step']:.2f} Newton iterations per step, "
                    f"assembly {v['assembly_s']:.1f} s, linear solve {v['linear_solve_s']:.1f} s "
                    f"({v['linear_solver']})")
+    return out

@@ -25,10 +25,6 @@ import sys
 import time
 from typing import Any
 
-import click
-
-from skinkit import jsonio
-from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
 
@@ -119,40 +115,30 @@ def measure(link: str, rate_param: int, stream_hz: float, duration_s: float) -> 
     }
 
 
-@click.command("robot")
-@click.option("--duration", type=FiniteFloat(0.1, 600.0), default=3.0, show_default=True,
-              help="device seconds per configuration")
-@click.option("--json", "as_json", is_flag=True)
-def bench_robot(duration: float, as_json: bool) -> None:
-    """Sustained sample rate over serial (115200, 921600 baud) and CAN (500k, 1M bit/s); one
-    configuration per link offers more than the link carries, to show losses being counted."""
-    configs = [
-        ("serial", 115_200, 500.0),
-        ("serial", 921_600, 1000.0),
-        ("serial", 921_600, 2000.0),
-        ("can", 500_000, 500.0),
-        ("can", 1_000_000, 1000.0),
-        ("can", 1_000_000, 2000.0),
-    ]
-    rows = [measure(link, rate, hz, duration) for link, rate, hz in configs]
-    if as_json:
-        click.echo(jsonio.dumps({"robot_links": rows}, indent=1))
-        return
-    from rich.console import Console
-    from rich.table import Table
+#: (link, line rate [baud or bit/s], offered sample rate [Hz]): one configuration per link
+#: offers more than the link carries, to show losses being counted
+CONFIGS: tuple[tuple[str, int, float], ...] = (
+    ("serial", 115_200, 500.0),
+    ("serial", 921_600, 1000.0),
+    ("serial", 921_600, 2000.0),
+    ("can", 500_000, 500.0),
+    ("can", 1_000_000, 1000.0),
+    ("can", 1_000_000, 2000.0),
+)
 
-    t = Table(title="robot link throughput (emulator in real time, 10 kHz control loop)")
-    for col in ("link", "rate", "offered Hz", "capacity Hz", "sustained Hz", "real-time", "lost", "ratio"):
-        t.add_column(col)
-    for r in rows:
-        t.add_row(
-            r["link"],
-            f"{r['rate']} {r['unit']}",
-            f"{r['offered_hz']:.0f}",
-            "unknown" if r["capacity_hz"] is None else f"{r['capacity_hz']:.0f}",
-            f"{r['sustained_hz']:.0f}",
-            f"{r['realtime_factor']:.2f}",
-            "unknown" if r["lost"] is None else f"{r['lost']}/{r['generated']}",
-            f"{r['ratio']:.2f}",
-        )
-    Console().print(t)
+
+def run(duration_s: float = 3.0) -> dict[str, Any]:
+    """Every configuration of :data:`CONFIGS` for ``duration_s`` device seconds:
+    ``{"robot_links": [measure(...), ...]}``."""
+    return {"robot_links": [measure(link, rate, hz, duration_s) for link, rate, hz in CONFIGS]}
+
+
+def table_rows(res: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    """Column titles and one row of text per configuration, for a table of :func:`run`'s figures."""
+    cols = ["link", "rate", "offered Hz", "capacity Hz", "sustained Hz", "real-time", "lost", "ratio"]
+    rows = [[r["link"], f"{r['rate']} {r['unit']}", f"{r['offered_hz']:.0f}",
+             "unknown" if r["capacity_hz"] is None else f"{r['capacity_hz']:.0f}",
+             f"{r['sustained_hz']:.0f}", f"{r['realtime_factor']:.2f}",
+             "unknown" if r["lost"] is None else f"{r['lost']}/{r['generated']}", f"{r['ratio']:.2f}"]
+            for r in res["robot_links"]]
+    return cols, rows

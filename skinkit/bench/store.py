@@ -11,11 +11,9 @@ import tempfile
 import time
 from pathlib import Path
 
-import click
 import h5py
 import numpy as np
 
-from skinkit import jsonio
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit.store import create_experiment
 
@@ -65,19 +63,9 @@ def run(n_blocks: int = 200, block: int = 1000, repeats: int = 3) -> dict[str, f
             "ratio_skinkit_over_h5py": best_h5 / best_sk}
 
 
-@click.command("store")
-@click.option("--blocks", type=click.IntRange(1, 100_000), default=200, show_default=True,
-              help="Number of blocks.")
-@click.option("--block", type=click.IntRange(1, 1_000_000), default=1000, show_default=True,
-              help="Samples per block.")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-def bench_store(blocks: int, block: int, as_json: bool) -> None:
-    """Crash-safe record appending (skinkit) against plain h5py appending, same blocks."""
-    res = run(blocks, block)
-    if as_json:
-        click.echo(jsonio.dumps(res, indent=2))
-        return
-    click.echo(f"{res['samples']} samples x {res['channels']} channels in blocks of {res['block']}:")
-    click.echo(f"  skinkit (SWMR, committed marker): {res['skinkit_samples_per_s']:,.0f} samples/s")
-    click.echo(f"  plain h5py, flush per block:      {res['h5py_samples_per_s']:,.0f} samples/s")
-    click.echo(f"  ratio skinkit/h5py throughput:    {res['ratio_skinkit_over_h5py']:.2f}")
+def summary_lines(res: dict[str, float]) -> list[str]:
+    """The figures of :func:`run` as lines of text."""
+    return [f"{res['samples']} samples x {res['channels']} channels in blocks of {res['block']}:",
+            f"  skinkit (SWMR, committed marker): {res['skinkit_samples_per_s']:,.0f} samples/s",
+            f"  plain h5py, flush per block:      {res['h5py_samples_per_s']:,.0f} samples/s",
+            f"  ratio skinkit/h5py throughput:    {res['ratio_skinkit_over_h5py']:.2f}"]

@@ -7,10 +7,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import click
 import numpy as np
-
-from skinkit import jsonio
 
 
 def _best(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
@@ -64,17 +61,9 @@ def run(repeat: int = 3, seed: int = 0, duration_s: float = 5.0,
     }
 
 
-@click.command()
-@click.option("--repeat", type=click.IntRange(1, 20), default=3, show_default=True,
-              help="Runs per timing (the fastest is reported).")
-@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True)
-@click.option("--threads", type=click.IntRange(0, 256), default=1, show_default=True,
-              help="BLAS threads for both sides (0: library default; 1 avoids "
-              "oversubscription on a shared machine).")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-def bench_sysid(repeat: int, seed: int, threads: int, as_json: bool) -> None:
-    """Wiener identification time (target < 0.5 s) and IRF by Toeplitz/SVD vs plain least
-    squares on the full Toeplitz data matrix, same 5 s, 2 kHz record."""
+def run_limited(repeat: int = 3, seed: int = 0, threads: int = 1) -> dict[str, Any]:
+    """:func:`run` with ``threads`` BLAS threads for both sides (0: the library default; 1
+    avoids oversubscription on a shared machine); ``blas_threads`` says what applied."""
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # optional: without it the library default applies
@@ -85,17 +74,19 @@ def bench_sysid(repeat: int, seed: int, threads: int, as_json: bool) -> None:
     else:
         r = run(repeat=repeat, seed=seed)
     r["blas_threads"] = threads if threadpool_limits is not None else 0
-    if as_json:
-        click.echo(jsonio.dumps(r, indent=2))
-        return
-    click.echo(f"record: {r['record']['duration_s']} s at {r['record']['rate_hz']:g} Hz "
-               f"({r['record']['samples']} samples), IRF {r['irf_lags']} lags")
-    click.echo(f"Wiener identification: {r['wiener_identification_s']:.3f} s "
-               f"(target {r['wiener_target_s']} s), VAF {r['wiener_vaf_pct']:.2f} %")
-    click.echo(f"IRF Toeplitz/SVD+MDL: {r['irf_svd_mdl_s'] * 1e3:.1f} ms, error "
-               f"{100 * r['irf_error_svd_rel']:.2f} %")
-    click.echo(f"IRF full-Toeplitz lstsq: {r['irf_full_toeplitz_lstsq_s'] * 1e3:.1f} ms, error "
-               f"{100 * r['irf_error_lstsq_rel']:.2f} %")
-    click.echo(f"speed-up: {r['speedup_vs_lstsq']:.1f}x; condition number of the input "
-               f"autocorrelation {r['input_autocorrelation_condition']:.2g} (a 200 Hz input at "
-               "2 kHz leaves most lag directions unexcited: plain least squares amplifies noise)")
+    return r
+
+
+def summary_lines(r: dict[str, Any]) -> list[str]:
+    """The figures of :func:`run` as lines of text."""
+    return [f"record: {r['record']['duration_s']} s at {r['record']['rate_hz']:g} Hz "
+            f"({r['record']['samples']} samples), IRF {r['irf_lags']} lags",
+            f"Wiener identification: {r['wiener_identification_s']:.3f} s "
+            f"(target {r['wiener_target_s']} s), VAF {r['wiener_vaf_pct']:.2f} %",
+            f"IRF Toeplitz/SVD+MDL: {r['irf_svd_mdl_s'] * 1e3:.1f} ms, error "
+            f"{100 * r['irf_error_svd_rel']:.2f} %",
+            f"IRF full-Toeplitz lstsq: {r['irf_full_toeplitz_lstsq_s'] * 1e3:.1f} ms, error "
+            f"{100 * r['irf_error_lstsq_rel']:.2f} %",
+            f"speed-up: {r['speedup_vs_lstsq']:.1f}x; condition number of the input "
+            f"autocorrelation {r['input_autocorrelation_condition']:.2g} (a 200 Hz input at "
+            "2 kHz leaves most lag directions unexcited: plain least squares amplifies noise)"]

@@ -15,7 +15,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-import click
 import numpy as np
 
 from skinkit.vision.planar import translation_trials
@@ -116,29 +115,21 @@ def compare(n_trials: int = 100, subset_px: int = 64, seed: int = 0,
     return rows
 
 
-@click.command("vision")
-@click.option("--trials", type=click.IntRange(1, 100_000), default=100, show_default=True,
-              help="number of subsets")
-@click.option("--subset", "subset_px", type=click.IntRange(8, 1024), default=64, show_default=True,
-              help="subset side [px]")
-@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True)
-def bench_vision(trials: int, subset_px: int, seed: int) -> None:
-    """Subpixel error (bias, noise) and subsets/s: pcc and gn vs OpenCV and scikit-image."""
-    from rich.console import Console
-    from rich.table import Table
+#: column titles of :func:`table_rows`
+COLUMNS = ("method", "RMS [px]", "bias x [px]", "bias y [px]", "noise [px]", "max [px]", "subsets/s",
+           "failed")
 
-    rows = compare(trials, subset_px, seed)
-    table = Table(title=f"{trials} subsets of {subset_px} px, speckle translation, 1 % noise, 8 bit")
-    for col in ("method", "RMS [px]", "bias x [px]", "bias y [px]", "noise [px]", "max [px]",
-                "subsets/s", "failed"):
-        table.add_column(col, justify="left" if col == "method" else "right")
+
+def table_rows(rows: list[dict[str, float | str]]) -> list[list[str]]:
+    """One row of text per method of :func:`compare`'s rows, under :data:`COLUMNS`."""
+    return [[str(r["method"]), f"{r['rms_px']:.4f}", f"{r['bias_x_px']:+.4f}", f"{r['bias_y_px']:+.4f}",
+             f"{r['noise_px']:.4f}", f"{r['max_px']:.4f}", f"{r['subsets_per_s']:.0f}", f"{r['failed']:.0f}"]
+            for r in rows]
+
+
+def ratio_lines(rows: list[dict[str, float | str]]) -> list[str]:
+    """Each method's RMS error and speed relative to skinkit's ``pcc`` (the first row without it)."""
     ref = next((r for r in rows if r["method"] == "skinkit pcc"), rows[0])
-    for r in rows:
-        table.add_row(str(r["method"]), f"{r['rms_px']:.4f}", f"{r['bias_x_px']:+.4f}",
-                      f"{r['bias_y_px']:+.4f}", f"{r['noise_px']:.4f}", f"{r['max_px']:.4f}",
-                      f"{r['subsets_per_s']:.0f}", f"{r['failed']:.0f}")
-    Console(width=140).print(table)
-    for r in rows:
-        if r is not ref:
-            click.echo(f"{r['method']}: RMS error {r['rms_px'] / ref['rms_px']:.2f}x pcc's, "
-                       f"speed {r['subsets_per_s'] / ref['subsets_per_s']:.2f}x pcc's")
+    return [f"{r['method']}: RMS error {float(r['rms_px']) / float(ref['rms_px']):.2f}x pcc's, "
+            f"speed {float(r['subsets_per_s']) / float(ref['subsets_per_s']):.2f}x pcc's"
+            for r in rows if r is not ref]

@@ -1,25 +1,46 @@
 """The ``skinkit`` command line: a thin layer over :mod:`skinkit.pipelines` and the engines.
 
-Commands are imported lazily (``_COMMANDS`` maps a name to ``module:attribute``) so that
-``skinkit --help`` stays fast and a broken optional part cannot stop the rest.
+Commands are imported lazily through one registry (:mod:`skinkit.cli.registry`): every group
+is a table ``{name: "module:attribute"}`` plus the entry points of ``skinkit.commands``
+(top level) or ``skinkit.commands.<group>``, so that ``skinkit --help`` stays fast and a broken
+optional part cannot stop the rest.
+
+Positional arguments follow one order and keep one meaning per name:
+
+- ``EXPERIMENT`` is an experiment file (HDF5 session); a command that imports into or writes
+  an experiment takes it FIRST, then what it reads (``import-csv EXPERIMENT CSV_FILE``,
+  ``import-tracks EXPERIMENT CSV_FILE``, ``import-extensometer EXPERIMENT FOLDER``,
+  ``import-calibration EXPERIMENT FILES...``). The old source-first order of ``import-csv``
+  and ``import-extensometer`` still works for one release when it is evident (the file given
+  as the experiment is not HDF5 and the other is): the two are swapped and one
+  ``warning: ... deprecated order ...`` line goes to stderr.
+- ``MODEL_FILE SESSION``: a model description, then what it is compared with (an experiment
+  file or a CSV record).
+- A renamed command keeps its old name for one release, hidden, after a one-line warning
+  (``skinkit profile`` is now ``skinkit profile-likelihood``; ``skinkit vision profile``, a
+  surface profile, is another thing).
+
 Every :class:`skinkit.errors.SkinkitError` and every usage error ends the command with a
 one-line message on stderr and exit status 2; any other exception is a bug and ends it with
-one line and exit status 3 (``--debug`` or ``SKINKIT_DEBUG=1`` shows the traceback).
+one line and exit status 3 (``--debug`` or ``SKINKIT_DEBUG=1`` shows the traceback); Ctrl-C
+ends it with status 130.
 """
 
 from __future__ import annotations
 
-import importlib
 import sys
-from importlib.metadata import entry_points
 from typing import Any
 
 import click
 
 from skinkit import __version__
+from skinkit.cli.registry import COMMANDS_GROUP, LazyGroup
 from skinkit.errors import SkinkitError
 
-_COMMANDS: dict[str, str] = {
+__all__ = ["COMMANDS_GROUP", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "cli", "main"]
+
+#: the top-level commands: name -> "module:attribute" (imported when the command is looked up)
+COMMANDS: dict[str, str] = {
     "plugins": "skinkit.cli.plugins:plugins",
     "inspect": "skinkit.cli.inspect:inspect",
     "import-csv": "skinkit.cli.import_csv:import_csv",
@@ -40,41 +61,24 @@ _COMMANDS: dict[str, str] = {
     "effects": "skinkit.cli.effects:effects",
     "fit": "skinkit.cli.fit:fit",
     "grid": "skinkit.cli.grid:grid",
-    "profile": "skinkit.cli.grid:profile",
+    "profile-likelihood": "skinkit.cli.grid:profile",
     "select": "skinkit.cli.select:select",
     "design": "skinkit.cli.design:design",
     "lab": "skinkit.cli.lab:lab",
     "gap": "skinkit.cli.gap:gap",
     "report": "skinkit.cli.report:report",
 }
+#: old top-level names kept for one release (hidden; a one-line warning, then they run)
+ALIASES: dict[str, str] = {"profile": "profile-likelihood"}
+
+#: exit status of an unexpected exception (a bug), distinct from 2 (bad input)
+EXIT_INTERNAL = 3
+#: exit status after Ctrl-C (128 + SIGINT, as a shell reports it)
+EXIT_INTERRUPTED = 130
 
 
-#: entry-point group through which other distributions add commands (e.g. ``skinkit robot``)
-COMMANDS_GROUP = "skinkit.commands"
-
-
-def _extension_commands() -> dict[str, Any]:
-    return {ep.name: ep for ep in entry_points(group=COMMANDS_GROUP)}
-
-
-class _LazyGroup(click.Group):
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(set(super().list_commands(ctx)) | set(_COMMANDS) | set(_extension_commands()))
-
-    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        if name in _COMMANDS:
-            module, attr = _COMMANDS[name].split(":")
-            return getattr(importlib.import_module(module), attr)
-        ext = _extension_commands().get(name)
-        if ext is not None:
-            try:
-                return ext.load()
-            except Exception as exc:  # a broken extension must not break the other commands
-                dist = ext.dist.name if ext.dist is not None else "?"
-                raise click.ClickException(
-                    f"command {name!r} from {dist} ({ext.value}) failed to import: "
-                    f"{type(exc).__name__}: {exc}") from exc
-        return super().get_command(ctx, name)
+class _RootGroup(LazyGroup):
+    """The top level: the registry's commands, and the one-line error contract."""
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
@@ -102,12 +106,6 @@ class _LazyGroup(click.Group):
             _internal(ctx, exc)
 
 
-#: exit status of an unexpected exception (a bug), distinct from 2 (bad input)
-EXIT_INTERNAL = 3
-#: exit status after Ctrl-C (128 + SIGINT, as a shell reports it)
-EXIT_INTERRUPTED = 130
-
-
 def _debug(ctx: click.Context) -> bool:
     return bool(ctx.find_root().params.get("debug"))
 
@@ -125,7 +123,8 @@ def _internal(ctx: click.Context, exc: BaseException) -> None:
           "with --debug (or SKINKIT_DEBUG=1) for the traceback", EXIT_INTERNAL)
 
 
-@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_RootGroup, table=COMMANDS, entry_group=COMMANDS_GROUP, aliases=ALIASES,
+             context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="skinkit")
 @click.option("--debug", is_flag=True, envvar="SKINKIT_DEBUG",
               help="show the Python traceback of an internal error (env SKINKIT_DEBUG=1)")

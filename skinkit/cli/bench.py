@@ -1,40 +1,32 @@
 """``skinkit bench``: side-by-side benchmarks against peer implementations, run in one process.
 
-Each benchmark reports ratios against a peer on the same input; none of them is a test.
+Each benchmark reports ratios against a peer on the same input; none of them is a test. The
+measuring lives in :mod:`skinkit.bench` (plain functions returning JSON-ready dicts); the
+commands here parse options and print. Other distributions add benchmarks through the
+entry-point group ``skinkit.commands.bench``.
 """
 
 from __future__ import annotations
 
-import importlib
-
 import click
 
+from skinkit.cli.registry import LazyGroup
+
 #: benchmark name -> "module:command"
-_BENCHES: dict[str, str] = {
-    "store": "skinkit.bench.store:bench_store",
-    "robot": "skinkit.bench.robot:bench_robot",
-    "sysid": "skinkit.bench.sysid:bench_sysid",
-    "fem": "skinkit.bench.fem:bench_fem",
-    "vision": "skinkit.bench.vision:bench_vision",
-    "forward": "skinkit.bench.forward:bench_forward",
-    "fit": "skinkit.bench.fit:bench_fit",
-    "fit-invivo": "skinkit.bench.fit_invivo:bench_fit_invivo",
-    "coverage": "skinkit.bench.coverage:bench_coverage",
-    "cli": "skinkit.bench.cli:bench_cli",
+BENCHES: dict[str, str] = {
+    "store": "skinkit.cli.bench_speed:bench_store",
+    "robot": "skinkit.cli.bench_speed:bench_robot",
+    "sysid": "skinkit.cli.bench_speed:bench_sysid",
+    "fem": "skinkit.cli.bench_speed:bench_fem",
+    "vision": "skinkit.cli.bench_speed:bench_vision",
+    "cli": "skinkit.cli.bench_speed:bench_cli",
+    "forward": "skinkit.cli.bench_ident:bench_forward",
+    "fit": "skinkit.cli.bench_ident:bench_fit",
+    "fit-invivo": "skinkit.cli.bench_ident:bench_fit_invivo",
+    "coverage": "skinkit.cli.bench_ident:bench_coverage",
 }
 
 
-class _LazyBench(click.Group):
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(_BENCHES)
-
-    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        if name not in _BENCHES:
-            return None
-        module, attr = _BENCHES[name].split(":")
-        return getattr(importlib.import_module(module), attr)
-
-
-@click.group(cls=_LazyBench)
+@click.group("bench", cls=LazyGroup, table=BENCHES)
 def bench() -> None:
     """Run a side-by-side benchmark (skinkit against a peer, same input, one process)."""

@@ -6,9 +6,10 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
+from skinkit.cli.registry import LazyGroup
 
 
-@click.group("effects")
+@click.group("effects", cls=LazyGroup)
 def effects() -> None:
     """Candidate unmodelled effects (plugins of the skinkit.effects group)."""
 

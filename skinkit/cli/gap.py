@@ -9,11 +9,18 @@ import click
 from skinkit import jsonio
 from skinkit.cli._paths import check_result_files
 from skinkit.cli._types import FiniteFloat
+from skinkit.cli.registry import LazyGroup
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import split_names
 
+#: the diagnosis's benchmarks, imported only when one runs
+GAP_COMMANDS: dict[str, str] = {
+    "thesis-case": "skinkit.cli.gap_bench:thesis_case",
+    "benchmark": "skinkit.cli.gap_bench:benchmark",
+}
 
-@click.group("gap")
+
+@click.group("gap", cls=LazyGroup, table=GAP_COMMANDS)
 def gap() -> None:
     """Where a calibrated model misses a session, which unmodelled effect causes it, how far it shrinks."""
 
@@ -125,35 +132,3 @@ def _print(d: dict, written: list) -> None:
         click.echo(f"stored as /gaps/{d['stored_as']} in {d['session']}")
     for p in written:
         click.echo(f"wrote {p}")
-
-
-
-def _add_lazy(name: str, target: str, summary: str) -> None:
-    """Register ``target`` ("module:command") under ``name``, imported only when it runs."""
-
-    class _Lazy(click.Command):
-        def _real(self) -> click.Command:
-            import importlib
-
-            module, attr = target.split(":")
-            return getattr(importlib.import_module(module), attr)
-
-        def invoke(self, ctx: click.Context) -> object:
-            return self._real().invoke(ctx)
-
-        def get_params(self, ctx: click.Context) -> list:
-            return self._real().get_params(ctx)
-
-        def get_help(self, ctx: click.Context) -> str:
-            return self._real().get_help(ctx)
-
-        def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
-            return self._real().parse_args(ctx, args)
-
-    gap.add_command(_Lazy(name, help=summary, short_help=summary), name)
-
-
-_add_lazy("thesis-case", "skinkit.cli.gap_bench:thesis_case",
-          "The thesis's case: pre-stress withheld from a GOH + QLV forearm model.")
-_add_lazy("benchmark", "skinkit.cli.gap_bench:benchmark",
-          "The withheld-effect benchmark of the diagnosis (skinkit.bench.gap_benchmark).")

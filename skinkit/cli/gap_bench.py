@@ -7,13 +7,11 @@ import math
 import click
 
 from skinkit import jsonio
-from skinkit.bench.gap_benchmark import run as benchmark_run
-from skinkit.bench.gap_benchmark import summary_lines
-from skinkit.bench.gap_cases import BenchmarkError
-from skinkit.bench.gap_thesis_case import run as thesis_case_run
 
 
 def _names(text: str | None) -> list[str] | None:
+    from skinkit.bench.gap_cases import BenchmarkError
+
     if text is None:
         return None
     out = [s.strip() for s in text.split(",") if s.strip()]
@@ -44,6 +42,9 @@ def _names(text: str | None) -> list[str] | None:
 def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, effects: str | None,
               model: str, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool) -> None:
     """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
+    from skinkit.bench.gap_benchmark import run as benchmark_run
+    from skinkit.bench.gap_benchmark import summary_lines
+
     res = benchmark_run(quick, scheduler=scheduler, seeds=seeds, progress=lambda s: click.echo(s, err=True),
               model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal,
               recorded_only=recorded_only)
@@ -60,6 +61,8 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
 @click.option("--json", "as_json", is_flag=True, help="print JSON (the whole report under 'report')")
 def thesis_case(seed: int, workers: int, as_json: bool) -> None:
     """The thesis's case: pre-stress withheld from a GOH + QLV model of a virtual forearm session."""
+    from skinkit.bench.gap_thesis_case import run as thesis_case_run
+
     res = thesis_case_run(seed, workers, progress=lambda m: click.echo(f"  {m}", err=True))
     if as_json:
         click.echo(jsonio.dumps(res, indent=1, default=str))

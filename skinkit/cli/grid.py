@@ -1,4 +1,4 @@
-"""``skinkit grid`` and ``skinkit profile``: the objective over two parameters (thesis Fig 7-10),
+"""``skinkit grid`` and ``skinkit profile-likelihood``: the objective over two parameters (thesis Fig 7-10),
 and the profile likelihood of one."""
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
     click.echo(f"wrote {out / 'grid.json'} and {png}")
 
 
-@click.command("profile")
+@click.command("profile-likelihood")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.argument("session", type=click.Path(dir_okay=False))
 @click.option("--parameter", "name", required=True, help="the parameter to profile")

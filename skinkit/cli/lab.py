@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import click
 
+from skinkit.cli.registry import LazyGroup
 
-@click.group("lab")
+
+@click.group("lab", cls=LazyGroup)
 def lab() -> None:
     """The virtual lab: synthetic sessions whose truth is known."""
 

@@ -3,9 +3,11 @@
 
 from __future__ import annotations
 
+import json
+
 import click
 
-from skinkit import jsonio, registry
+from skinkit import registry
 
 #: what the listing says when it has not imported the plugins
 NOT_LOADED_NOTE = ("listed from entry-point metadata, no plugin imported; "
@@ -36,7 +38,9 @@ def plugins(as_json: bool, groups: tuple[str, ...], check: bool) -> None:
     if as_json:
         out = {"groups": {g: [s.to_dict() for s in st] for g, st in rep.items()},
                "checked": check}
-        click.echo(jsonio.dumps(out, indent=2))
+        # plain json, strict: the listing holds only text, flags and None (skinkit.jsonio imports
+        # numpy, which a listing must not)
+        click.echo(json.dumps(out, indent=2, allow_nan=False))
         return
     from rich import box
     from rich.console import Console

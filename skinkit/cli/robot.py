@@ -9,7 +9,6 @@ from __future__ import annotations
 import datetime as _dt
 import inspect
 import json
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
@@ -17,35 +16,11 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
+from skinkit.cli.registry import LazyGroup
 from skinkit.errors import OptionError, RefusedError, SkinkitError
 
-#: entry-point group for ``skinkit robot`` subcommands contributed by other distributions
-ROBOT_COMMANDS_GROUP = "skinkit.commands.robot"
 
-
-class _RobotGroup(click.Group):
-    def _ext(self) -> dict[str, Any]:
-        return {ep.name: ep for ep in entry_points(group=ROBOT_COMMANDS_GROUP)}
-
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(set(super().list_commands(ctx)) | set(self._ext()))
-
-    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        cmd = super().get_command(ctx, name)
-        if cmd is not None:
-            return cmd
-        ep = self._ext().get(name)
-        if ep is None:
-            return None
-        try:
-            return ep.load()
-        except Exception as exc:  # a broken extension must not break the other commands
-            raise click.ClickException(
-                f"robot command {name!r} ({ep.value}) failed to import: {type(exc).__name__}: {exc}"
-            ) from exc
-
-
-@click.group(cls=_RobotGroup)
+@click.group("robot", cls=LazyGroup)
 def robot() -> None:
     """Drive the microrobot: list protocols, run one into an experiment file."""
 

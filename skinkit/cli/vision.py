@@ -12,13 +12,14 @@ from click.core import ParameterSource
 
 from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
+from skinkit.cli.registry import LazyGroup
 from skinkit.errors import SkinkitError
 
 #: the device calibration (``/calibrations/<name>``) where ``calibrate`` notes its board views
 RIG_CALIBRATION = "rig"
 
 
-@click.group("vision")
+@click.group("vision", cls=LazyGroup)
 def vision() -> None:
     """Stereo vision: calibration, surface profiling, 2D and 3D tracking."""
 

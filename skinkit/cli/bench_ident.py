@@ -1,0 +1,75 @@
+"""``skinkit bench forward | fit | fit-invivo | coverage``: the cost and the honesty of
+identification, beside the ways peers do it.
+
+Each command runs :mod:`skinkit.bench`'s plain functions and prints their figures (JSON with
+``--json``; progress on stderr); the benchmark modules are imported only when a command runs.
+"""
+
+from __future__ import annotations
+
+import click
+
+from skinkit.cli.bench_speed import emit
+
+#: the coverage study's cases (kept here so that ``--help`` imports no benchmark)
+COVERAGE_CASES = ("gel", "invivo", "twopad", "lumped")
+
+
+@click.command("forward")
+@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
+@click.option("--skip-invivo", is_flag=True, help="Only the parallel part (the in vivo part takes minutes).")
+def bench_forward(as_json: bool, skip_invivo: bool) -> None:
+    """Forward model: serial vs 2 workers vs Dask (identical, speed-up); the in vivo 0.1 Hz protocol."""
+    from skinkit.bench import forward
+
+    res = forward.run(skip_invivo)
+    emit(res, as_json, None if as_json else forward.summary_lines(res))
+
+
+@click.command("fit")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
+              help="noise seed of the virtual session")
+def bench_fit(as_json: bool, seed: int) -> None:
+    """Analytic-Jacobian fit vs finite differences vs derivative-free, same problem and start."""
+    from skinkit.bench import fit
+
+    res = fit.run(seed)
+    emit(res, as_json, None if as_json else fit.summary_lines(res))
+
+
+@click.command("fit-invivo")
+@click.option("--protocols", "n_protocols", type=click.IntRange(1, 16), default=16, show_default=True,
+              help="the first N of the 16 Table 12 protocols")
+@click.option("--periods", type=click.IntRange(min=1), default=3, show_default=True)
+@click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool) -> None:
+    """Four GOH + QLV parameters from the Table 12 protocols at in vivo scale: wall time, where it goes."""
+    import sys
+
+    from skinkit.bench import fit_invivo
+
+    res = fit_invivo.run(n_protocols, periods, workers, log=sys.stderr)
+    emit(res, as_json, None if as_json else fit_invivo.summary_lines(res))
+
+
+@click.command("coverage")
+@click.option("--case", "case", type=click.Choice([*COVERAGE_CASES, "all"]), default="all", show_default=True,
+              help="which truth")
+@click.option("--seeds", type=click.IntRange(1), default=20, show_default=True,
+              help="virtual sessions per case")
+@click.option("--start", type=click.Choice(["perturbed", "truth"]), default="perturbed", show_default=True,
+              help="each fit's start: the truth perturbed by ~20 % per parameter, or the truth")
+@click.option("--first-seed", type=click.IntRange(0), default=0, show_default=True,
+              help="seeds are first-seed, first-seed + 1, ...")
+@click.option("--workers", type=click.IntRange(1), default=None, help="worker processes per FE prediction")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None,
+                   as_json: bool) -> None:
+    """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
+    from skinkit.bench import coverage
+
+    # progress goes to stderr, also with --json
+    res = coverage.run(case, seeds, start, first_seed, workers, say=lambda s: click.echo(s, err=True))
+    emit(res, as_json, None if as_json else coverage.summary_lines(res), indent=1)
