@@ -6,13 +6,14 @@ from pathlib import Path
 
 import click
 
+from skinkit.cli._order import experiment_first
 from skinkit.cli._types import FiniteFloat
 from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_extensometer
 
 
 @click.command("import-extensometer")
-@click.argument("folder", type=click.Path(path_type=Path))
 @click.argument("experiment", type=click.Path(path_type=Path))
+@click.argument("folder", type=click.Path(path_type=Path))
 @click.option("--protocol", default="extension", show_default=True, help="Protocol (record and track) name.")
 @click.option("--overwrite", is_flag=True, help="Replace EXPERIMENT if it exists.")
 @click.option("--rate", "rate_hz", type=FiniteFloat(min=0.0, min_open=True), default=NOMINAL_RATE_HZ,
@@ -24,11 +25,15 @@ from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_ext
               help="Distance between the two marks on one pad [mm]; sets the pixel scale.")
 @click.option("--moving-pad", type=click.Choice(["1", "2"]), default="1", show_default=True,
               help="Which pad's marks (x0_ref_N) are on the moving pad.")
-def import_extensometer_cmd(folder: Path, experiment: Path, protocol: str, overwrite: bool, rate_hz: float,
+def import_extensometer_cmd(experiment: Path, folder: Path, protocol: str, overwrite: bool, rate_hz: float,
                             mark_spacing_mm: float, moving_pad: str) -> None:
     """Import FOLDER (u_moving_pad.dat, f_moving_pad.dat and the tracked points x0/y0/xt/yt
     in pixels; see docs/real-data.md) as a new session EXPERIMENT: one record (pad
-    displacement and force along x) and its 2D track in metres in the skin frame."""
+    displacement and force along x) and its 2D track in metres in the skin frame.
+
+    The old order FOLDER EXPERIMENT is still read, with a warning, when it is evident (the
+    first is a folder, the second an HDF5 file or a new .h5 name)."""
+    experiment, folder = experiment_first(experiment, folder, "skinkit import-extensometer")
     imp = import_extensometer(folder, experiment, protocol, overwrite, rate_hz, mark_spacing_mm * 1e-3,
                               int(moving_pad))
     a = imp.track_attrs

@@ -110,7 +110,8 @@ class LazyGroup(click.Group):
             target = self.get_command(ctx, new)
             if target is None:
                 return None
-            here = ctx.command_path or "skinkit"
+            # named as the user types it, whatever the root was invoked as (a test runner's "cli")
+            here = " ".join(["skinkit", *ctx.command_path.split()[1:]])
             return deprecated_alias(name, target, f"{here} {name}", f"{here} {new}")
         ep = extension_entry_points(self.entry_group).get(name)
         if ep is None:

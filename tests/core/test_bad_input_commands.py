@@ -107,15 +107,15 @@ def test_import_csv_refuses_path_like_record_names(tmp_path, name):
     csv.write_text("time_s,force_N\n0,0\n0.01,1\n0.02,2\n")
     exp = _experiment(tmp_path / "e.h5")
     before = _tree(tmp_path)
-    one_error(_run("import-csv", str(csv), str(exp), "--protocol", name), "--protocol")
-    one_error(_run("import-csv", str(csv), str(tmp_path / "new.h5"), "--protocol", name), "--protocol")
+    one_error(_run("import-csv", str(exp), str(csv), "--protocol", name), "--protocol")
+    one_error(_run("import-csv", str(tmp_path / "new.h5"), str(csv), "--protocol", name), "--protocol")
     assert _tree(tmp_path) == before
 
 
 def test_import_csv_bad_csv_creates_no_experiment(tmp_path):
     csv = tmp_path / "r.csv"
     csv.write_text("time_s,force_N\n0,0\n0.01,oops\n")
-    one_error(_run("import-csv", str(csv), str(tmp_path / "new.h5")), "oops")
+    one_error(_run("import-csv", str(tmp_path / "new.h5"), str(csv)), "oops")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
 
 

@@ -92,14 +92,14 @@ def test_import_csv_then_inspect(tmp_path):
     csv.write_text("time_s,displacement_mm,force_N\n0,0,-0.077\n0.01,0.1,0.02\n0.02,0.2,0.05\n")
     exp = tmp_path / "e.h5"
     runner = CliRunner()
-    res = runner.invoke(cli, ["import-csv", str(csv), str(exp), "--axis", "x"])
+    res = runner.invoke(cli, ["import-csv", str(exp), str(csv), "--axis", "x"])
     assert res.exit_code == 0, res.output
     assert "imported 3 samples" in res.output
     data = json.loads(runner.invoke(cli, ["inspect", str(exp), "--json"]).output)
     assert data["records"][0]["protocol"] == "ext"
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,force_N\n0,1\n1,oops\n")
-    res = runner.invoke(cli, ["import-csv", str(bad), str(exp)])
+    res = runner.invoke(cli, ["import-csv", str(exp), str(bad)])
     assert res.exit_code == 2 and "line 3" in res.output and "'oops' is not a number" in res.output
 
 
