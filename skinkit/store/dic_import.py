@@ -158,31 +158,17 @@ def _outliers(pos: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return out
 
 
-def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension",
-                      rate_hz: float = NOMINAL_RATE_HZ, mark_spacing_m: float = MARK_SPACING_M,
-                      moving_pad: int = 1) -> ExtensometerImport:
-    """Read a two-pad extensometer + 2D tracking record (module docstring) into skinkit's types.
-
-    Args:
-        folder: the record's folder (its root or its ``datafiles_unprocessed``).
-        protocol: name of the protocol (kind ``"external"``).
-        rate_hz: nominal rate given to the device's samples [Hz]; the model is quasi-static,
-            so it only sets the time axis.
-        mark_spacing_m: distance between the two marks of one pad [m].
-        moving_pad: which pad's marks (``1`` or ``2``) are on the moving pad.
-
-    Raises:
-        StoreError: a file is missing, not numeric, of the wrong shape, or the record is not a
-            monotonic extension the images can be matched to (one line naming the file).
-    """
-    root = _root(Path(folder))
+def _check_options(root: Path, rate_hz: float, mark_spacing_m: float, moving_pad: int) -> None:
     if not (rate_hz > 0 and np.isfinite(rate_hz)):
         raise StoreError(str(root), "", f"rate_hz must be positive, got {rate_hz}")
     if not mark_spacing_m > 0:
         raise StoreError(str(root), "", f"mark_spacing_m must be positive, got {mark_spacing_m}")
     if moving_pad not in (1, 2):
         raise StoreError(str(root), "", f"moving_pad must be 1 or 2, got {moving_pad}")
-    rf, dd = root / "reactionforce", root / "displacement"
+
+
+def _read_device(rf: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The device's displacement [mm] and force [N], ``(N,)`` each."""
     u_mm = _load(rf / "u_moving_pad.dat", 1)
     f_n = _load(rf / "f_moving_pad.dat", 1)
     if u_mm.size != f_n.size:
@@ -190,6 +176,11 @@ def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension
                          f"has {f_n.size} values but u_moving_pad.dat has {u_mm.size}")
     if not (np.all(np.isfinite(u_mm)) and np.all(np.isfinite(f_n))):
         raise StoreError(str(rf), "", "a displacement or force value is not finite")
+    return u_mm, f_n
+
+
+def _read_points(dd: Path) -> np.ndarray:
+    """``(P, F + 1, 2)`` image positions [px] of the tracked points (frame 0 = reference)."""
     x0, y0 = _load(dd / "x0.dat", 1), _load(dd / "y0.dat", 1)
     xt, yt = _load(dd / "xt.dat", 2), _load(dd / "yt.dat", 2)
     if y0.shape != x0.shape:
@@ -199,35 +190,62 @@ def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension
                          f"expected {x0.size} points x frames like xt.dat {xt.shape}, got {yt.shape}"
                          if xt.shape[0] == x0.size else
                          f"has {xt.shape[0]} rows but x0.dat has {x0.size} points")
-    n_later = xt.shape[1]
-    pads = {k: _read_pad(dd, k, n_later) for k in (1, 2)}
-    mov, fix = pads[moving_pad], pads[3 - moving_pad]
+    return np.stack([np.column_stack([x0, xt]), np.column_stack([y0, yt])], axis=2)
 
-    # 1. pixel scale from the marks' spacing in the reference image
+
+@dataclass
+class _SkinFrame:
+    """Steps 1 and 2: the pixel scale [m/px] and the skin frame of the reference image.
+
+    ``R`` rows are skin x and y in image coordinates; ``origin`` [px] is midway between the
+    pads' centres; ``shift`` ``(F + 1, 2)`` [px] keeps the fixed pad still in every image."""
+
+    scale: float
+    spacing_px: np.ndarray
+    spacing_all: np.ndarray
+    c_mov: np.ndarray
+    c_fix: np.ndarray
+    R: np.ndarray
+    origin: np.ndarray
+    shift: np.ndarray
+
+    def to_skin(self, px: np.ndarray) -> np.ndarray:
+        """``(..., F + 1, 2)`` image positions [px] -> skin coordinates [m]."""
+        return self.scale * ((px + self.shift - self.origin) @ self.R.T)
+
+
+def _skin_frame(mov: np.ndarray, fix: np.ndarray, mark_spacing_m: float, dd: Path) -> _SkinFrame:
+    """The pixel scale from the marks' spacing in the reference image (step 1) and the skin
+    frame: origin midway between the pads, x from the fixed to the moving pad (step 2)."""
     spacing_px = np.array([np.linalg.norm(p[1, 0] - p[0, 0]) for p in (mov, fix)])
     if np.any(spacing_px <= 0):
         raise StoreError(str(dd), "pads", "the two marks of a pad coincide in the reference image")
     scale = mark_spacing_m / float(spacing_px.mean())
     spacing_all = np.array([np.linalg.norm(p[1] - p[0], axis=1) for p in (mov, fix)])   # (2, F+1)
-
-    # 2. skin frame: origin midway between the pads, x from the fixed to the moving pad
     c_mov, c_fix = mov.mean(axis=0), fix.mean(axis=0)          # (F+1, 2) pad centres [px]
     ex = c_mov[0] - c_fix[0]
     ex = ex / np.linalg.norm(ex)
-    R = np.array([ex, [ex[1], -ex[0]]])                        # rows: skin x, y in image coordinates
+    R = np.array([ex, [ex[1], -ex[0]]])
     origin = 0.5 * (c_mov[0] + c_fix[0])
-    shift = c_fix[0] - c_fix                                   # (F+1, 2) keeps the fixed pad still
+    shift = c_fix[0] - c_fix
+    return _SkinFrame(scale, spacing_px, spacing_all, c_mov, c_fix, R, origin, shift)
 
-    def to_skin(px: np.ndarray) -> np.ndarray:                 # (..., F+1, 2) [px] -> [m]
-        return scale * ((px + shift - origin) @ R.T)
 
-    pts_px = np.stack([np.column_stack([x0, xt]), np.column_stack([y0, yt])], axis=2)   # (P, F+1, 2)
-    pts = to_skin(pts_px)
-    pad_mov = to_skin(c_mov)
-    d = pad_mov[:, 0] - pad_mov[0, 0]                          # moving-pad displacement in images [m]
+@dataclass
+class _FrameTimes:
+    """Step 3: the device sample each image is matched to, and the mismatch of that match."""
 
-    # 3. frame times from the device displacement
-    u = u_mm * 1e-3
+    i_rest: int
+    u_rest: float
+    sample: np.ndarray
+    mismatch_samples: np.ndarray
+    mismatch_m: np.ndarray
+
+
+def _frame_times(u: np.ndarray, d: np.ndarray, scale: float, rate_hz: float, rf: Path,
+                 dd: Path) -> _FrameTimes:
+    """Match each image's moving-pad displacement ``d`` [m] to the device's displacement
+    ``u`` [m]: the first (fractional) sample at which the device reaches it."""
     i_rest = int(np.argmin(u[: max(2, int(np.argmax(u)))]))
     u_rest = float(u[i_rest])
     mono = np.maximum.accumulate(u[i_rest:])
@@ -246,21 +264,29 @@ def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension
     frac = (target - mono[jm]) / np.where(j > 0, mono[np.maximum(j, 1)] - mono[jm], 1.0)
     sample = np.where(j > 0, i_rest + jm + frac, float(i_rest))
     sample = np.maximum.accumulate(sample)                     # ties between repeated readings
-    t_frames = sample / rate_hz
     kk = np.arange(sample.size, dtype=float)
     line = np.polyval(np.polyfit(kk, sample, 1), kk)
     mismatch_samples = sample - line
     slope = np.gradient(mono) * rate_hz                        # device speed [m/s] along the record
     speed = np.interp(sample - i_rest, np.arange(mono.size), slope)
     mismatch_m = mismatch_samples / rate_hz * speed
+    return _FrameTimes(i_rest, u_rest, sample, mismatch_samples, mismatch_m)
 
-    # 4. validity and 5. noise
+
+def _valid_points(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Steps 4 and 5: validity ``(P, F)``, the per-axis noise ``(2,)`` [m] and the points
+    ``(P, F, 3)`` [m] with z = 0 and NaN where invalid."""
     valid = np.all(np.isfinite(pts), axis=2)
     valid &= ~_outliers(pts, valid)
     noise = _poly_scatter(pts, valid)
     points = np.concatenate([np.where(valid[..., None], pts, np.nan), np.zeros(pts.shape[:2] + (1,))], axis=2)
     points[~valid] = np.nan
+    return valid, noise, points
 
+
+def _record_and_track(root: Path, protocol: str, rate_hz: float, u: np.ndarray, f_n: np.ndarray,
+                      points: np.ndarray, valid: np.ndarray, t_frames: np.ndarray) -> tuple[RobotRecord,
+                                                                                           SurfaceTrack]:
     n = u.size
     nan = np.full(n, np.nan)
     proto = Protocol(protocol, kind="external",
@@ -273,40 +299,81 @@ def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension
                              point_ids=np.arange(points.shape[0]))
     except SchemaError as exc:
         raise StoreError(str(root), "", str(exc)) from None
+    return record, track
 
-    rec_attrs = {
+
+def _record_attrs(root: Path, rate_hz: float, times: _FrameTimes) -> dict[str, Any]:
+    return {
         "source": str(root.resolve()),
         "time_base": f"nominal: sample i at i / {rate_hz:g} Hz (the device has no clock); quasi-static",
         "nominal_rate_hz": rate_hz,
         "sign": "tip_position x: moving-pad displacement, tip_force x: force of the pad on the skin; "
                 "+x when pulling; y, z not measured",
-        "rest_sample": i_rest,
-        "rest_position_m": u_rest,
-        "frame_samples": [float(s) for s in sample],
+        "rest_sample": times.i_rest,
+        "rest_position_m": times.u_rest,
+        "frame_samples": [float(s) for s in times.sample],
     }
-    trk_attrs = {
+
+
+def _track_attrs(frame: _SkinFrame, mark_spacing_m: float, d: np.ndarray, times: _FrameTimes,
+                 noise: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
+    return {
         "dimensions": 2,
         # z is not measured by 2D tracking: NaN (JSON NaN), x and y from the scatter (step 5)
         "noise_m": [float(noise[0]), float(noise[1]), float("nan")],
         "noise_source": "scatter of each point about a cubic in frame index (1.4826 MAD)",
-        "pixel_scale_m_per_px": scale,
+        "pixel_scale_m_per_px": frame.scale,
         "mark_spacing_m": mark_spacing_m,
-        "mark_spacing_px": [float(v) for v in spacing_px],
-        "mark_spacing_px_range": [float(spacing_all.min()), float(spacing_all.max())],
+        "mark_spacing_px": [float(v) for v in frame.spacing_px],
+        "mark_spacing_px_range": [float(frame.spacing_all.min()), float(frame.spacing_all.max())],
         "frame": "skin frame: origin midway between the pads' centres, x from the fixed to the moving "
                  "pad, y = z x x (camera looking into the skin), z out of the skin; each image "
                  "translated to keep the fixed pad still",
-        "image_x_axis_in_skin": [float(v) for v in R[:, 0]],
-        "pad_centre_distance_m": float(np.linalg.norm(c_mov[0] - c_fix[0]) * scale),
-        "fixed_pad_drift_px": float(np.max(np.linalg.norm(c_fix - c_fix[0], axis=1))),
+        "image_x_axis_in_skin": [float(v) for v in frame.R[:, 0]],
+        "pad_centre_distance_m": float(np.linalg.norm(frame.c_mov[0] - frame.c_fix[0]) * frame.scale),
+        "fixed_pad_drift_px": float(np.max(np.linalg.norm(frame.c_fix - frame.c_fix[0], axis=1))),
         "moving_pad_displacement_m": [float(v) for v in d],
-        "frame_match_mismatch_rms_m": float(np.sqrt(np.mean(mismatch_m ** 2))),
-        "frame_match_mismatch_max_m": float(np.max(np.abs(mismatch_m))),
-        "frame_match_mismatch_rms_samples": float(np.sqrt(np.mean(mismatch_samples ** 2))),
+        "frame_match_mismatch_rms_m": float(np.sqrt(np.mean(times.mismatch_m ** 2))),
+        "frame_match_mismatch_max_m": float(np.max(np.abs(times.mismatch_m))),
+        "frame_match_mismatch_rms_samples": float(np.sqrt(np.mean(times.mismatch_samples ** 2))),
         "invalid_point_frames": int((~valid).sum()),
         "invalid_points": int((~valid).any(axis=1).sum()),
     }
-    return ExtensometerImport(record, track, rec_attrs, trk_attrs)
+
+
+def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension",
+                      rate_hz: float = NOMINAL_RATE_HZ, mark_spacing_m: float = MARK_SPACING_M,
+                      moving_pad: int = 1) -> ExtensometerImport:
+    """Read a two-pad extensometer + 2D tracking record (module docstring) into skinkit's types.
+
+    Args:
+        folder: the record's folder (its root or its ``datafiles_unprocessed``).
+        protocol: name of the protocol (kind ``"external"``).
+        rate_hz: nominal rate given to the device's samples [Hz]; the model is quasi-static,
+            so it only sets the time axis.
+        mark_spacing_m: distance between the two marks of one pad [m].
+        moving_pad: which pad's marks (``1`` or ``2``) are on the moving pad.
+
+    Raises:
+        StoreError: a file is missing, not numeric, of the wrong shape, or the record is not a
+            monotonic extension the images can be matched to (one line naming the file).
+    """
+    root = _root(Path(folder))
+    _check_options(root, rate_hz, mark_spacing_m, moving_pad)
+    rf, dd = root / "reactionforce", root / "displacement"
+    u_mm, f_n = _read_device(rf)
+    pts_px = _read_points(dd)
+    pads = {k: _read_pad(dd, k, pts_px.shape[1] - 1) for k in (1, 2)}
+    frame = _skin_frame(pads[moving_pad], pads[3 - moving_pad], mark_spacing_m, dd)       # 1., 2.
+    pts = frame.to_skin(pts_px)
+    pad_mov = frame.to_skin(frame.c_mov)
+    d = pad_mov[:, 0] - pad_mov[0, 0]                          # moving-pad displacement in images [m]
+    u = u_mm * 1e-3
+    times = _frame_times(u, d, frame.scale, rate_hz, rf, dd)                                # 3.
+    valid, noise, points = _valid_points(pts)                                               # 4., 5.
+    record, track = _record_and_track(root, protocol, rate_hz, u, f_n, points, valid, times.sample / rate_hz)
+    return ExtensometerImport(record, track, _record_attrs(root, rate_hz, times),
+                              _track_attrs(frame, mark_spacing_m, d, times, noise, valid))
 
 
 def import_extensometer(folder: str | os.PathLike[str], experiment: str | os.PathLike[str],

@@ -78,7 +78,7 @@ def test_noise_and_frame_matching(imp):
 
 def test_experiment_file_and_cli(tmp_path):
     out = tmp_path / "session.h5"
-    r = CliRunner().invoke(cli, ["import-extensometer", str(RECORD), str(out)])
+    r = CliRunner().invoke(cli, ["import-extensometer", str(out), str(RECORD)])
     assert r.exit_code == 0, r.output
     assert "18.7 px/mm" in r.output
     with open_experiment(out) as exp:
@@ -86,9 +86,9 @@ def test_experiment_file_and_cli(tmp_path):
         assert exp.track_attrs("extension")["dimensions"] == 2
         assert exp.record_info("extension")["extra"]["nominal_rate_hz"] == 10.0
         assert exp.read_track("extension").n_frames == 50
-    r = CliRunner().invoke(cli, ["import-extensometer", str(RECORD), str(out)])
+    r = CliRunner().invoke(cli, ["import-extensometer", str(out), str(RECORD)])
     assert r.exit_code == 2 and "already exists" in r.output
-    r = CliRunner().invoke(cli, ["import-extensometer", str(RECORD), str(out), "--overwrite",
+    r = CliRunner().invoke(cli, ["import-extensometer", str(out), str(RECORD), "--overwrite",
                                  "--protocol", "pull", "--rate", "20"])
     assert r.exit_code == 0, r.output
     with open_experiment(out) as exp:
@@ -118,7 +118,7 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, mutate, message):
         import_extensometer(d, out)
     assert "\n" not in str(ei.value)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]      # no file, no temporary left
-    r = CliRunner().invoke(cli, ["import-extensometer", str(d), str(out)])
+    r = CliRunner().invoke(cli, ["import-extensometer", str(out), str(d)])
     assert r.exit_code == 2 and r.output.count("\n") == 1 and "Traceback" not in r.output
 
 
