@@ -225,7 +225,7 @@ def simulate_spring_run(
     """Thesis 4.1.4 on the simulator: a stochastic normal force (all three motors, 200 Hz
     band) on a calibration spring of known stiffness, recorded at the full 10 kHz; returns
     the lumped fit of summed motor force against the tip's normal position."""
-    from skinkit.acquisition import stochastic
+    from skinkit.plugin.drivers import stochastic
     from skinkit_hardware.device import Device
     from skinkit_hardware.skin import KelvinVoigtSkin
 

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from skinkit.acquisition import (
+from skinkit.plugin.drivers import (
     FLAG_CAMERA_TRIGGER,
     FLAG_CONTACT,
     FLAG_ESTOP,

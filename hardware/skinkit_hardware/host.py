@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.acquisition import FLAG_SAMPLES_LOST, Programme, programme_for
 from skinkit.errors import SkinkitError
+from skinkit.plugin.drivers import FLAG_SAMPLES_LOST, Programme, programme_for
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit_hardware import faults as F
 from skinkit_hardware.device import Event

@@ -1,4 +1,5 @@
-"""Conformance check any law author can run: ``check_law(law)``.
+"""Conformance check any law author can run: ``check_law(law)``, offered to law authors as
+:mod:`skinkit.plugin.conformance.laws` (the declared, stable API; this engine module may change).
 
 It verifies, on a seeded set of deformations (stretches of up to ±20 %, shears, rotations):
 

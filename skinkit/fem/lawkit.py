@@ -1,8 +1,7 @@
-"""The stable API for authors of constitutive laws (``skinkit.laws``): law machinery and the
-tensor and hyperelastic building blocks a law is written with.
-
-Everything in ``__all__`` is public and kept stable; the modules it re-exports from
-(:mod:`skinkit.fem.hyper`, :mod:`skinkit.fem.tensors`) are engine internals that may change.
+"""Law machinery for the finite-element engine, and the tensor and hyperelastic building blocks
+a law is written with: the implementation behind :mod:`skinkit.plugin.laws`, the declared,
+stable API law plugins import (this module and those it re-exports from,
+:mod:`skinkit.fem.hyper` and :mod:`skinkit.fem.tensors`, are engine internals).
 
 Law machinery: stress and tangent of any :class:`skinkit.interfaces.Law`, from its energy if need be.
 

@@ -1,14 +1,12 @@
-"""The stable API for authors of candidate effects (``skinkit.effects``).
+"""What the engines offer effect authors, gathered in one place for :mod:`skinkit.plugin.effects`.
 
-Everything in ``__all__`` is public and kept stable; the engine modules it re-exports from
-may change. An effect edits a model description (the mapping a model file parses to) with the
-vocabulary the forward models already read (``docs/effects.md``); what it needs from skinkit
-beyond the core (:mod:`skinkit.errors` for :class:`~skinkit.errors.EffectError`,
-:mod:`skinkit.schemas` for :class:`~skinkit.schemas.Parameter`, :mod:`skinkit.units`) is:
+Effect plugins import :mod:`skinkit.plugin.effects` (the declared, stable API: ``BaseEffect``,
+``declare``, ``model_kind``, ``quantity``), not this module; it stays for code that imported
+it before that package existed, and may change.
 
 - :func:`quantity` a scalar in SI from a model-file value, a number (already SI) or a
-  ``"<number> <unit>"`` string (``quantity("1.5 mm", "m", "layers[0].thickness")`` ->
-  ``0.0015``), refusing anything else with an error naming the entry.
+  ``"<number> <unit>"`` string, refusing anything else with a
+  :class:`skinkit.fem.errors.ModelError` naming the entry.
 """
 
 from __future__ import annotations

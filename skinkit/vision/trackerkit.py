@@ -1,11 +1,13 @@
-"""The stable API for authors of trackers (``skinkit.trackers``) and surface profilers
-(``skinkit.profilers``).
-
-Everything in ``__all__`` is public and kept stable; the engine modules it re-exports from
+"""The vision building blocks trackers (``skinkit.trackers``) and surface profilers
+(``skinkit.profilers``) are written with, gathered from the engine modules
 (:mod:`skinkit.vision.subsets`, :mod:`~skinkit.vision.matching`,
 :mod:`~skinkit.vision.tracking3d`, :mod:`~skinkit.vision.triangulation`,
-:mod:`~skinkit.vision.camera`) may change. Pixel coordinates are ``(x, y)`` with the origin at
-the centre of the top-left pixel, ``x`` along columns; world points are in metres.
+:mod:`~skinkit.vision.camera`).
+
+Plugins import the declared, stable API instead: :mod:`skinkit.plugin.trackers` and
+:mod:`skinkit.plugin.profilers`; this engine-side module may change. Pixel coordinates
+are ``(x, y)`` with the origin at the centre of the top-left pixel, ``x`` along columns; world
+points are in metres.
 
 Subsets (what every subset tracker shares):
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from skinkit_plugins.effects.base import BaseEffect, Declared, declare
+from skinkit.plugin.effects import BaseEffect, Declared, declare
 
 
 def _element_half(effect: BaseEffect, layer: dict[str, Any]) -> float:
@@ -29,6 +29,7 @@ class LayerSlip(BaseEffect):
 
     name = "layer-slip"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"fields"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("ratio", 0.2, 1.0, "1", 0.01, 1.0)]
@@ -48,6 +49,7 @@ class Fascia(BaseEffect):
 
     name = "fascia"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"fields"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("ratio", 10.0, 1.0, "1", 1.0, 1000.0),
@@ -72,6 +74,7 @@ class Inclusion(BaseEffect):
 
     name = "inclusion"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"fields"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("ratio", 3.0, 1.0, "1", 0.05, 50.0),
@@ -93,6 +96,7 @@ class Preconditioning(BaseEffect):
 
     name = "preconditioning"
     kinds = ("fe", "lumped")
+    touches = {"fe": frozenset({"fields"}), "lumped": frozenset({"bindings", "lumped"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("softening", 0.2, 0.0, "1", 0.0, 0.9)]

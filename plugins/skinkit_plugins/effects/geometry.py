@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from skinkit_plugins.effects.base import BaseEffect, Declared, declare
+from skinkit.plugin.effects import BaseEffect, Declared, declare
 
 
 class Thickness(BaseEffect):
@@ -21,6 +21,8 @@ class Thickness(BaseEffect):
 
     name = "thickness"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"layers"})}
+    once = False  # it only moves an interface: nothing to recognise it by
 
     def _declared(self) -> list[Declared]:
         return [declare("delta", 0.3, 0.0, "mm", -0.8, 1.5)]
@@ -51,6 +53,7 @@ class SupportCompliance(BaseEffect):
 
     name = "support-compliance"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"boundary"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("compliance", 1.0, 0.0, "mm/kPa", 0.0, 20.0)]

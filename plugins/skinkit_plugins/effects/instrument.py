@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from skinkit_plugins.effects.base import BaseEffect, Declared, declare
+from skinkit.plugin.effects import BaseEffect, Declared, declare
 
 _AXES = ("x", "y", "z")
 
@@ -22,6 +22,7 @@ class IndenterTilt(BaseEffect):
 
     name = "indenter-tilt"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"instrument"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("angle", 3.0, 0.0, "deg", -15.0, 15.0),
@@ -54,6 +55,7 @@ class ForceOffset(_ForceBias):
     true + offset. On a force-driven model the skin saw recorded − offset."""
 
     name = "force-offset"
+    touches = {"fe": frozenset({"instrument"}), "lumped": frozenset({"instrument"})}
     basis = "constant"
 
     def _declared(self) -> list[Declared]:
@@ -66,6 +68,7 @@ class ForceDrift(_ForceBias):
     protocol, about 9 force-noise levels (σ ≈ 1.7 mN), where 0.2 mN/s would stay below 5."""
 
     name = "force-drift"
+    touches = {"fe": frozenset({"instrument"}), "lumped": frozenset({"instrument"})}
     basis = "time"
 
     def _declared(self) -> list[Declared]:
@@ -79,6 +82,7 @@ class RobotCompliance(BaseEffect):
 
     name = "robot-compliance"
     kinds = ("fe", "lumped")
+    touches = {"fe": frozenset({"instrument"}), "lumped": frozenset({"instrument"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("compliance", 1.0, 0.0, "mm/N", 0.0, 10.0)]
@@ -101,6 +105,7 @@ class TrackingBias(BaseEffect):
 
     name = "tracking-bias"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"instrument"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("scale", 1.0, 0.0, "%", -10.0, 10.0),

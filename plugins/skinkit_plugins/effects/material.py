@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from skinkit_plugins.effects.base import BaseEffect, Declared, declare, quantity
+from skinkit.plugin.effects import BaseEffect, Declared, declare, quantity
 
 
 def _sum_g(terms: list[Any], entry: str) -> float:
@@ -33,6 +33,7 @@ class Viscoelastic(BaseEffect):
 
     name = "viscoelastic"
     kinds = ("fe", "lumped")
+    touches = {"fe": frozenset({"bindings", "layers"}), "lumped": frozenset({"bindings", "lumped"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("g1", 0.3, 0.0, "1", 0.0, 0.9),
@@ -85,6 +86,7 @@ class Prestress(BaseEffect):
 
     name = "prestress"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"bindings", "layers"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("l1", 1.10, 1.0, "1", 0.8, 1.4),
@@ -115,6 +117,7 @@ class Fibres(BaseEffect):
 
     name = "fibres"
     kinds = ("fe",)
+    touches = {"fe": frozenset({"bindings", "layers"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("k1", 20.0, 0.0, "kPa", 0.0, 1000.0),

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.lawkit import (
+from skinkit.plugin.laws import (
     I3,
     b2,
     b4,

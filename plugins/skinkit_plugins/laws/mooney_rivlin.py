@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.lawkit import (
+from skinkit.plugin.laws import (
     check_volumetric,
     iso_I1,
     iso_I2,

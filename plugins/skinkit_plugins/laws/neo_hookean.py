@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.lawkit import (
+from skinkit.plugin.laws import (
     I3,
     check_volumetric,
     iso_I1,

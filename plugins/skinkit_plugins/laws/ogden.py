@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.fem.lawkit import (
+from skinkit.plugin.laws import (
     check_volumetric,
     require_positive,
     volumetric_energy,

@@ -15,7 +15,7 @@ import numpy as np
 
 from skinkit import registry
 from skinkit.errors import SkinkitError
-from skinkit.fem import lawkit
+from skinkit.plugin import laws as lawkit
 from skinkit.schemas import Parameter
 
 

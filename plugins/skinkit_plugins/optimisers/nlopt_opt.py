@@ -20,7 +20,7 @@ from typing import Any
 import nlopt
 import numpy as np
 
-from skinkit_plugins.optimisers.result import OptimiseResult
+from skinkit.plugin.optimisers import OptimiseResult
 
 _MESSAGES = {nlopt.SUCCESS: "success", nlopt.FTOL_REACHED: "ftol reached", nlopt.XTOL_REACHED: "xtol reached",
              nlopt.MAXEVAL_REACHED: "maxeval reached", nlopt.STOPVAL_REACHED: "stopval reached",

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from skinkit_plugins.optimisers.result import OptimiseResult
+from skinkit.plugin.optimisers import OptimiseResult
 
 
 class ScipyLeastSquares:

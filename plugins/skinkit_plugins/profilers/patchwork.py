@@ -27,8 +27,7 @@ import numpy as np
 from matplotlib.path import Path
 
 from skinkit import registry
-from skinkit.schemas import CameraRig, ImageSequence, SurfaceProfile
-from skinkit.vision.trackerkit import (
+from skinkit.plugin.profilers import (
     VisionError,
     camera_order,
     edge_reason,
@@ -38,6 +37,7 @@ from skinkit.vision.trackerkit import (
     subset_origin,
     triangulate,
 )
+from skinkit.schemas import CameraRig, ImageSequence, SurfaceProfile
 
 
 @dataclass

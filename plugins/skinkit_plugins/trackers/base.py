@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.vision.trackerkit import (
+from skinkit.plugin.trackers import (
     MIN_USABLE,
     IntegerMatch,
     TrackResult,

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter
 
-from skinkit.vision.trackerkit import IntegerMatch, VisionError
+from skinkit.plugin.trackers import IntegerMatch, VisionError
 from skinkit_plugins.trackers.base import SubsetTracker
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter
 
-from skinkit.vision.trackerkit import IntegerMatch
+from skinkit.plugin.trackers import IntegerMatch
 from skinkit_plugins.trackers.base import SubsetTracker
 
 

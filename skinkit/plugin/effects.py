@@ -1,9 +1,27 @@
-"""What every built-in effect shares: declared parameters with their null values, the kind
-check, the deep copy, and small accessors of a model description (``docs/effects.md``).
+"""The stable API for authors of candidate effects (``skinkit.effects``).
 
-An effect subclasses :class:`BaseEffect`, declares its parameters with :func:`declare` and
-implements ``_apply_fe`` and/or ``_apply_lumped``, which edit a deep copy in place. Errors are
-:class:`skinkit.errors.EffectError` naming ``effects.<name>``.
+Everything in ``__all__`` is public and kept stable. An effect declares parameters and edits a
+**model description** (the mapping a model file parses to) with the vocabulary the forward
+models already read and differentiate (``bindings``, ``[[layers]]`` edits, ``[[fields]]``,
+``[[instrument]]`` entries, the ``[lumped]`` table; see ``docs/effects.md``). It never adds code
+to a forward model. Errors are :class:`skinkit.errors.EffectError` naming ``effects.<name>``.
+
+- :class:`BaseEffect` what every effect shares: ``parameters()`` and ``null()`` from its
+  declarations, the kind check, the deep copy (``apply`` never modifies its input), refusal of
+  a second application, and accessors of the copied description (``layers``, ``thickness``,
+  ``lumped``, ``bind``, ``add_field``, ``add_instrument``, ``fail``). A subclass sets ``name``
+  and ``kinds``, returns its declarations from ``_declared()`` and implements ``_apply_fe``
+  and/or ``_apply_lumped``, which edit the copy in place (values in SI, every parameter
+  present: those not given take their null value);
+- :func:`declare` one parameter: name, typical magnitude, null value, unit, admissible bounds
+  (all in that unit; stored in SI) -> a :class:`Declared`;
+- :func:`model_kind` ``"fe"`` (the default) or ``"lumped"`` from a description's ``[model]``;
+- :func:`quantity` a scalar in SI from a model-file value, a number (already SI) or a
+  ``"<number> <unit>"`` string (``quantity("1.5 mm", "m", "layers[0].thickness")`` ->
+  ``0.0015``), refusing anything else with an :class:`~skinkit.errors.EffectError` naming the
+  entry.
+
+An effect is checked with :func:`skinkit.plugin.conformance.effects.check_effect`.
 """
 
 from __future__ import annotations
@@ -11,10 +29,11 @@ from __future__ import annotations
 import copy
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from types import MappingProxyType
+from typing import Any, ClassVar
 
 from skinkit.errors import EffectError, SkinkitError
-from skinkit.forward.effectkit import quantity as _quantity
+from skinkit.fem.model import quantity as _model_quantity
 from skinkit.schemas import Parameter
 from skinkit.units import to_si
 
@@ -47,16 +66,26 @@ def quantity(value: Any, unit: str, entry: str) -> float:
     """A scalar in SI ``unit`` from a number (SI) or a ``"<number> <unit>"`` string;
     :class:`EffectError` naming ``entry`` otherwise."""
     try:
-        return _quantity(value, unit, entry)
+        return _model_quantity(value, unit, entry)
     except SkinkitError as exc:
         raise EffectError(entry, getattr(exc, "problem", str(exc))) from None
 
 
 class BaseEffect:
-    """Parameters, null, kind check and copy; subclasses edit the copy."""
+    """Parameters, null, kind check and copy; subclasses edit the copy.
+
+    Two optional declarations say what the conformance kit
+    (:mod:`skinkit.plugin.conformance.effects`) may expect of the effect: ``touches``, model
+    kind -> the top-level tables of a description ``apply`` may change (a kind left out is not
+    checked), and ``once``, True when ``apply`` recognises the effect in a description it
+    already edited and refuses a second application (an effect that only moves a value
+    already in the description cannot).
+    """
 
     name: str = ""
     kinds: tuple[str, ...] = ("fe",)
+    touches: ClassVar[Mapping[str, frozenset[str]]] = MappingProxyType({})
+    once: ClassVar[bool] = True
 
     def _declared(self) -> list[Declared]:
         raise NotImplementedError
