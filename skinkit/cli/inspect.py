@@ -22,10 +22,10 @@ def _jsonable(v: Any) -> Any:
 
 
 @click.command()
-@click.argument("file", type=click.Path(path_type=Path))
+@click.argument("file", metavar="EXPERIMENT", type=click.Path(path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of tables.")
 def inspect(file: Path, as_json: bool) -> None:
-    """Show what experiment FILE holds: schema version, records (protocol, samples, rate,
+    """Show what experiment file EXPERIMENT holds: schema version, records (protocol, samples, rate,
     channels, units, complete), cameras, image sequences, profiles, tracks and results.
 
     A file whose writer died is still shown; its unfinished record has complete = false.

@@ -32,10 +32,10 @@ def _check_committed(file: Path) -> None:
 
 
 @click.command()
-@click.argument("file", type=click.Path(path_type=Path))
+@click.argument("file", metavar="EXPERIMENT", type=click.Path(path_type=Path))
 @click.argument("out", type=click.Path(path_type=Path))
 def recover(file: Path, out: Path) -> None:
-    """Copy experiment FILE, left open by a writer that died, into OUT: every committed block
+    """Copy experiment file EXPERIMENT, left open by a writer that died, into OUT: every committed block
     is kept, unfinished records stay marked incomplete, and OUT can be appended to again."""
     if out.exists() or out.is_symlink():
         raise StoreError(str(out), "", "already exists; choose another output file")

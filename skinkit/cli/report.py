@@ -8,17 +8,17 @@ import click
 
 
 @click.command()
-@click.argument("session", type=click.Path(path_type=Path))
+@click.argument("session", metavar="EXPERIMENT", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="the HTML file to write (default: <session stem>-report.html in the current directory)")
+              help="the HTML file to write (default: <experiment stem>-report.html in the current directory)")
 @click.option("--overwrite", is_flag=True, help="replace an existing report file")
 def report(session: Path, out: Path | None, overwrite: bool) -> None:
-    """Write a report of experiment file SESSION: metadata, robot records, lumped fits,
+    """Write a report of experiment file EXPERIMENT: metadata, robot records, lumped fits,
     calibration, images, surface profiles, tracks, model fits (parameters ± se, correlation,
     identifiability) and gap reports, as ONE HTML file that needs nothing else (figures are
     embedded PNGs, no network).
 
-    SESSION is only read. Sections for what the file lacks are left out and named as such in the
+    EXPERIMENT is only read. Sections for what the file lacks are left out and named as such in the
     contents. An existing report is not replaced without --overwrite.
     """
     import time

@@ -9,25 +9,65 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.mark.needs_plugins
-@pytest.mark.needs_hardware
-def test_cli_reference_is_current():
-    """In a full environment (every command installed) the generated reference matches."""
-    import difflib
+def _generated(*args: str) -> str:
+    """A page as ``python -m skinkit.cli.docgen ARGS`` writes it, in a fresh process exactly as the
+    page says to generate it: other tests in this worker may have changed the environment
+    (terminal width, working directory) that help reads."""
     import os
     import subprocess
     import sys
 
-    doc = ROOT / "docs" / "cli.md"
-    # in a fresh process, exactly as the docs say to generate it: other tests in this worker
-    # may have changed the environment (terminal width, working directory) that help reads
-    out = subprocess.run([sys.executable, "-m", "skinkit.cli.docgen"], capture_output=True, text=True,
-                         cwd=ROOT, env={k: v for k, v in os.environ.items() if k != "COLUMNS"},
-                         check=True).stdout
-    if out != doc.read_text():
-        lines = difflib.unified_diff(doc.read_text().splitlines(True), out.splitlines(True))
-        diff = "".join(list(lines)[:30])
-        pytest.fail("docs/cli.md is out of date: run `python -m skinkit.cli.docgen > docs/cli.md`\n" + diff)
+    return subprocess.run([sys.executable, "-m", "skinkit.cli.docgen", *args], capture_output=True,
+                          text=True, cwd=ROOT, env={k: v for k, v in os.environ.items() if k != "COLUMNS"},
+                          check=True).stdout
+
+
+def _check_current(page: str, out: str, command: str) -> None:
+    import difflib
+
+    doc = ROOT / page
+    if not doc.is_file() or out != doc.read_text(encoding="utf-8"):
+        old = doc.read_text(encoding="utf-8") if doc.is_file() else ""
+        diff = "".join(list(difflib.unified_diff(old.splitlines(True), out.splitlines(True)))[:30])
+        pytest.fail(f"{page} is out of date: run `{command} > {page}`\n" + diff)
+
+
+@pytest.mark.needs_plugins
+@pytest.mark.needs_hardware
+def test_cli_reference_is_current():
+    """In a full environment (every command installed) the generated reference matches."""
+    from skinkit.cli.docgen import CLI_PAGE
+
+    _check_current(CLI_PAGE, _generated(), "python -m skinkit.cli.docgen")
+
+
+@pytest.mark.needs_plugins
+@pytest.mark.needs_hardware
+def test_effects_reference_is_current():
+    """In a full environment (every effect plugin installed) the generated table matches."""
+    from skinkit.cli.docgen import EFFECTS_PAGE
+
+    _check_current(EFFECTS_PAGE, _generated("effects"), "python -m skinkit.cli.docgen effects")
+
+
+def test_the_effects_table_has_a_row_per_installed_effect():
+    from skinkit import registry
+    from skinkit.cli.docgen import effect_rows, render_effects
+
+    rows = effect_rows()
+    assert [r[0].strip("`") for r in rows] == registry.names("skinkit.effects")
+    page = render_effects()
+    assert page.count("\n| `") == len(rows)
+    for r in rows:
+        if r[1]:   # a loaded effect: its kinds and a summary sentence
+            assert set(r[1].split(", ")) <= {"fe", "lumped"} and r[3].endswith("."), r
+
+
+def test_docgen_refuses_an_unknown_page():
+    from skinkit.cli.docgen import main
+
+    with pytest.raises(SystemExit, match="usage"):
+        main(["nope"])
 
 
 def test_readme_commands_exist_in_makefile():
