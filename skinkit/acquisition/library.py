@@ -175,7 +175,8 @@ def _incremental(variant: str) -> Callable[[dict[str, Any]], Programme]:
     return build
 
 
-def _catalogue() -> dict[str, _Entry]:
+def _trajectory_entries() -> dict[str, _Entry]:
+    """The position-controlled protocols: preconditioning and the sinusoids of Table 12."""
     sine = {
         "peak_to_peak": 1.5e-3,
         "frequency": 0.1,
@@ -227,6 +228,12 @@ def _catalogue() -> dict[str, _Entry]:
             _sine,
             _sine_length,
         )
+    return out
+
+
+def _force_entries() -> dict[str, _Entry]:
+    """The force-controlled protocols: stochastic inputs of thesis 4.1.3 and Protocols A and B."""
+    out: dict[str, _Entry] = {}
     force = {
         "force_max": 3.5,
         "cutoff": 200.0,
@@ -278,6 +285,11 @@ def _catalogue() -> dict[str, _Entry]:
         _incremental_length,
     )
     return out
+
+
+def _catalogue() -> dict[str, _Entry]:
+    """Every built-in protocol, in thesis order."""
+    return {**_trajectory_entries(), **_force_entries()}
 
 
 _CATALOGUE = _catalogue()

@@ -28,6 +28,9 @@ from skinkit.inverse.identifiability import analyse
 from skinkit.inverse.objective import Objective, Residual, held_out_rms
 from skinkit.inverse.scaling import Scaling
 from skinkit.schemas import FitResult, Observations, ParameterSet
+from skinkit.schemas.parameters import bound_entries
+from skinkit.schemas.results import SE_NOT_A_NUMBER, SE_UNDETERMINED
+from skinkit.units import format_quantity, unit_suffix
 
 
 class FitError(SkinkitError):
@@ -56,10 +59,11 @@ def with_bounds(params: ParameterSet, bounds: dict[str, tuple[float, float]]) ->
             raise FitError(f"--bounds: the model has no parameter {name!r}; it has {params.names}")
         p = params.param(name)
         if not lo < hi:
-            raise FitError(f"--bounds {name}: inverted or empty, lower {lo:g} >= upper {hi:g} {p.unit}")
+            raise FitError(f"--bounds {name}: inverted or empty, lower {lo:g} >= upper "
+                           f"{format_quantity(hi, p.unit)}")
         if lo < p.lower or hi > p.upper:
-            raise FitError(f"--bounds {name}: [{lo:g}, {hi:g}] {p.unit} leaves the admissible range "
-                           f"[{p.lower:g}, {p.upper:g}]")
+            raise FitError(f"--bounds {name}: [{lo:g}, {hi:g}]{unit_suffix(p.unit)} leaves the admissible "
+                           f"range [{p.lower:g}, {p.upper:g}]")
         value = min(max(p.value, lo), hi)
         out[name] = replace(p, lower=lo, upper=hi, value=value)
     return ParameterSet(out.get(p.name, p) for p in params)
@@ -115,6 +119,89 @@ class _Evaluations:
         os.replace(tmp, path)
 
 
+class _FitRun:
+    """The evaluations of one fit: each scaled point's residual and Jacobian, asked of the
+    checkpoint first, and the history the fit reports.
+
+    ``z`` and ``J`` are the weighted residual ``(m,)`` and its derivative in scaled
+    coordinates ``(m, n_free)``; a point the model cannot solve has a NaN residual."""
+
+    def __init__(self, params: ParameterSet, obj: Objective, sc: Scaling, evals: _Evaluations,
+                 use_jac: bool, progress: Callable[[int, float, dict[str, float]], None] | None) -> None:
+        self.params, self.obj, self.sc, self.evals = params, obj, sc, evals
+        self.names = params.free_names
+        self.use_jac = use_jac
+        self.progress = progress
+        self.history: list[dict[str, Any]] = []
+        self.n_replayed = 0
+        self.m: int | None = None   # residual size, known after the first solved evaluation
+
+    def at(self, x: np.ndarray, need_jac: bool | None = None) -> dict[str, Any]:
+        """The evaluation at scaled point ``x``: replayed from the checkpoint, or solved."""
+        need_jac = self.use_jac if need_jac is None else need_jac
+        rec = self.evals.get(x)
+        if rec is not None and (rec["J"] is not None or not need_jac or not rec["ok"]):
+            if rec.pop("from_disk", False):   # an evaluation made before the fit was stopped
+                self.n_replayed += 1
+                self._record(x, rec, replayed=True)
+            return rec
+        rec = self._solve(x, need_jac)
+        self.evals.put(x, rec)
+        self._record(x, rec, replayed=False)
+        return rec
+
+    def _solve(self, x: np.ndarray, need_jac: bool) -> dict[str, Any]:
+        pset = self.params.with_free_vector(self.sc.to_values(x))
+        try:
+            res, _ = self.obj.evaluate(pset, jacobian=need_jac)
+            J = res.J * self.sc.dvalue_dscaled(x)[None, :] if need_jac else None
+            rec = {"z": res.z, "J": J, "ok": True, "error": "",
+                   "blocks": [(p, c, sl.start, sl.stop) for p, c, sl in res.blocks]}
+            self.m = res.z.size
+            return rec
+        except (SkinkitError, ArithmeticError) as exc:
+            if self.m is None:
+                raise FitError(f"the model cannot be solved at the start of the fit "
+                               f"({_describe(pset, self.names)}): {exc}") from None
+            # not a penalty: a non-finite residual makes the optimiser reject the step and shrink it
+            return {"z": np.full(self.m, np.nan), "J": np.zeros((self.m, len(self.names))), "ok": False,
+                    "error": str(exc), "blocks": []}
+
+    def _record(self, x: np.ndarray, rec: dict[str, Any], replayed: bool) -> None:
+        phi = 0.5 * float(rec["z"] @ rec["z"]) if rec["ok"] else float("nan")
+        values = self.sc.to_values(x)
+        self.history.append({"x": values.tolist(), "x_scaled": np.asarray(x, float).tolist(),
+                             "objective": phi, "solved": rec["ok"], "replayed": replayed,
+                             **({"error": rec["error"]} if not rec["ok"] else {})})
+        if self.m is None:
+            self.m = rec["z"].size
+        if self.progress is not None:
+            self.progress(len(self.history), phi, dict(zip(self.names, values.tolist(), strict=True)))
+
+
+def _optimiser(optimiser: str, use_jac: bool) -> Any:
+    """The optimiser plugin ``optimiser``, refused when it needs a Jacobian the fit does not give."""
+    try:
+        opt = registry.create("skinkit.optimisers", optimiser)
+    except PluginError as exc:
+        raise FitError(f"--optimiser {optimiser!r}: {exc}") from None
+    if getattr(opt, "needs_gradient", False) and not use_jac:
+        raise FitError(f"--optimiser {optimiser!r} is gradient-based: it needs the analytic Jacobian")
+    return opt
+
+
+def _minimise(run: _FitRun, opt: Any, optimiser: str, options: dict[str, Any]) -> Any:
+    """Run the optimiser from the fit's start (which must be solvable) within the scaled bounds."""
+    x0 = run.sc.to_scaled(run.params.free_vector())
+    lo, hi = run.sc.bounds()
+    run.at(x0)   # the start must be solvable
+    try:
+        return opt.minimise(lambda x: run.at(x)["z"], x0, lo, hi,
+                            jac=(lambda x: run.at(x)["J"]) if run.use_jac else None, options=options)
+    except ValueError as exc:   # an optimiser refusing the problem (bounds it cannot search, ...)
+        raise FitError(f"--optimiser {optimiser!r}: {exc}") from None
+
+
 def fit(model: Any, observations: Observations, free: Sequence[str] | None = None, *,
         weighting: str = "noise", optimiser: str = "scipy-lsq", start: dict[str, float] | None = None,
         ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50, jacobian: str = "analytic",
@@ -142,72 +229,34 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
     t0 = time.perf_counter()
     params = _start_parameters(model, free, bounds, start)
     names = params.free_names
-    fitted = observations.fitted()
-    obj = Objective(model, fitted, names, weighting)
+    obj = Objective(model, observations.fitted(), names, weighting)
     sc = Scaling.for_parameters(params, names)
-    lo, hi = sc.bounds()
-    x0 = sc.to_scaled(params.free_vector())
-    try:
-        opt = registry.create("skinkit.optimisers", optimiser)
-    except PluginError as exc:
-        raise FitError(f"--optimiser {optimiser!r}: {exc}") from None
-    if getattr(opt, "needs_gradient", False) and not use_jac:
-        raise FitError(f"--optimiser {optimiser!r} is gradient-based: it needs the analytic Jacobian")
+    opt = _optimiser(optimiser, use_jac)
     evals = _Evaluations(Path(checkpoint) if checkpoint is not None else None)
-    history: list[dict[str, Any]] = []
-    n_replayed = 0
-    size = {"m": None}
-
-    def at(x: np.ndarray, need_jac: bool = use_jac) -> dict[str, Any]:
-        nonlocal n_replayed
-        rec = evals.get(x)
-        if rec is not None and (rec["J"] is not None or not need_jac or not rec["ok"]):
-            if rec.pop("from_disk", False):   # an evaluation made before the fit was stopped
-                n_replayed += 1
-                _record(x, rec, replayed=True)
-            return rec
-        pset = params.with_free_vector(sc.to_values(x))
-        try:
-            res, _ = obj.evaluate(pset, jacobian=need_jac)
-            J = res.J * sc.dvalue_dscaled(x)[None, :] if need_jac else None
-            rec = {"z": res.z, "J": J, "ok": True, "error": "",
-                   "blocks": [(p, c, sl.start, sl.stop) for p, c, sl in res.blocks]}
-            size["m"] = res.z.size
-        except (SkinkitError, ArithmeticError) as exc:
-            if size["m"] is None:
-                raise FitError(f"the model cannot be solved at the start of the fit "
-                               f"({_describe(pset, names)}): {exc}") from None
-            # not a penalty: a non-finite residual makes the optimiser reject the step and shrink it
-            rec = {"z": np.full(size["m"], np.nan), "J": np.zeros((size["m"], len(names))), "ok": False,
-                   "error": str(exc), "blocks": []}
-        evals.put(x, rec)
-        _record(x, rec, replayed=False)
-        return rec
-
-    def _record(x: np.ndarray, rec: dict[str, Any], replayed: bool) -> None:
-        phi = 0.5 * float(rec["z"] @ rec["z"]) if rec["ok"] else float("nan")
-        values = sc.to_values(x)
-        history.append({"x": values.tolist(), "x_scaled": np.asarray(x, float).tolist(), "objective": phi,
-                        "solved": rec["ok"], "replayed": replayed,
-                        **({"error": rec["error"]} if not rec["ok"] else {})})
-        if size["m"] is None:
-            size["m"] = rec["z"].size
-        if progress is not None:
-            progress(len(history), phi, dict(zip(names, values.tolist(), strict=True)))
-
-    at(x0)   # the start must be solvable
-    try:
-        result = opt.minimise(lambda x: at(x)["z"], x0, lo, hi,
-                              jac=(lambda x: at(x)["J"]) if use_jac else None,
-                              options=_options(optimiser, ftol, xtol, max_iterations))
-    except ValueError as exc:   # an optimiser refusing the problem (bounds it cannot search, ...)
-        raise FitError(f"--optimiser {optimiser!r}: {exc}") from None
+    run = _FitRun(params, obj, sc, evals, use_jac, progress)
+    result = _minimise(run, opt, optimiser, _options(optimiser, ftol, xtol, max_iterations))
     n_fit_forward, n_fit_sens = obj.n_forward, obj.n_sensitivity
     x_best = np.asarray(result.x, float)
-    final = at(x_best, need_jac=True)
+    final = run.at(x_best, need_jac=True)
     if not final["ok"]:
         raise FitError(f"the optimiser ended where the model cannot be solved: {final['error']}")
-    best = params.with_free_vector(sc.to_values(x_best))
+    out = _fit_result(model, observations, run, x_best, final, result, weighting, t0)
+    out.extra.update({
+        "weighting": weighting, "optimiser": optimiser, "free": names, "history": run.history,
+        "scaling": dict(zip(names, sc.kinds, strict=True)), "n_replayed": run.n_replayed,
+        "n_failed_solves": sum(1 for h in run.history if not h["solved"]),
+        "n_forward_optimiser": n_fit_forward, "n_sensitivity_optimiser": n_fit_sens,
+        "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations,
+    })
+    return out
+
+
+def _fit_result(model: Any, observations: Observations, run: _FitRun, x_best: np.ndarray,
+                final: dict[str, Any], result: Any, weighting: str, t0: float) -> FitResult:
+    """The :class:`FitResult` at the optimum ``x_best``: uncertainty and identifiability from the
+    final residual and Jacobian, AIC, held-out error; ``extra`` holds ``chi2`` and ``n_observations``."""
+    names, sc, obj = run.names, run.sc, run.obj
+    best = run.params.with_free_vector(sc.to_values(x_best))
     z = final["z"]
     J = final["J"] / sc.dvalue_dscaled(x_best)[None, :]     # back to ∂z/∂p in SI
     res = Residual(z, None, [(p, c, slice(a, b)) for p, c, a, b in final["blocks"]])
@@ -228,13 +277,7 @@ def fit(model: Any, observations: Observations, free: Sequence[str] | None = Non
                     chi2_per_dof=ident["chi2_per_dof"], residual_by_protocol=res.by("protocol"),
                     residual_by_channel=res.by("channel"), held_out=held, n_forward=n_fwd,
                     n_sensitivity=n_sens, wall_s=wall)
-    out.extra.update({
-        "chi2": chi2, "n_observations": n_obs, "weighting": weighting, "optimiser": optimiser, "free": names,
-        "history": history, "scaling": dict(zip(names, sc.kinds, strict=True)), "n_replayed": n_replayed,
-        "n_failed_solves": sum(1 for h in history if not h["solved"]),
-        "n_forward_optimiser": n_fit_forward, "n_sensitivity_optimiser": n_fit_sens,
-        "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations,
-    })
+    out.extra.update({"chi2": chi2, "n_observations": n_obs})
     return out
 
 
@@ -251,21 +294,22 @@ def _start_parameters(model: Any, free: Sequence[str] | None, bounds: dict[str, 
     for n in names:
         p = params.param(n)
         if not p.lower < p.upper:
-            raise FitError(f"bounds of {n} are inverted or empty: [{p.lower:g}, {p.upper:g}] {p.unit}")
+            raise FitError(f"bounds of {n} are inverted or empty: "
+                           f"[{p.lower:g}, {p.upper:g}]{unit_suffix(p.unit)}")
     if start:
         for k, v in start.items():
             if k not in params:
                 raise FitError(f"start: the model has no parameter {k!r}")
             p = params.param(k)
             if not p.lower <= v <= p.upper:
-                raise FitError(f"start of {k} = {v:g} {p.unit} is outside its bounds "
+                raise FitError(f"start of {k} = {format_quantity(v, p.unit)} is outside its bounds "
                                f"[{p.lower:g}, {p.upper:g}]")
         params = params.with_values(start)
     return params
 
 
 def _describe(pset: ParameterSet, names: Sequence[str]) -> str:
-    return ", ".join(f"{n} = {pset[n]:.4g} {pset.param(n).unit}" for n in names)
+    return ", ".join(f"{n} = {format_quantity(pset[n], pset.param(n).unit, '.4g')}" for n in names)
 
 
 def _options(optimiser: str, ftol: float, xtol: float, max_iterations: int) -> dict[str, Any]:
@@ -275,18 +319,14 @@ def _options(optimiser: str, ftol: float, xtol: float, max_iterations: int) -> d
 
 
 def fit_json(result: FitResult) -> dict[str, Any]:
-    """The ``skinkit fit --json`` shape."""
-    se = result.se
+    """The ``skinkit fit --json`` shape. Strict JSON has no infinity: an unbounded bound is
+    null with ``lower_reason``/``upper_reason`` ``"unbounded"``, an undetermined standard error
+    null with ``se_reason``, an infinite condition number null with ``cond_H_reason``."""
     ident = result.identifiability.get("identifiable", {})
-    pars = {}
-    for p in result.parameters:
-        s = se.get(p.name)
-        s = float(s) if s is not None and np.isfinite(s) else None   # an undetermined one: no number
-        pars[p.name] = {"value": p.value, "unit": p.unit, "se": s, "lower": p.lower, "upper": p.upper,
-                        "free": p.free, "identifiable": ident.get(p.name, True) if p.free else None}
+    pars = {p.name: _parameter_json(p, result.se.get(p.name), ident) for p in result.parameters}
     corr = None if result.correlation is None else np.asarray(result.correlation).tolist()
     return {"parameters": pars, "objective": result.objective, "chi2_per_dof": result.chi2_per_dof,
-            "correlation": corr, "identifiability": result.identifiability,
+            "correlation": corr, "identifiability": _identifiability_json(result.identifiability),
             "aic": result.aic, "aicc": result.aicc, "n_forward": result.n_forward,
             "n_sensitivity": result.n_sensitivity, "wall_s": result.wall_s,
             "converged": result.converged, "message": result.message, "held_out": result.held_out,
@@ -295,6 +335,28 @@ def fit_json(result: FitResult) -> dict[str, Any]:
             "n_replayed": result.extra.get("n_replayed", 0),
             "n_failed_solves": result.extra.get("n_failed_solves", 0),
             **{k: result.extra[k] for k in ("discretisation",) if k in result.extra}}
+
+
+def _parameter_json(p: Any, se: float | None, identifiable: dict[str, bool]) -> dict[str, Any]:
+    out: dict[str, Any] = {"value": p.value, "unit": p.unit}
+    if se is not None and not np.isfinite(se):   # an undetermined one: no number, and why
+        out.update(se=None, se_reason=SE_NOT_A_NUMBER if np.isnan(se) else SE_UNDETERMINED)
+    else:
+        out["se"] = None if se is None else float(se)
+    bounds = bound_entries(p.lower, p.upper)
+    out.update(lower=p.lower, upper=p.upper, **{k: v for k, v in bounds.items() if k.endswith("_reason")})
+    out.update(free=p.free, identifiable=identifiable.get(p.name, True) if p.free else None)
+    return out
+
+
+def _identifiability_json(ident: dict[str, Any]) -> dict[str, Any]:
+    """``ident`` with ``metrics.cond_H_reason`` beside an infinite condition number."""
+    metrics = ident.get("metrics")
+    cond = metrics.get("cond_H") if isinstance(metrics, dict) else None
+    if cond is None or np.isfinite(cond):
+        return ident
+    why = "singular: the objective is flat along some direction of the parameters (infinite condition number)"
+    return {**ident, "metrics": {**metrics, "cond_H_reason": why}}
 
 
 __all__ = ["FitError", "aic", "fit", "fit_json", "free_set", "with_bounds"]

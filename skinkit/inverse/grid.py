@@ -44,7 +44,9 @@ import numpy as np
 from skinkit.errors import SkinkitError
 from skinkit.inverse.objective import Objective
 from skinkit.inverse.scaling import Scaling
-from skinkit.schemas import Observations, ParameterSet
+from skinkit.schemas import Observations, Parameter, ParameterSet
+from skinkit.schemas.results import SE_UNDETERMINED
+from skinkit.units import format_quantity
 
 #: χ²₁(0.95): the 95 % likelihood-ratio threshold on Δ(2φ) for one parameter
 CHI2_1_95 = 3.841458820694124
@@ -271,7 +273,6 @@ def profile_likelihood(model: Any, observations: Observations, name: str, free: 
     say(f"fit with {name} free: {', '.join([name, *others])}")
     central = fit(model, fitted, [name, *others], weighting=weighting, optimiser=optimiser, ftol=ftol,
                   xtol=xtol, max_iterations=max_iterations)
-    n_fwd, n_sens = central.n_forward, central.n_sensitivity
     theta = float(central.parameters[name])
     phi_hat = float(central.objective)
     m = int(central.extra["n_observations"])
@@ -279,48 +280,12 @@ def profile_likelihood(model: Any, observations: Observations, name: str, free: 
     s = _inflation(2 * phi_hat, dof, weighting)
     se = central.se.get(name)
     p = base.param(name)
-    if values is None:
-        if se is not None and math.isfinite(se) and se > 0:
-            lo, hi = theta - 3 * se, theta + 3 * se
-        else:   # not determined: the bounds, or ±50 %
-            lo = p.lower if math.isfinite(p.lower) else theta - 0.5 * abs(theta)
-            hi = p.upper if math.isfinite(p.upper) else theta + 0.5 * abs(theta)
-        vals = np.linspace(max(lo, p.lower), min(hi, p.upper), int(n))
-    else:
-        vals = np.unique(np.asarray(values, float))
-        bad = [v for v in vals if not p.lower <= v <= p.upper]
-        if bad:
-            raise GridError(f"--values: {bad[0]:g} {p.unit} is outside the bounds of {name} "
-                            f"[{p.lower:g}, {p.upper:g}]")
-        if vals.size < 2:
-            raise GridError("--values: give at least two values")
-    fitted_free = {q: float(central.parameters[q]) for q in others}
-    prof: dict[float, dict[str, Any]] = {}
-    up = [v for v in vals if v >= theta]
-    down = [v for v in vals[::-1] if v < theta]
-    for side in (up, down):
-        start = dict(fitted_free)
-        for v in side:
-            rec: dict[str, Any] = {"objective": None, "others": dict(start), "converged": False}
-            try:
-                if others:
-                    r = fit(model, fitted, others, weighting=weighting, optimiser=optimiser,
-                            start={name: float(v), **start}, ftol=ftol, xtol=xtol,
-                            max_iterations=max_iterations)
-                    n_fwd += r.n_forward
-                    n_sens += r.n_sensitivity
-                    start = {q: float(r.parameters[q]) for q in others}
-                    rec = {"objective": float(r.objective), "others": start, "converged": bool(r.converged)}
-                else:
-                    obj = Objective(model, fitted, [], weighting)
-                    res, _ = obj.evaluate(central.parameters.with_values({name: float(v)}), jacobian=False)
-                    n_fwd += 1
-                    rec = {"objective": 0.5 * float(res.z @ res.z), "others": {}, "converged": True}
-            except (SkinkitError, ArithmeticError) as exc:
-                rec["error"] = str(exc)
-            prof[float(v)] = rec
-            say(f"profile {name} = {v:.6g} {p.unit}: objective "
-                + (f"{rec['objective']:.6g}" if rec["objective"] is not None else "not solved"))
+    vals = _profile_values(p, theta, se, values, n)
+    refit = _Refit(model, fitted, name, others, central, weighting,
+                   {"optimiser": optimiser, "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations})
+    prof = refit.profile(vals, theta, lambda v, rec: say(
+        f"profile {name} = {format_quantity(v, p.unit, '.6g')}: objective "
+        + (f"{rec['objective']:.6g}" if rec["objective"] is not None else "not solved")))
     vals = np.array(sorted(prof))
     phis = [prof[v]["objective"] for v in vals]
     finite = [f for f in phis if f is not None]
@@ -330,6 +295,97 @@ def profile_likelihood(model: Any, observations: Observations, name: str, free: 
     root = [None if d is None else math.copysign(math.sqrt(max(d, 0.0) / s), v - theta)
             for d, v in zip(d2, vals, strict=True)]
     level = math.sqrt(CHI2_1_95)
+    wald = [theta - level * se, theta + level * se] if se is not None and math.isfinite(se) else None
+    return {
+        "model": getattr(model, "name", "model"), "parameter": name, "unit": p.unit, "free": others,
+        "weighting": weighting, "estimate": theta, "objective_min": phi_min, "se": se,
+        **({"se_reason": SE_UNDETERMINED} if se is not None and not math.isfinite(se) else {}),
+        "wald_interval": wald, "values": vals.tolist(), "objective": phis, "delta_2phi": d2,
+        "signed_root": root, "others": {q: [prof[v]["others"].get(q) for v in vals] for q in others},
+        "converged": [prof[v]["converged"] for v in vals],
+        "errors": {str(v): prof[v]["error"] for v in vals if "error" in prof[v]},
+        "threshold": CHI2_1_95 * s, "inflation": s, "chi2_per_dof": 2 * phi_hat / max(dof, 1),
+        "n_observations": m, "interval": _interval(vals, root, theta, level),
+        "n_forward": central.n_forward + refit.n_forward,
+        "n_sensitivity": central.n_sensitivity + refit.n_sensitivity, "wall_s": time.perf_counter() - t0,
+    }
+
+
+def _profile_values(p: Parameter, theta: float, se: float | None, values: Sequence[float] | None,
+                    n: int) -> np.ndarray:
+    """Where to profile ``p`` [SI]: ``values`` checked against its bounds, or ``n`` values over
+    θ̂ ± 3 se (the bounds, or ±50 %, when se is not determined), clipped to the bounds."""
+    if values is None:
+        if se is not None and math.isfinite(se) and se > 0:
+            lo, hi = theta - 3 * se, theta + 3 * se
+        else:   # not determined: the bounds, or ±50 %
+            lo = p.lower if math.isfinite(p.lower) else theta - 0.5 * abs(theta)
+            hi = p.upper if math.isfinite(p.upper) else theta + 0.5 * abs(theta)
+        return np.linspace(max(lo, p.lower), min(hi, p.upper), int(n))
+    vals = np.unique(np.asarray(values, float))
+    bad = [v for v in vals if not p.lower <= v <= p.upper]
+    if bad:
+        raise GridError(f"--values: {format_quantity(bad[0], p.unit)} is outside the bounds of {p.name} "
+                        f"[{p.lower:g}, {p.upper:g}]")
+    if vals.size < 2:
+        raise GridError("--values: give at least two values")
+    return vals
+
+
+class _Refit:
+    """The profile's re-fits: at each value of ``name``, the ``others`` fitted again, each
+    starting from its neighbour's result nearer θ̂; counts the solves they take."""
+
+    def __init__(self, model: Any, fitted: Observations, name: str, others: list[str], central: Any,
+                 weighting: str, options: dict[str, Any]) -> None:
+        self.model, self.fitted, self.name, self.others = model, fitted, name, others
+        self.central, self.weighting, self.options = central, weighting, options
+        self.n_forward = 0
+        self.n_sensitivity = 0
+
+    def profile(self, vals: np.ndarray, theta: float,
+                report: Callable[[float, dict[str, Any]], None]) -> dict[float, dict[str, Any]]:
+        """value -> ``{"objective", "others", "converged"[, "error"]}``, moving outward from θ̂."""
+        fitted_free = {q: float(self.central.parameters[q]) for q in self.others}
+        prof: dict[float, dict[str, Any]] = {}
+        up = [v for v in vals if v >= theta]
+        down = [v for v in vals[::-1] if v < theta]
+        for side in (up, down):
+            start = dict(fitted_free)
+            for v in side:
+                rec = self.at(float(v), start)
+                if "error" not in rec:   # the next value starts from this one's fit
+                    start = rec["others"]
+                prof[float(v)] = rec
+                report(v, rec)
+        return prof
+
+    def at(self, v: float, start: dict[str, float]) -> dict[str, Any]:
+        """The others re-fitted with ``name`` fixed at ``v`` from ``start`` (the objective alone
+        when nothing else is free); a fit that fails is recorded with its error."""
+        from skinkit.inverse.fit import fit
+
+        rec: dict[str, Any] = {"objective": None, "others": dict(start), "converged": False}
+        try:
+            if self.others:
+                r = fit(self.model, self.fitted, self.others, weighting=self.weighting,
+                        start={self.name: v, **start}, **self.options)
+                self.n_forward += r.n_forward
+                self.n_sensitivity += r.n_sensitivity
+                found = {q: float(r.parameters[q]) for q in self.others}
+                return {"objective": float(r.objective), "others": found, "converged": bool(r.converged)}
+            obj = Objective(self.model, self.fitted, [], self.weighting)
+            res, _ = obj.evaluate(self.central.parameters.with_values({self.name: v}), jacobian=False)
+            self.n_forward += 1
+            return {"objective": 0.5 * float(res.z @ res.z), "others": {}, "converged": True}
+        except (SkinkitError, ArithmeticError) as exc:
+            rec["error"] = str(exc)
+        return rec
+
+
+def _interval(vals: np.ndarray, root: list[float | None], theta: float, level: float) -> list[float | None]:
+    """The profile interval's ends: where the signed root reaches ``level`` below and above θ̂
+    (None for an end the profiled values do not reach)."""
     ends: list[float | None] = []
     for sel in (vals < theta, vals >= theta):
         idx = [k for k in np.nonzero(sel)[0] if root[k] is not None]
@@ -337,18 +393,7 @@ def profile_likelihood(model: Any, observations: Observations, name: str, free: 
         v = np.array([theta, *vals[idx]])
         r = np.array([0.0, *[root[k] for k in idx]])
         ends.append(_crossing(v, r, level))
-    wald = [theta - level * se, theta + level * se] if se is not None and math.isfinite(se) else None
-    return {
-        "model": getattr(model, "name", "model"), "parameter": name, "unit": p.unit, "free": others,
-        "weighting": weighting, "estimate": theta, "objective_min": phi_min, "se": se,
-        "wald_interval": wald, "values": vals.tolist(), "objective": phis, "delta_2phi": d2,
-        "signed_root": root, "others": {q: [prof[v]["others"].get(q) for v in vals] for q in others},
-        "converged": [prof[v]["converged"] for v in vals],
-        "errors": {str(v): prof[v]["error"] for v in vals if "error" in prof[v]},
-        "threshold": CHI2_1_95 * s, "inflation": s, "chi2_per_dof": 2 * phi_hat / max(dof, 1),
-        "n_observations": m, "interval": ends, "n_forward": n_fwd, "n_sensitivity": n_sens,
-        "wall_s": time.perf_counter() - t0,
-    }
+    return ends
 
 
 __all__ = ["CHI2_1_95", "CHI2_2_95", "GridError", "attach_covariance", "conditional_and_marginal",
