@@ -49,20 +49,31 @@ def model_kind(spec: Mapping[str, Any]) -> str:
 
 
 def load(path_or_spec: str | os.PathLike[str] | Mapping[str, Any], *, workers: int | None = None,
-         scheduler: Any = None) -> ForwardModel:
+         scheduler: Any = None, plugins: Mapping[str, Any] | None = None) -> ForwardModel:
     """The forward model of a model file or description, with its ``[[effects]]`` applied.
     Close it when done (``close()`` or ``with load(...) as model:``).
 
     ``workers``: worker processes for the protocols of a session (default: one per core;
-    1: in this process); ``scheduler``: a Dask scheduler address (or cluster) instead.
-    Raises :class:`ForwardError`, :class:`skinkit.errors.EffectError` or
-    :class:`skinkit.fem.errors.ModelError` naming the entry at fault.
+    1: in this process); ``scheduler``: a Dask scheduler address (or cluster) instead;
+    ``plugins``: effect name -> plugin object to use for ``[[effects]]`` of that name instead of
+    the installed one (an effect under development). Raises :class:`ForwardError`,
+    :class:`skinkit.errors.EffectError` or :class:`skinkit.fem.errors.ModelError` naming the
+    entry at fault.
     """
     from skinkit.forward.effects import resolve
 
-    spec = read_description(path_or_spec)
+    if plugins:
+        # the description check knows installed effects only: the given ones are checked by
+        # resolve, against the plugin objects themselves
+        spec = read_description(path_or_spec) if not isinstance(path_or_spec, Mapping) else dict(path_or_spec)
+        tables = spec.get("effects")
+        given = [t for t in tables or [] if isinstance(t, Mapping) and t.get("name") in plugins]
+        spec = read_description({**spec, "effects": [t for t in tables or [] if t not in given]})
+        spec["effects"] = tables
+    else:
+        spec = read_description(path_or_spec)
     kind = model_kind(spec)
-    effects = resolve(spec.get("effects"), kind)
+    effects = resolve(spec.get("effects"), kind, plugins)
     if kind == "lumped":
         from skinkit.forward.lumped import build_lumped
 

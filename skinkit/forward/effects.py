@@ -65,8 +65,11 @@ def check_value(effect: str, p: Parameter, value: float, entry: str) -> float:
     return value
 
 
-def resolve(tables: Any, kind: str) -> list[AppliedEffect]:
-    """Validate ``[[effects]]`` tables for a model of ``kind`` (``"fe"`` or ``"lumped"``)."""
+def resolve(tables: Any, kind: str, plugins: Mapping[str, Any] | None = None) -> list[AppliedEffect]:
+    """Validate ``[[effects]]`` tables for a model of ``kind`` (``"fe"`` or ``"lumped"``).
+
+    ``plugins``: effect name -> plugin object, used instead of the installed plugin of that name
+    (an effect not installed yet, as the conformance kit checks one)."""
     if tables is None:
         return []
     if not isinstance(tables, list):
@@ -81,7 +84,7 @@ def resolve(tables: Any, kind: str) -> list[AppliedEffect]:
         if name in seen:
             raise EffectError(f"{entry}.name", f"effect {name!r} is given twice")
         seen.add(name)
-        plugin = effect_plugin(name, f"{entry}.name")
+        plugin = plugins[name] if plugins and name in plugins else effect_plugin(name, f"{entry}.name")
         kinds = tuple(getattr(plugin, "kinds", ()))
         if kind not in kinds:
             raise EffectError(f"{entry}.name", f"effect {name!r} applies to {', '.join(kinds) or 'no'} "

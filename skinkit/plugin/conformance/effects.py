@@ -197,13 +197,15 @@ def _predictions(plugin: Any, kind: str, spec: Mapping[str, Any], obs: Observati
 
     base = copy.deepcopy(dict(spec))
     base.pop("effects", None)
+    # the plugin object itself, installed or not
+    mine = {plugin.name: plugin}
     try:
         with load(base, workers=1) as m:
             ref = m.predict(m.parameters(), obs)
-        with load({**base, "effects": [{"name": plugin.name}]}, workers=1) as m:
+        with load({**base, "effects": [{"name": plugin.name}]}, workers=1, plugins=mine) as m:
             null = m.predict(m.parameters(), obs)
         typical = _typical(plugin)
-        with load({**base, "effects": [{"name": plugin.name, **typical}]}, workers=1) as m:
+        with load({**base, "effects": [{"name": plugin.name, **typical}]}, workers=1, plugins=mine) as m:
             names = [f"{plugin.name}.{k}" for k in typical]
             typ = m.predict(m.parameters(), obs, sensitivities=names)
     except SkinkitError as exc:
