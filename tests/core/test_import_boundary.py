@@ -1,7 +1,8 @@
 """The built-in plugins (``plugins/``) and the hardware layer (``hardware/``) use only the
-declared plugin API: the core modules and one small kit per plugin kind,
-each listed in ``docs/plugin-authors.md``. Checked on the source (ast), so a private import
-fails here before any third-party author copies it."""
+declared plugin API: the contract modules and the plugin surface (``skinkit.plugin``: one module
+per plugin kind and its conformance kit), each listed in ``docs/guide/writing-plugins.md``.
+Checked on the source (ast), so a private import fails here before any third-party author
+copies it."""
 
 from __future__ import annotations
 
@@ -11,21 +12,21 @@ from pathlib import Path
 
 import pytest
 
+from skinkit.plugin import CONFORMANCE
+from skinkit.plugin import KITS as PLUGIN_KITS
+
 ROOT = Path(__file__).resolve().parents[2]
 
-#: the core a plugin may import from
+GUIDE = ROOT / "docs" / "guide" / "writing-plugins.md"
+
+#: the contract a plugin may import from
 CORE = ("skinkit", "skinkit.errors", "skinkit.units", "skinkit.schemas", "skinkit.registry",
         "skinkit.interfaces")
-#: plugin kind -> its kit (the stable API for that kind, with ``__all__``)
-KITS = {
-    "skinkit.laws": "skinkit.fem.lawkit",
-    "skinkit.trackers": "skinkit.vision.trackerkit",
-    "skinkit.profilers": "skinkit.vision.trackerkit",
-    "skinkit.drivers": "skinkit.acquisition",
-    "skinkit.effects": "skinkit.forward.effectkit",
-    "skinkit.commands": "skinkit.cli.commandkit",
-}
-DECLARED = frozenset(CORE) | frozenset(KITS.values())
+#: plugin kind -> its module (the stable API for that kind, with ``__all__``), and its
+#: conformance kit; the package declares both
+KITS = dict(PLUGIN_KITS)
+DECLARED = (frozenset(CORE) | frozenset(KITS.values()) | frozenset(CONFORMANCE.values())
+            | {"skinkit.plugin", "skinkit.plugin.conformance", "skinkit.plugin.conformance.report"})
 
 
 def _source(module: str) -> Path | None:
@@ -150,10 +151,10 @@ import numpy as np
 import skinkit.vision.subsets
 from skinkit import registry
 from skinkit.errors import SkinkitError
-from skinkit.fem import lawkit
+from skinkit.plugin import laws as lawkit
 from skinkit.fem.hyper import b2
-from skinkit.fem.lawkit import _show, stress
-from skinkit.fem.lawkit import no_such_name
+from skinkit.plugin.laws import _show, stress
+from skinkit.plugin.laws import no_such_name
 from skinkit_plugins.laws.goh import GOH
 from . import sibling
 
@@ -165,8 +166,8 @@ def f(law, C, p):
 
 
 def g(C):
-    import skinkit.fem.lawkit
-    return skinkit.fem.hyper.b2(C), skinkit.fem.lawkit.b2(C)
+    import skinkit.plugin.laws
+    return skinkit.fem.hyper.b2(C), skinkit.plugin.laws.b2(C)
 '''
 
 
@@ -180,11 +181,11 @@ def test_the_checker_names_every_offence(tmp_path):
     # undeclared modules (2, 6, and 14 inside a function), a private name (7), a name the kit
     # does not export (8), private members of skinkit names (16: lawkit._energy_gradient and
     # registry._cache; np._private is not skinkit's), an undeclared module reached by
-    # attribute (21: skinkit.fem.hyper, not skinkit.fem.lawkit)
+    # attribute (21: skinkit.fem.hyper, not skinkit.plugin.laws)
     assert lines == [2, 6, 7, 8, 14, 16, 16, 21], found
     assert "skinkit.fem.hyper is not in the declared plugin API" in found[1]
     assert "import _show (private name)" in found[2]
-    assert "not in skinkit.fem.lawkit.__all__" in found[3]
+    assert "not in skinkit.plugin.laws.__all__" in found[3]
     assert "skinkit.cli._types is not in the declared plugin API" in found[4]
     assert {"lawkit._energy_gradient (private member)", "registry._cache (private member)"} == \
         {s.split(": ", 1)[1] for s in found[5:7]}
@@ -193,14 +194,17 @@ def test_the_checker_names_every_offence(tmp_path):
 
 def test_a_throwaway_private_import_in_a_fixture_tree_fails(tmp_path):
     (tmp_path / "pkg").mkdir()
-    (tmp_path / "pkg" / "ok.py").write_text("from skinkit.fem.lawkit import stress\n", encoding="utf-8")
+    (tmp_path / "pkg" / "ok.py").write_text("from skinkit.plugin.laws import stress\n", encoding="utf-8")
+    (tmp_path / "pkg" / "old.py").write_text("from skinkit.fem.lawkit import stress\n", encoding="utf-8")
     (tmp_path / "pkg" / "bad.py").write_text(
-        "def g():\n    from skinkit.fem.lawkit import _energy_gradient\n", encoding="utf-8")
+        "def g():\n    from skinkit.plugin.laws import _energy_gradient\n", encoding="utf-8")
     found = check_tree(tmp_path, base=tmp_path)
-    assert found == ["pkg/bad.py:2: from skinkit.fem.lawkit import _energy_gradient (private name)"]
+    assert found == ["pkg/bad.py:2: from skinkit.plugin.laws import _energy_gradient (private name)",
+                     "pkg/old.py:1: from skinkit.fem.lawkit import stress "
+                     "(skinkit.fem.lawkit is not in the declared plugin API)"]
 
 
-@pytest.mark.parametrize("kit", sorted(set(KITS.values())))
+@pytest.mark.parametrize("kit", sorted(set(KITS.values()) | set(CONFORMANCE.values())))
 def test_every_kit_declares_its_api(kit):
     mod = importlib.import_module(kit)
     assert "stable API" in (mod.__doc__ or ""), f"{kit}: the docstring must say it is the stable API"
@@ -212,9 +216,32 @@ def test_every_kit_declares_its_api(kit):
 
 
 def test_plugin_guide_lists_every_kit_and_name():
-    guide = (ROOT / "docs" / "plugin-authors.md").read_text(encoding="utf-8")
+    guide = GUIDE.read_text(encoding="utf-8")
     for kit in set(KITS.values()):
-        assert f"`{kit}`" in guide, f"docs/plugin-authors.md does not list {kit}"
+        assert f"`{kit}`" in guide, f"{GUIDE.name} does not list {kit}"
         row = next((ln for ln in guide.splitlines() if ln.startswith("|") and f"`{kit}`" in ln), "")
         missing = [n for n in _all_of(kit) or () if f"`{n}`" not in row]
-        assert not missing, f"docs/plugin-authors.md: the row of {kit} does not name {missing}"
+        assert not missing, f"{GUIDE.name}: the row of {kit} does not name {missing}"
+
+
+def test_plugin_guide_lists_every_conformance_kit():
+    guide = GUIDE.read_text(encoding="utf-8")
+    for group, kit in CONFORMANCE.items():
+        checks = sorted(n for n in _all_of(kit) or () if n.startswith("check_"))
+        row = next((ln for ln in guide.splitlines() if ln.startswith("|") and f"`{kit}`" in ln), "")
+        assert any(f"`{c}(" in row for c in checks), f"{GUIDE.name}: no row for {kit} ({group}) naming {checks}"
+
+
+def test_every_plugin_kind_has_a_module_and_the_engines_do_not_import_the_surface():
+    from skinkit.interfaces import GROUPS
+
+    assert set(GROUPS) <= set(KITS) and set(GROUPS) == set(CONFORMANCE)
+    for path in sorted((ROOT / "skinkit").rglob("*.py")):
+        rel = path.relative_to(ROOT / "skinkit").parts
+        if rel[0] in ("plugin", "cli", "pipelines", "report", "bench", "__main__.py"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            mod = node.module if isinstance(node, ast.ImportFrom) else None
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else [mod or ""]
+            assert not any(n == "skinkit.plugin" or n.startswith("skinkit.plugin.") for n in names), \
+                f"{path.relative_to(ROOT)}:{node.lineno} imports the plugin surface from an engine"
