@@ -34,7 +34,7 @@ from typing import Any
 import click
 
 from skinkit import __version__
-from skinkit.cli.registry import COMMANDS_GROUP, LazyGroup
+from skinkit.cli.registry import ARGV_KEY, COMMANDS_GROUP, LazyGroup
 from skinkit.errors import SkinkitError
 
 __all__ = ["COMMANDS_GROUP", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "cli", "main"]
@@ -79,6 +79,11 @@ EXIT_INTERRUPTED = 130
 
 class _RootGroup(LazyGroup):
     """The top level: the registry's commands, and the one-line error contract."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        # kept for the pages a command writes, which name the exact command line
+        ctx.meta[ARGV_KEY] = list(args)
+        return super().parse_args(ctx, args)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:

@@ -2,14 +2,17 @@
 identification, beside the ways peers do it.
 
 Each command runs :mod:`skinkit.bench`'s plain functions and prints their figures (JSON with
-``--json``; progress on stderr); the benchmark modules are imported only when a command runs.
+``--json``; a Markdown results page with ``--page``; progress on stderr); the benchmark modules
+are imported only when a command runs.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
-from skinkit.cli.bench_speed import emit
+from skinkit.cli._bench_out import emit, page_option, write_page
 
 #: the coverage study's cases (kept here so that ``--help`` imports no benchmark)
 COVERAGE_CASES = ("gel", "invivo", "twopad", "lumped")
@@ -18,24 +21,30 @@ COVERAGE_CASES = ("gel", "invivo", "twopad", "lumped")
 @click.command("forward")
 @click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
 @click.option("--skip-invivo", is_flag=True, help="Only the parallel part (the in vivo part takes minutes).")
-def bench_forward(as_json: bool, skip_invivo: bool) -> None:
+@page_option
+def bench_forward(as_json: bool, skip_invivo: bool, page: Path | None) -> None:
     """Forward model: serial vs 2 workers vs Dask (identical, speed-up); the in vivo 0.1 Hz protocol."""
     from skinkit.bench import forward
 
     res = forward.run(skip_invivo)
-    emit(res, as_json, None if as_json else forward.summary_lines(res))
+    lines = forward.summary_lines(res)
+    emit(res, as_json, lines)
+    write_page(page, "Forward model: serial, worker processes and Dask", res, lines)
 
 
 @click.command("fit")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
               help="noise seed of the virtual session")
-def bench_fit(as_json: bool, seed: int) -> None:
+@page_option
+def bench_fit(as_json: bool, seed: int, page: Path | None) -> None:
     """Analytic-Jacobian fit vs finite differences vs derivative-free, same problem and start."""
     from skinkit.bench import fit
 
     res = fit.run(seed)
-    emit(res, as_json, None if as_json else fit.summary_lines(res))
+    lines = fit.summary_lines(res)
+    emit(res, as_json, lines)
+    write_page(page, "Fit: analytic Jacobian, finite differences, derivative-free", res, lines)
 
 
 @click.command("fit-invivo")
@@ -44,14 +53,17 @@ def bench_fit(as_json: bool, seed: int) -> None:
 @click.option("--periods", type=click.IntRange(min=1), default=3, show_default=True)
 @click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
-def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool) -> None:
+@page_option
+def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool, page: Path | None) -> None:
     """Four GOH + QLV parameters from the Table 12 protocols at in vivo scale: wall time, where it goes."""
     import sys
 
     from skinkit.bench import fit_invivo
 
     res = fit_invivo.run(n_protocols, periods, workers, log=sys.stderr)
-    emit(res, as_json, None if as_json else fit_invivo.summary_lines(res))
+    lines = fit_invivo.summary_lines(res)
+    emit(res, as_json, lines)
+    write_page(page, "Identification at in vivo scale", res, lines)
 
 
 @click.command("coverage")
@@ -65,11 +77,14 @@ def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool
               help="seeds are first-seed, first-seed + 1, ...")
 @click.option("--workers", type=click.IntRange(1), default=None, help="worker processes per FE prediction")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
+@page_option
 def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None,
-                   as_json: bool) -> None:
+                   as_json: bool, page: Path | None) -> None:
     """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
     from skinkit.bench import coverage
 
     # progress goes to stderr, also with --json
     res = coverage.run(case, seeds, start, first_seed, workers, say=lambda s: click.echo(s, err=True))
-    emit(res, as_json, None if as_json else coverage.summary_lines(res), indent=1)
+    lines = coverage.summary_lines(res)
+    emit(res, as_json, lines, indent=1)
+    write_page(page, "Coverage of the reported 95 % intervals", res, lines)

@@ -8,6 +8,7 @@ from typing import Any
 import click
 
 from skinkit import jsonio
+from skinkit.cli._bench_out import page_option, write_page
 
 
 def _fmt(v: Any, unit: str) -> str:
@@ -42,7 +43,8 @@ def closing_table(summary: dict[str, Any]) -> list[str]:
 @click.option("--workers", type=click.IntRange(min=1, max=64), default=2, show_default=True,
               help="Worker processes of the finite-element model.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def demo(out_dir: Path, seed: int, quick: bool, workers: int, as_json: bool) -> None:
+@page_option
+def demo(out_dir: Path, seed: int, quick: bool, workers: int, as_json: bool, page: Path | None) -> None:
     """Run the main job on a virtual-lab session whose truth is known: acquire (robot records,
     four rendered cameras, stochastic records) into one experiment file, identify the lumped
     models, calibrate-profile-track, identify the thesis's finite-element model, diagnose the
@@ -69,20 +71,22 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, as_json: bool) -> 
             bar.update(tasks[key], completed=fraction, description=step[:44])
 
         summary = run_chain(out_dir, seed=seed, quick=quick, workers=workers, progress=progress)
+    lines = _summary_lines(summary, out_dir)
+    write_page(page, "The main job on the virtual lab", summary, lines)
     if as_json:
         click.echo(jsonio.dumps(summary, indent=1, default=float))
         return
-    gap = summary["diagnose"]
-    click.echo(f"experiment file: {summary['experiment_file']}  (truth kept apart: {summary['truth_file']})")
-    for m in gap.get("messages", []):
-        click.echo(f"gap: {m}")
-    click.echo("")
-    for line in closing_table(summary):
+    for line in lines:
         click.echo(line)
-    click.echo("")
-    click.echo(f"report: {summary['report']}")
-    for p in summary.get("plots", []):
-        click.echo(f"against the truth: {p}")
-    for f in gap.get("files", []):
-        click.echo(f"gap report: {f}")
-    click.echo(f"summary: {out_dir / 'summary.json'}  (total {sum(summary['times_s'].values()):.0f} s)")
+
+
+def _summary_lines(summary: dict[str, Any], out_dir: Path) -> list[str]:
+    """What the demo prints: the files, the gap's messages, the closing table, the reports."""
+    gap = summary["diagnose"]
+    lines = [f"experiment file: {summary['experiment_file']}  (truth kept apart: {summary['truth_file']})"]
+    lines += [f"gap: {m}" for m in gap.get("messages", [])]
+    lines += ["", *closing_table(summary), "", f"report: {summary['report']}"]
+    lines += [f"against the truth: {p}" for p in summary.get("plots", [])]
+    lines += [f"gap report: {f}" for f in gap.get("files", [])]
+    lines.append(f"summary: {out_dir / 'summary.json'}  (total {sum(summary['times_s'].values()):.0f} s)")
+    return lines

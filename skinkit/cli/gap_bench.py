@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import click
 
 from skinkit import jsonio
+from skinkit.cli._bench_out import page_option, write_page
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -39,8 +41,10 @@ def _names(text: str | None) -> list[str] | None:
               "holds: resume a stopped run, or add seeds or null sessions to a finished one")
 @click.option("--recorded-only", is_flag=True, help="run nothing: score the cases the --journal holds "
               "(a run under way or stopped)")
+@page_option
 def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, effects: str | None,
-              model: str, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool) -> None:
+              model: str, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool,
+              page: Path | None) -> None:
     """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
     from skinkit.bench.gap_benchmark import run as benchmark_run
     from skinkit.bench.gap_benchmark import summary_lines
@@ -48,10 +52,12 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
     res = benchmark_run(quick, scheduler=scheduler, seeds=seeds, progress=lambda s: click.echo(s, err=True),
               model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal,
               recorded_only=recorded_only)
+    lines = summary_lines(res)
+    write_page(page, "Withheld-effect benchmark of the gap diagnosis", res, lines)
     if as_json:
         click.echo(jsonio.dumps(res, indent=1, default=float))
         return
-    for line in summary_lines(res):
+    for line in lines:
         click.echo(line)
 
 
@@ -59,18 +65,22 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="noise seed")
 @click.option("--workers", type=click.IntRange(min=1), default=2, show_default=True, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print JSON (the whole report under 'report')")
-def thesis_case(seed: int, workers: int, as_json: bool) -> None:
+@page_option
+def thesis_case(seed: int, workers: int, as_json: bool, page: Path | None) -> None:
     """The thesis's case: pre-stress withheld from a GOH + QLV model of a virtual forearm session."""
     from skinkit.bench.gap_thesis_case import run as thesis_case_run
 
     res = thesis_case_run(seed, workers, progress=lambda m: click.echo(f"  {m}", err=True))
+    lines = list(res["report"].get("messages", []))
+    if "prestress" in res:
+        p, e = res["prestress"], res["prestress_error"]
+        lines.append(f"prestress identified: λ1 {p['l1']:.4f} (truth 1.10), λ2 {p['l2']:.4f} (1.03), "
+                     f"θ {math.degrees(p['angle']):.2f}° (20°); θ error {e['angle_deg']:+.2f}°")
+    write_page(page, "The thesis's case: pre-stress withheld", res,
+               [*lines, f"wall time {res['wall_s']:.0f} s"])
     if as_json:
         click.echo(jsonio.dumps(res, indent=1, default=str))
         return
-    for line in res["report"].get("messages", []):
+    for line in lines:
         click.echo(line)
-    if "prestress" in res:
-        p, e = res["prestress"], res["prestress_error"]
-        click.echo(f"prestress identified: λ1 {p['l1']:.4f} (truth 1.10), λ2 {p['l2']:.4f} (1.03), "
-                   f"θ {math.degrees(p['angle']):.2f}° (20°); θ error {e['angle_deg']:+.2f}°")
     click.echo(f"{res['wall_s']:.0f} s", err=True)

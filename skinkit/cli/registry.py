@@ -22,6 +22,8 @@ import click
 #: entry-point group through which other distributions add top-level commands; a group ``G``
 #: takes sub-commands from ``skinkit.commands.G``
 COMMANDS_GROUP = "skinkit.commands"
+#: key of the root context's ``meta`` holding the arguments the command line was given
+ARGV_KEY = "skinkit.argv"
 
 
 def entry_point_group(*path: str) -> str:
