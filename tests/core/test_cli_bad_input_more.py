@@ -333,11 +333,12 @@ def test_the_example_models_and_the_lab_descriptions_pass(tmp_path):
 
 
 def test_documented_ranges_are_the_enforced_ones():
-    """docs/models/README.md's table of checks states the limits the readers enforce."""
+    """The model-file reference's table of checks states the limits the readers enforce."""
     from skinkit.fem import model as M
     from skinkit.forward.spec_check import MAX_DRIVE_STEP_S
 
-    doc = Path(__file__).parents[2].joinpath("docs", "models", "README.md").read_text(encoding="utf-8")
+    page = Path(__file__).parents[2].joinpath("docs", "reference", "model-files.md")
+    doc = page.read_text(encoding="utf-8")
 
     def g(x: float) -> str:  # 1e+06 as 1e6, 1e-06 as 1e-6
         return f"{x:g}".replace("e+0", "e").replace("e-0", "e-").replace("e+", "e")
