@@ -169,6 +169,32 @@ def test_fit_result_and_gap_report_roundtrip():
         FitResult("m", ps, objective=0.0, covariance=np.eye(2))
 
 
+def test_strict_json_says_why_a_number_is_null():
+    """An infinite bound or standard error is written as null with its reason beside it, and a
+    stored fit reads back infinite."""
+    from skinkit import jsonio
+    from skinkit.inverse import fit_json
+
+    ps = ParameterSet([Parameter("skin.k1", 2.0, "Pa", lower=0.0),
+                       Parameter("skin.k2", 0.5, lower=0.0, upper=1.0)])
+    fit = FitResult("m", ps, objective=1.0, se={"skin.k1": math.inf, "skin.k2": 0.01},
+                    identifiability={"metrics": {"cond_H": math.inf}, "identifiable": {"skin.k1": False}})
+    stored = jsonio.loads_strict(jsonio.dumps(fit.to_dict()))
+    assert stored["se"]["skin.k1"] is None and "undetermined" in stored["se_reason"]["skin.k1"]
+    assert "skin.k2" not in stored["se_reason"]
+    assert stored["parameters"][0]["upper"] is None and stored["parameters"][0]["upper_reason"] == "unbounded"
+    back = FitResult.from_dict(stored)
+    assert back.se == {"skin.k1": math.inf, "skin.k2": 0.01} and back.parameters == ps
+    j = jsonio.loads_strict(jsonio.dumps(fit_json(fit)))
+    k1 = j["parameters"]["skin.k1"]
+    assert k1["se"] is None and "undetermined" in k1["se_reason"]
+    assert k1["upper"] is None and k1["upper_reason"] == "unbounded" and "lower_reason" not in k1
+    assert "se_reason" not in j["parameters"]["skin.k2"] and j["parameters"]["skin.k2"]["unit"] == "1"
+    metrics = j["identifiability"]["metrics"]
+    assert metrics["cond_H"] is None and "singular" in metrics["cond_H_reason"]
+    assert "cond_H_reason" not in fit.identifiability["metrics"]   # the result itself is left as it was
+
+
 def test_gap_report_roundtrip_and_checks():
     cands = [EffectScore("prestress", score=250.0, p_value=1e-50, dof=2, refitted=True, delta_aic=-240.0,
                          shrinkage=0.8, parameters={"prestress.l1": {"value": 1.1, "se": 0.01}},
