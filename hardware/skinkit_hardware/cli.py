@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from skinkit.cli.commandkit import FiniteFloat
+from skinkit.plugin.commands import FiniteFloat
 
 
 @click.command("emulate")
