@@ -319,8 +319,10 @@ def _track_attrs(frame: _SkinFrame, mark_spacing_m: float, d: np.ndarray, times:
                  noise: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
     return {
         "dimensions": 2,
-        # z is not measured by 2D tracking: NaN (JSON NaN), x and y from the scatter (step 5)
+        # z is not measured by 2D tracking: NaN here, null in the file with the reason beside it;
+        # x and y from the scatter (step 5)
         "noise_m": [float(noise[0]), float(noise[1]), float("nan")],
+        "noise_m_reason": "z (the third value) is not measured: 2D image tracking",
         "noise_source": "scatter of each point about a cubic in frame index (1.4826 MAD)",
         "pixel_scale_m_per_px": frame.scale,
         "mark_spacing_m": mark_spacing_m,
