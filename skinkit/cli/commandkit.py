@@ -1,16 +1,8 @@
-"""The stable API for distributions that add commands to the ``skinkit`` CLI (entry-point
-groups ``skinkit.commands`` and ``skinkit.commands.<group>``, each pointing at a ``click``
-command).
-
-Everything in ``__all__`` is public and kept stable. A command refuses bad input by raising a
-:class:`skinkit.errors.SkinkitError` (the CLI prints its one line, no traceback) and takes its
-numeric options with the ranges the CLI promises:
-
-- :class:`FiniteFloat` a :class:`click.FloatRange` that also refuses NaN and infinities.
-"""
+"""The former home of the command authors' kit, kept so that distributions written against it
+still import: new code imports :mod:`skinkit.plugin.commands` (the declared plugin surface)."""
 
 from __future__ import annotations
 
-from skinkit.cli._types import FiniteFloat
+from skinkit.plugin.commands import FiniteFloat
 
 __all__ = ["FiniteFloat"]
