@@ -32,6 +32,14 @@ def test_units_and_axes():
     assert r.motor_current[:, 1].tolist() == [0.5, 0.6] and r.flags.tolist() == [0, 3]
 
 
+def test_compound_units_in_the_header():
+    # a torque in mN m and in N*mm: both 1e-3 N m per unit
+    r = _parse("time_s,tip_torque_x_mN m,tip_torque_y_N*mm\n0,2,3\n1,4,5\n")
+    assert r.tip_torque[:, 0].tolist() == [0.002, 0.004] and r.tip_torque[:, 1].tolist() == [0.003, 0.005]
+    with pytest.raises(StoreError, match="'N/m' is not a unit of 'N'"):
+        _parse("time_s,force_N/m\n0,1\n")
+
+
 def test_one_axis_columns_and_axis_option(tmp_path):
     p = tmp_path / "sysid.csv"
     p.write_text("time_s,force_N,position_m\n0,0.1,0.001\n0.0005,0.2,0.002\n")

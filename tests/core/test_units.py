@@ -121,3 +121,16 @@ def test_json_keeps_the_unit_key_and_says_why_a_bound_is_null():
     assert items[0]["unit"] == "1" and items[0]["upper"] is None and items[0]["upper_reason"] == "unbounded"
     assert "lower_reason" not in items[0] and "upper_reason" not in items[1]
     assert ParameterSet.from_list(items).param("skin.k2").upper == math.inf
+
+
+def test_model_file_quantities_take_compound_units():
+    from skinkit.fem.errors import ModelError
+    from skinkit.fem.values import quantity
+
+    assert quantity("2 1/mm", "1/m", "geometry.curvature") == 2000.0
+    assert quantity("3 N s/mm", "N s/m", "support.damping") == 3000.0
+    assert quantity("0.5 N/mm", "N/m", "support.k") == 500.0
+    with pytest.raises(ModelError, match=r"support\.k: inconsistent units"):
+        quantity("2 N/m", "Pa", "support.k")
+    with pytest.raises(ModelError, match=r"unknown unit 'N/furlong'"):
+        quantity("2 N/furlong", "N/m", "support.k")
