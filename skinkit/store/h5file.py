@@ -1,5 +1,5 @@
-r"""What every part of an experiment file shares: opening it, turning a damaged file's errors
-into one-line :class:`StoreError`\ s, and reading groups, datasets and attributes with checks
+"""What every part of an experiment file shares: opening it, turning a damaged file's errors
+into one-line :class:`StoreError` messages, and reading groups, datasets and attributes with checks
 (:class:`ExperimentFile`, the base of :class:`skinkit.store.Experiment`)."""
 
 from __future__ import annotations
