@@ -4,8 +4,9 @@ A plugin is registered under one of the entry-point groups in :data:`GROUPS` and
 a class (or any object) that provides the members its interface lists. The registry checks
 those members when it loads the plugin and reports what is missing. Interfaces are
 structural (each is a ``typing.Protocol``): a plugin never needs to import or subclass
-anything from skinkit to satisfy one, although it may use the kits skinkit offers
-(``docs/plugin-authors.md``). In skinkit "protocol" alone means a measurement protocol
+anything from skinkit to satisfy one, although it may use the plugin surface skinkit offers,
+:mod:`skinkit.plugin`, and check itself with its conformance kits
+(``docs/guide/writing-plugins.md``). In skinkit "protocol" alone means a measurement protocol
 (:class:`skinkit.schemas.Protocol`), which drivers run.
 
 Shapes and units follow the schemas: SI inside, arrays as numpy.
@@ -161,8 +162,14 @@ class Effect(typing.Protocol):
     In the description, an effect may bind a parameter to a model quantity the forward
     model differentiates (``model["bindings"]["<effect>.<parameter>"] = "<model parameter>"``,
     e.g. ``"viscoelastic.g1" -> "skin.g1"``), or write a field, load or instrument table
-    whose parameters the forward model differentiates directly (see ``docs/effects.md``);
-    parameters it does neither for are differentiated by central differences.
+    whose parameters the forward model differentiates directly (see
+    ``docs/guide/effects.md``); parameters it does neither for are differentiated by central
+    differences.
+
+    Optional, for the conformance kit (:mod:`skinkit.plugin.conformance.effects`) and the
+    contract tests: ``touches``, a mapping model kind -> the top-level tables of a description
+    ``apply`` may change, and ``once`` (default True): ``apply`` refuses a description it
+    already edited.
     """
 
     name: str

@@ -117,7 +117,7 @@ def apply_all(spec: Mapping[str, Any], effects: list[AppliedEffect],
                 key = f"{eff.name}.{local}"
                 if key in values:
                     p[local] = check_value(eff.name, eff.declared[local], float(values[key]), key)
-        # an effect refuses a model with EffectError (docs/plugin-authors.md); anything else it
+        # an effect refuses a model with EffectError (docs/guide/writing-plugins.md); anything else it
         # raises is a bug in the effect and propagates with its traceback
         out = dict(eff.plugin.apply(out, p))
     return out

@@ -3,7 +3,7 @@
 Everything in ``__all__`` is public and kept stable. An effect declares parameters and edits a
 **model description** (the mapping a model file parses to) with the vocabulary the forward
 models already read and differentiate (``bindings``, ``[[layers]]`` edits, ``[[fields]]``,
-``[[instrument]]`` entries, the ``[lumped]`` table; see ``docs/effects.md``). It never adds code
+``[[instrument]]`` entries, the ``[lumped]`` table; see ``docs/guide/effects.md``). It never adds code
 to a forward model. Errors are :class:`skinkit.errors.EffectError` naming ``effects.<name>``.
 
 - :class:`BaseEffect` what every effect shares: ``parameters()`` and ``null()`` from its
