@@ -264,8 +264,8 @@ def test_cli_bad_input_is_one_line(tmp_path):
     _one_line_error(run(cli, ["grid", *base, "--pair", "lumped.a,lumped.b", "--n", "2"]), "--n")
     _one_line_error(run(cli, ["grid", *base, "--pair", "lumped.a"]), "--pair")
     _one_line_error(run(cli, ["grid", *base, "--pair", "lumped.a,lumped.b", "--span", "4se"]), "--at")
-    _one_line_error(run(cli, ["profile", *base, "--parameter", "lumped.nope"]), "lumped.nope")
-    _one_line_error(run(cli, ["profile", *base, "--parameter", "lumped.a", "--n", "1"]), "--n")
+    _one_line_error(run(cli, ["profile-likelihood", *base, "--parameter", "lumped.nope"]), "lumped.nope")
+    _one_line_error(run(cli, ["profile-likelihood", *base, "--parameter", "lumped.a", "--n", "1"]), "--n")
     with pytest.raises(GridError, match="at least 3"):
         objective_grid(model, obs, ("lumped.a", "lumped.b"), n=2)
     # and a good grid through the command line: JSON on stdout, the PNG written
