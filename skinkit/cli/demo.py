@@ -9,6 +9,7 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._bench_out import page_option, write_page
+from skinkit.units import unit_suffix
 
 
 def _fmt(v: Any, unit: str) -> str:
@@ -16,7 +17,7 @@ def _fmt(v: Any, unit: str) -> str:
         return "-"
     if isinstance(v, str):
         return v
-    return f"{v:.4g} {unit}".strip()
+    return f"{v:.4g}{unit_suffix(unit)}".strip()
 
 
 def closing_table(summary: dict[str, Any]) -> list[str]:
@@ -24,7 +25,7 @@ def closing_table(summary: dict[str, Any]) -> list[str]:
     lines = [f"{'step':<9} {'result':<34} {'found':>14} {'truth':>14} {'error':>11} {'time':>6}"]
     shown: set[str] = set()
     for r in summary["table"]:
-        err = "-" if r["error"] is None else f"{r['error']:+.3g} {r['error_unit']}"
+        err = "-" if r["error"] is None else f"{r['error']:+.3g}{unit_suffix(r['error_unit'])}"
         t = "" if r["step"] in shown or r["time_s"] is None else f"{r['time_s']:.0f} s"
         shown.add(r["step"])
         lines.append(f"{r['step']:<9} {r['result'][:34]:<34} {_fmt(r['found'], r['unit']):>14} "

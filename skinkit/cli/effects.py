@@ -7,6 +7,7 @@ import click
 from skinkit import jsonio
 from skinkit.cli._types import FiniteFloat
 from skinkit.cli.registry import LazyGroup
+from skinkit.units import unit_suffix
 
 
 @click.group("effects", cls=LazyGroup)
@@ -38,7 +39,7 @@ def list_effects(as_json: bool) -> None:
         if "error" in d:
             click.echo(f"{name}: error: {d['error']}")
             continue
-        pars = ", ".join(f"{p['name']} {p['null']:g} -> {p['typical']:g} {p['unit']}"
+        pars = ", ".join(f"{p['name']} {p['null']:g} -> {p['typical']:g}{unit_suffix(p['unit'])}"
                          for p in d["parameters"])
         click.echo(f"{name:20s} [{', '.join(d['kinds'])}]  {pars}")
 

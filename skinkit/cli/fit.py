@@ -13,6 +13,7 @@ from skinkit.cli._paths import check_name, check_result_files
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session, split_names
+from skinkit.units import unit_suffix
 
 
 def _checkpoint(path: Path, payload: dict) -> None:
@@ -312,12 +313,12 @@ def _echo_summary(best: dict, model_name: str, session: str, wall_s: float, name
                f"solves ({best['n_sensitivity']} with sensitivities), {wall_s:.1f} s, {status}")
     for n in names:
         p = best["parameters"][n]
+        u = unit_suffix(p["unit"])
         if p.get("identifiable") is False:
-            click.echo(f"  {n:28s} {p['value']:.6g} {p['unit']}: NOT identifiable from these protocols "
-                       "(see below)")
+            click.echo(f"  {n:28s} {p['value']:.6g}{u}: NOT identifiable from these protocols (see below)")
         else:
-            click.echo(f"  {n:28s} {p['value']:.6g} ± {1.96 * p['se']:.2g} {p['unit']} (95 %)"
-                       if p["se"] is not None else f"  {n:28s} {p['value']:.6g} {p['unit']}: undetermined")
+            click.echo(f"  {n:28s} {p['value']:.6g} ± {1.96 * p['se']:.2g}{u} (95 %)"
+                       if p["se"] is not None else f"  {n:28s} {p['value']:.6g}{u}: undetermined")
     for pr in best["identifiability"]["problems"]:
         click.echo(f"  ! {pr['message']}")
     for p, v in best["held_out"].items():

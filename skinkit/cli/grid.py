@@ -14,6 +14,7 @@ from skinkit import jsonio
 from skinkit.cli._paths import check_result_files
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session, split_names
+from skinkit.units import unit_suffix
 
 
 def _session(model_file: str, session: str, holdout: str | None, workers: int | None) -> tuple[Any, Any]:
@@ -160,8 +161,8 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
     a, b = names
     mn = g["minimum"]
     click.echo(f"{model.name} on {session}: objective over {a} x {b} ({n} x {n}, {g['wall_s']:.1f} s)")
-    click.echo(f"  lowest objective {mn['objective']:.6g} at {a} = {mn[a]:.6g} "
-               f"{g['parameters'][a]['unit']}, {b} = {mn[b]:.6g} {g['parameters'][b]['unit']}")
+    ua, ub = (unit_suffix(g["parameters"][k]["unit"]) for k in (a, b))
+    click.echo(f"  lowest objective {mn['objective']:.6g} at {a} = {mn[a]:.6g}{ua}, {b} = {mn[b]:.6g}{ub}")
     if g["failed"]:
         click.echo(f"  {len(g['failed'])} grid point(s) could not be solved (grid.json: failed)")
     click.echo(f"wrote {out / 'grid.json'} and {png}")
@@ -217,15 +218,15 @@ def profile(model_file: str, session: str, name: str, free: str | None, n: int, 
     if as_json:
         click.echo(jsonio.dumps(pr, indent=2))
         return
-    unit = pr["unit"]
+    unit = unit_suffix(pr["unit"])
     lo, hi = pr["interval"]
     click.echo(f"{model.name} on {session}: profile of {name} ({len(pr['values'])} values, re-fitted: "
                f"{', '.join(pr['free']) or 'none'}; {pr['n_forward']} forward solves, {pr['wall_s']:.1f} s)")
-    click.echo(f"  estimate {pr['estimate']:.6g} {unit}; "
-               f"95 % profile interval [{_end(lo)}, {_end(hi)}] {unit}")
+    click.echo(f"  estimate {pr['estimate']:.6g}{unit}; "
+               f"95 % profile interval [{_end(lo)}, {_end(hi)}]{unit}")
     if pr["wald_interval"] is not None:
         w = pr["wald_interval"]
-        click.echo(f"  quadratic (Wald) interval      [{w[0]:.6g}, {w[1]:.6g}] {unit} (± 1.96 se)")
+        click.echo(f"  quadratic (Wald) interval      [{w[0]:.6g}, {w[1]:.6g}]{unit} (± 1.96 se)")
     if pr["inflation"] > 1:
         click.echo(f"  both widened by chi2/dof = {pr['inflation']:.3g} "
                    "(the fit is worse than the noise explains)")

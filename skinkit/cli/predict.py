@@ -11,6 +11,7 @@ from skinkit.cli._paths import check_out_file
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session
+from skinkit.units import unit_suffix
 
 
 @click.command("predict")
@@ -88,7 +89,7 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
         for cname, c in chans.items():
             rms = ", ".join(f"{v:.3g}" for v in c["rms"])
             click.echo(f"  {proto:24s} {cname:13s} chi2/n {c['chi2_per_sample']:9.3g}  "
-                       f"rms [{rms}] {c['unit']}"
+                       f"rms [{rms}]{unit_suffix(c['unit'])}"
                        f"{'  (held out)' if c['held_out'] else ''}")
 
 

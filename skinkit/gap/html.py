@@ -33,6 +33,7 @@ import numpy as np
 
 from skinkit import jsonio
 from skinkit.errors import SchemaError, StoreError
+from skinkit.units import unit_suffix
 
 #: the order in which the residual axes are shown (others, if any, follow alphabetically)
 AXES = ("protocol", "phase", "channel", "region", "frequency")
@@ -191,7 +192,7 @@ def _magnitudes(cand: Mapping[str, Any] | None) -> str:
         if isinstance(pv, Mapping):
             se = _f(pv.get("se"))
             interval = "" if math.isnan(se) else f" ± {_num(se, 2)}"
-            unit = f" {pv['unit']}" if pv.get("unit") else ""
+            unit = unit_suffix(pv.get("unit"))
             parts.append(f"{name} = {_num(pv.get('value'), 4)}{interval}{unit}")
         else:
             parts.append(f"{name} = {_num(pv)}")

@@ -25,6 +25,7 @@ from skinkit.report.common import (
     slug,
     t,
     table,
+    unit_text,
     warn_list,
 )
 from skinkit.report.lumped import is_lumped
@@ -59,7 +60,7 @@ def _parameters(fit: FitResult) -> str:
             state = "NOT identifiable from these protocols"
         se_text = "—" if not p.free else ("∞" if math.isinf(se) else num(se, 2))
         bounds = f"[{num(p.lower, 3)}, {num(p.upper, 3)}]" if p.free else "—"
-        rows.append([t(p.name, p.name), t(num(p.value, 5), p.value), t(p.unit), t(se_text, se),
+        rows.append([t(p.name, p.name), t(num(p.value, 5), p.value), t(unit_text(p.unit)), t(se_text, se),
                      t("—" if math.isnan(rel) else f"{100 * rel:.2g} %", rel), t(bounds), t(state, state)])
         classes.append("sig" if state.startswith("NOT") else "")
     return table(["parameter", "value", "unit", "± standard error", "relative se", "bounds", "status"], rows,

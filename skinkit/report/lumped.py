@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from skinkit.report.common import Section, e, f, note, num, plural, slug, t, table, warn_list
+from skinkit.report.common import Section, e, f, note, num, plural, slug, t, table, unit_text, warn_list
 from skinkit.schemas import FitResult
 from skinkit.store.experiment import Experiment
 
@@ -51,7 +51,7 @@ def _fit(name: str, fit: FitResult) -> str:
     for p in fit.parameters:
         se = _se(fit, p.name, free.index(p.name) if p.name in free else None)
         rel = se / abs(p.value) if p.value and math.isfinite(se) else math.nan
-        rows.append([t(p.name, p.name), t(num(p.value, 5), p.value), t(p.unit),
+        rows.append([t(p.name, p.name), t(num(p.value, 5), p.value), t(unit_text(p.unit)),
                      t(num(se, 2), se), t("—" if math.isnan(rel) else f"{100 * rel:.2g} %", rel)])
     vafs = ", ".join(f"{e(k)} <b>{num(v, 4)} %</b>" for k, v in _vafs(fit))
     samples = f"; {fit.n_evaluations} samples" if fit.n_evaluations else ""
