@@ -19,7 +19,7 @@ parameter (10 % for the in vivo case; :func:`skinkit.inverse.coverage.perturbed_
   (``preconditioning``) and the normal sinusoid; free: ``a``, ``b``, ``g1``, ``tau1``.
 
 FE meshes and protocol lengths were chosen so that 20 seeds of a case take about 15 minutes
-or less on the 2-core machine (``docs/identification-coverage.md`` has the measured costs).
+or less on the 2-core machine (``docs/guide/identification.md`` has the measured costs).
 Every truth is flat-topped (``[surface] fit = false``) and displacement-driven (Table 12
 protocols are trajectories: the programme is the drive, exact in the virtual session).
 """

@@ -70,7 +70,7 @@ def bench_session(model: Any, seed: int = 0) -> Observations:
             ch[c] = Channel(c, o.time_s, noisy, noise=o.noise, reference=o.reference)
         # the drive is the programmed force itself: noise on a force drive is an
         # errors-in-variables problem that biases every method alike (by 7-15 standard errors
-        # here), which would make "equal accuracy" meaningless (docs/identification-coverage.md)
+        # here), which would make "equal accuracy" meaningless (docs/guide/identification.md)
         out[po.name] = ProtocolObservations(po.protocol, ch)
     return Observations(out, None, "bench")
 

@@ -41,7 +41,7 @@ whether the truth is in the reported set of at most two; the false-alarm rate on
 sessions; localisation; the median relative magnitude error and shrinkage error against the
 oracle; time per case. Rates come with Clopper–Pearson 95 % intervals.
 
-``docs/gap-benchmark.md`` has the rules' justification and the measured figures.
+``docs/guide/gap-benchmark.md`` has the rules' justification and the measured figures.
 """
 
 from __future__ import annotations

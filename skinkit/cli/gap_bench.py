@@ -24,7 +24,7 @@ def _names(text: str | None) -> list[str] | None:
 
 @click.command("benchmark")
 @click.option("--quick", is_flag=True, help="the quick run (a handful of effects at moderate magnitude, "
-              "two null sessions; measured time in docs/gap-benchmark.md)")
+              "two null sessions; measured time in docs/guide/gap-benchmark.md)")
 @click.option("--scheduler", default=None, metavar="ADDRESS", help="run the cases on this Dask scheduler")
 @click.option("--json", "as_json", is_flag=True, help="print JSON (progress lines go to stderr)")
 @click.option("--seeds", type=click.IntRange(1), default=None, help="seeds per effect and magnitude "

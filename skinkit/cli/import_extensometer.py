@@ -28,7 +28,7 @@ from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_ext
 def import_extensometer_cmd(experiment: Path, folder: Path, protocol: str, overwrite: bool, rate_hz: float,
                             mark_spacing_mm: float, moving_pad: str) -> None:
     """Import FOLDER (u_moving_pad.dat, f_moving_pad.dat and the tracked points x0/y0/xt/yt
-    in pixels; see docs/real-data.md) as a new session EXPERIMENT: one record (pad
+    in pixels; see docs/guide/real-records.md) as a new session EXPERIMENT: one record (pad
     displacement and force along x) and its 2D track in metres in the skin frame.
 
     The old order FOLDER EXPERIMENT is still read, with a warning, when it is evident (the

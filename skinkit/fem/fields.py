@@ -7,7 +7,7 @@ field, exactly. Several fields on one layer multiply. Every numeric parameter is
 differentiable: φ is analytic in its parameters, so ∂φ/∂p comes from the complex step
 (exact to rounding).
 
-Kinds (see ``docs/effects.md``):
+Kinds (see ``docs/guide/effects.md``):
 
 * ``inclusion``: φ = 1 + (ratio − 1) w, w = ½ [1 − tanh((r − radius)/δ)], r the in-plane
   distance from (x, y), δ = ``width`` (default radius/4);

@@ -1,5 +1,5 @@
 """The TOML model format: geometry, layers (law, parameters, pre-stress), boundary
-conditions, indenter, load programme, solver options. See ``docs/models/README.md``.
+conditions, indenter, load programme, solver options. See ``docs/reference/model-files.md``.
 
 Quantities are numbers in SI units or strings ``"<number> <unit>"`` (``"1.5 mm"``,
 ``"20 kPa"``, ``"30 deg"``); a unit of the wrong dimension is an error naming the entry.

@@ -1,7 +1,7 @@
 """``[[instrument]]`` entries: linear transforms between what the skin saw and what was recorded.
 
 Each entry is linear in one parameter (``parameter``, value ``value``; 0 is no effect, exactly)
-and applies to one channel (``docs/effects.md``):
+and applies to one channel (``docs/guide/effects.md``):
 
 * ``bias``: recorded = true + value · b(t) on ``component`` of ``channel``, b = 1
   (``basis = "constant"``) or t [s] (``"time"``). On the channel that drives a model the

@@ -1,6 +1,6 @@
 """The ``[lumped]`` table of a lumped model description, parsed and checked.
 
-Vocabulary (``docs/effects.md``, "Lumped descriptions"; every quantity a number in SI or a
+Vocabulary (``docs/guide/effects.md``, "Lumped descriptions"; every quantity a number in SI or a
 ``"<number> <unit>"`` string):
 
 * ``family``: ``"quasi-static"`` (default), ``"kbi"`` or ``"wiener"``.

@@ -11,7 +11,7 @@ sample (rest) and ``R`` its full range, the drive's excursion is ``a = |u − r|
 [0, 1]. A cycle begins where ``a`` rises above 0.6 and ends where it next falls below 0.4:
 a hysteresis of 0.2 R, so noise well below a tenth of the range cannot start or end a cycle,
 and the median over 5 samples (applied first) removes isolated spikes of up to two samples.
-A return needs only to go below 0.4 R: the record of ``docs/real-data.md`` returns to
+A return needs only to go below 0.4 R: the record of ``docs/guide/real-records.md`` returns to
 0.05-1.8 mm of its 9.45 mm between cycles and reloads at once.
 
 **The cuts.** Between two cycles the "rest" is the samples within max(2 % of R, 3 noise

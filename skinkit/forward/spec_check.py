@@ -9,7 +9,7 @@ the first prediction, minutes into a fit. The readers (``skinkit.forward.fe``,
 ``skinkit.forward.instrument``, ``skinkit.fem.fields``, ``skinkit.forward.effects``,
 ``skinkit.lab``) keep their own checks; this module adds what they leave out: unknown keys
 with the nearest valid one, types, ranges, protocol and effect names against those known.
-The accepted ranges are listed in ``docs/models/README.md``.
+The accepted ranges are listed in ``docs/reference/model-files.md``.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ unmodelled effect causes it, and how far the gap shrinks once that effect is add
   :class:`skinkit.schemas.GapReport` (step 4; ``skinkit gap diagnose``, step 5);
 * :mod:`skinkit.gap.html` — the self-contained HTML report.
 
-``docs/gap.md`` describes the method and its rules.
+``docs/guide/gap-diagnosis.md`` describes the method and its rules.
 """
 
 from skinkit.gap.diagnose import AIC_MARGIN, GapError, diagnose, write_report

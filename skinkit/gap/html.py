@@ -1,7 +1,7 @@
 """The self-contained HTML report of a gap diagnosis.
 
 :func:`write_html` takes the report dict that ``skinkit gap diagnose --json`` prints (the pinned
-shape of ``docs/gap.md``, plus the optional keys ``gap.whiteness``, ``gap.cross_correlation``,
+shape of ``docs/guide/gap-diagnosis.md``, plus the optional keys ``gap.whiteness``, ``gap.cross_correlation``,
 ``gap.point_map``, ``points``, ``point_map_after``, ``separation``, ``rounds``, ``messages``)
 and writes one HTML file that needs nothing else: the CSS is inline, the figures are PNGs
 embedded as base64 ``data:`` URIs, the one script (table sorting) is inline. Any optional key —

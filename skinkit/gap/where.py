@@ -16,7 +16,7 @@ Each cell is tested against the noise: raw χ² upper tail, and for ``significan
 allows for the noise level itself being estimated from the record, with Holm's correction over
 every cell of every axis. Whiteness (Ljung–Box) and cross-correlation with the drive (a
 portmanteau of the regression on the lagged drive) are reported per protocol and channel.
-The rules and their justification: ``docs/gap-where.md``.
+The rules and their justification: ``docs/guide/gap-diagnosis.md``.
 """
 
 from __future__ import annotations
@@ -294,7 +294,7 @@ def noise_dof(ch: Channel) -> tuple[np.ndarray, np.ndarray]:
     ``n_est``: effective number of samples behind the variance estimate, Var(σ̂²/σ²) = 2/n_est
     (inf: known). ``n_shared``: for a level estimated by second differences over the whole
     record, its number of samples (the estimate then shares its noise with every residual sample
-    of the channel, see ``docs/gap-where.md``); 0 otherwise.
+    of the channel, see ``docs/guide/gap-diagnosis.md``); 0 otherwise.
 
     From ``ch.noise_source`` (``skinkit.forward.observations``): a tracker's or a declared level,
     or the sensor resolution floor, is known; second differences over the record count 36/70 of
@@ -515,7 +515,7 @@ class _Table:
 
 # ------------------------------------------------------------------------------------------- tests
 def _noise_dof_of(table: _Table, nmat: np.ndarray, gmat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(m, ν)`` per cell: under the null, χ²/dof of the cell is m·F(dof, ν) (docs/gap-where.md).
+    """``(m, ν)`` per cell: under the null, χ²/dof of the cell is m·F(dof, ν) (docs/guide/gap-diagnosis.md).
 
     A cell's statistic is Σ_g w_g a_g / b_g: w_g its share of samples of noise group g (one
     component of one protocol's channel), a_g their χ²/n at the true noise, b_g = σ̂_g²/σ_g² with

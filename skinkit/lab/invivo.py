@@ -33,7 +33,7 @@ LAWS = ("neo-hookean-ni", "neo-hookean-enu")
 
 
 def static_force_spec(prestretch: bool = True, force_N: float = 0.02) -> dict[str, Any]:
-    """The model as a mapping in the TOML model format (``docs/models/README.md``): normal
+    """The model as a mapping in the TOML model format (``docs/reference/model-files.md``): normal
     tip force ``force_N`` [N] into the skin; ``prestretch`` False drops the natural tension."""
     spec = copy.deepcopy(_SPEC)
     spec["load"]["value"] = ["0 N", "0 N", f"{-force_N} N"]

@@ -1,6 +1,6 @@
 """The virtual lab's instruments: the robot's tip sensors, the 3D tracker and the profiler.
 
-Every number has a source (see ``docs/lab.md``); ``scale`` (``--noise-scale``) multiplies
+Every number has a source (see ``docs/guide/virtual-lab.md``); ``scale`` (``--noise-scale``) multiplies
 every imperfection at once — noise, quantisation step and offset — so every declared level
 scales with it.
 

@@ -1,7 +1,7 @@
 """Import of a two-pad extensometer record with 2D image tracking (``skinkit import-extensometer``).
 
 The folder layout is that of ``aflahelouneg/inverse_identification_soft_tissue`` (see
-``docs/real-data.md``): ``reactionforce/u_moving_pad.dat`` and ``f_moving_pad.dat`` (one value
+``docs/guide/real-records.md``): ``reactionforce/u_moving_pad.dat`` and ``f_moving_pad.dat`` (one value
 a line: device displacement [mm] and force [N], no time stamps) and ``displacement/``
 ``x0.dat``, ``y0.dat`` (``(P,)`` tracked points in the reference image [px]), ``xt.dat``,
 ``yt.dat`` (``(P, F)``: the same points in the ``F`` later images [px]) and
@@ -9,7 +9,7 @@ a line: device displacement [mm] and force [N], no time stamps) and ``displaceme
 holder). The folder given may be the record's root (holding ``datafiles_unprocessed/``) or
 the ``datafiles_unprocessed`` folder itself.
 
-What the import does, in order (numbers for the healthy record in ``docs/real-data.md``):
+What the import does, in order (numbers for the healthy record in ``docs/guide/real-records.md``):
 
 1. **Pixel scale** [m/px] = ``mark_spacing`` (the known distance between the two marks of one
    pad, 24 mm for this extensometer) / the mean over both pads of the distance between its

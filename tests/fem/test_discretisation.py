@@ -323,7 +323,7 @@ def test_convergence_on_an_example_reports_the_estimate(tmp_path):
     np.testing.assert_allclose(res["extrapolated"], 2 * F2 - F1, rtol=1e-12, atol=1e-15)
     e1, e2 = (x["relative_error"] for x in res["levels"])
     assert e1 == pytest.approx(2 * e2)
-    # this example meets 5 % on the tip force at its documented load (docs/models/README.md)
+    # this example meets 5 % on the tip force at its documented load (docs/reference/model-files.md)
     assert e1 < 0.05
 
 

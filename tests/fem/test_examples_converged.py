@@ -16,7 +16,7 @@ when ``SKINKIT_EXAMPLE_STUDIES=1`` is set —
     SKINKIT_EXAMPLE_STUDIES=1 SKINKIT_MAX_UNKNOWNS=200000 \\
         .venv/bin/python -m pytest tests/fem/test_examples_converged.py -q -s
 
-— and print each level; docs/models/README.md lists what they gave. Every example's study
+— and print each level; docs/reference/model-files.md lists what they gave. Every example's study
 factors are checked in the suite to scale its file's counts to whole numbers, so the
 documented study stays runnable.
 """
@@ -106,6 +106,7 @@ def test_study_factors_scale_the_files_counts(name):
 @pytest.mark.parametrize("name", sorted(STUDIES))
 def test_example_meets_five_percent_at_its_documented_load(name):
     if name not in CHEAP and not FULL:
-        pytest.skip("a study of several minutes: set SKINKIT_EXAMPLE_STUDIES=1 (docs/models/README.md)")
+        pytest.skip("a study of several minutes: set SKINKIT_EXAMPLE_STUDIES=1 "
+                    "(docs/reference/model-files.md)")
     rel, info = _study(name)
     assert rel < TOLERANCE, (name, rel, info)

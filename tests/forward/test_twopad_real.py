@@ -3,7 +3,7 @@ its measured pad displacement, and predicts the 2D tracked points.
 
 The record lies beside the checkout (``../shared/data/real``); without it the test is skipped.
 Nothing here compares with copied numbers: the hand-chosen parameters are not fitted, so the
-residuals are reported (docs/real-data.md), and the test asserts what must hold whatever they
+residuals are reported (docs/guide/real-records.md), and the test asserts what must hold whatever they
 are — every sample predicted to the end of the record, a force that rises with the pull over the
 toe region, point displacements that fall off from the moving pad to the fixed one.
 """
@@ -47,7 +47,7 @@ def test_whole_record_solved_and_points_predicted(tmp_path):
     assert pos.values[:, 0].max() > 8.5e-3
     # over the tracked range (the toe region, to 3.8 mm) a hyperelastic strip pulled further
     # pulls back harder. (Beyond about 8 mm this hand-chosen model's force peaks and falls, a
-    # limit point of the model — docs/real-data.md — so no monotonicity is asserted there.)
+    # limit point of the model — docs/guide/real-records.md — so no monotonicity is asserted there.)
     toe = force.time_s <= 45.0
     assert np.corrcoef(pos.values[toe, 0], fp.values[toe, 0])[0, 1] > 0.99
     # tracked points: every valid one predicted, x displacement falling from the moving pad

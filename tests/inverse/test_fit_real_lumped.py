@@ -8,7 +8,7 @@ record*, moduli summing below 1, the sensor zero among the forces read at rest, 
 curve bracketed by the forces the record shows) and statistical (finite 95 % intervals, the
 AIC comparison, held-out errors present and better than predicting the cycle's mean). The
 values themselves are reported (``-s`` prints them; ``record_property`` keeps them in a
-junit report) and discussed in ``docs/real-data.md``.
+junit report) and discussed in ``docs/guide/real-records.md``.
 """
 
 from __future__ import annotations
