@@ -70,9 +70,8 @@ def test_patchwork_declares_exactly_its_constructor_options():
 
 @pytest.mark.needs_plugins
 def test_verification_cases_come_from_the_laws_with_stable_names():
-    from skinkit.fem import verify
-
     from skinkit import registry
+    from skinkit.fem import verify
 
     cases, problems = verify.law_cases()
     assert problems == {}
