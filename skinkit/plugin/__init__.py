@@ -1,17 +1,16 @@
 """The declared package for plugin authors: one module per kind of plugin, each the stable API
 for that kind, and a conformance kit per kind.
 
-================================  ==========================  ==================================
-kind (entry-point group)          module                      conformance kit
-================================  ==========================  ==================================
-laws (``skinkit.laws``)           :mod:`skinkit.plugin.laws`        :mod:`.conformance.laws`
-trackers (``skinkit.trackers``)   :mod:`skinkit.plugin.trackers`    :mod:`.conformance.trackers`
-profilers (``skinkit.profilers``) :mod:`skinkit.plugin.profilers`   :mod:`.conformance.profilers`
-optimisers (``skinkit.optimisers``) :mod:`skinkit.plugin.optimisers` :mod:`.conformance.optimisers`
-effects (``skinkit.effects``)     :mod:`skinkit.plugin.effects`     :mod:`.conformance.effects`
-drivers (``skinkit.drivers``)     :mod:`skinkit.plugin.drivers`     :mod:`.conformance.drivers`
-commands (``skinkit.commands``)   :mod:`skinkit.plugin.commands`    —
-================================  ==========================  ==================================
+- laws (``skinkit.laws``): :mod:`skinkit.plugin.laws`, kit :mod:`.conformance.laws`;
+- trackers (``skinkit.trackers``): :mod:`skinkit.plugin.trackers`, kit :mod:`.conformance.trackers`;
+- profilers (``skinkit.profilers``): :mod:`skinkit.plugin.profilers`, kit
+  :mod:`.conformance.profilers`;
+- optimisers (``skinkit.optimisers``): :mod:`skinkit.plugin.optimisers`, kit
+  :mod:`.conformance.optimisers`;
+- effects (``skinkit.effects``): :mod:`skinkit.plugin.effects`, kit :mod:`.conformance.effects`;
+- drivers (``skinkit.drivers``): :mod:`skinkit.plugin.drivers`, kit :mod:`.conformance.drivers`;
+- commands (``skinkit.commands``, ``skinkit.commands.<group>``): :mod:`skinkit.plugin.commands`
+  (it imports ``click``, so it ranks with the command line).
 
 A plugin imports these modules and the contract (:mod:`skinkit.errors`, :mod:`skinkit.units`,
 :mod:`skinkit.schemas`, :mod:`skinkit.registry`, :mod:`skinkit.interfaces`) and nothing else

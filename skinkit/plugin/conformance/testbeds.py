@@ -5,7 +5,9 @@
   ramp-hold-return extension record for it (10 Hz, 40 s): a prediction costs milliseconds;
 - :func:`fe_model` a layered disc with an isotropic elastic skin and the coarsest mesh (every
   built-in finite-element effect fits it) and :func:`fe_session` an oblique 0.1 Hz push under
-  force control, with tracked surface points: a prediction costs about a second.
+  force control, with tracked surface points: a prediction costs about a second. Its laws
+  (``neo-hookean-ni``, ``neo-hookean-enu``) are skinkit-plugins', which an effect of
+  finite-element models needs installed anyway.
 """
 
 from __future__ import annotations
