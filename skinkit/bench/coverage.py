@@ -124,8 +124,7 @@ def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int 
         st = perturbed_start(model, free, SPREAD[case]) if start == "perturbed" else "truth"
         res = coverage(model, lab, free, range(first_seed, first_seed + seeds), start=st, progress=progress)
     finally:
-        if hasattr(model, "close"):
-            model.close()
+        model.close()
     res.update({"case": case, "model": spec.get("model", {}).get("name"), "protocols": lab.protocols,
                 "start_kind": start, "start_spread": SPREAD[case] if start == "perturbed" else 0.0,
                 "truth_wall_s": lab.truth_wall_s, "dof": _dof_of(lab.model_spec),

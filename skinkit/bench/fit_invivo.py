@@ -51,27 +51,29 @@ def run(n_protocols: int = 16, periods: int = 3, workers: int = 2, seed: int = 0
     obs = lab(seed)
     t_lab = time.perf_counter() - t0
     model = load(lab.model_spec, workers=workers)
-    truth = {n: model.parameters()[n] for n in FREE}
-    start = {n: v * (1.1 if i % 2 == 0 else 0.9) for i, (n, v) in enumerate(truth.items())}
+    try:
+        truth = {n: model.parameters()[n] for n in FREE}
+        start = {n: v * (1.1 if i % 2 == 0 else 0.9) for i, (n, v) in enumerate(truth.items())}
 
-    def progress(i: int, phi: float, x: dict[str, float]) -> None:
-        if log is not None:
-            vals = ", ".join(f"{k} = {v:.4g}" for k, v in x.items())
-            print(f"  evaluation {i} ({time.perf_counter() - t1:.0f} s): objective {phi:.6g} [{vals}]",
-                  file=log, flush=True)
+        def progress(i: int, phi: float, x: dict[str, float]) -> None:
+            if log is not None:
+                vals = ", ".join(f"{k} = {v:.4g}" for k, v in x.items())
+                print(f"  evaluation {i} ({time.perf_counter() - t1:.0f} s): objective {phi:.6g} [{vals}]",
+                      file=log, flush=True)
 
-    t1 = time.perf_counter()
-    r = fit(model, obs, list(FREE), start=start, progress=progress)
-    wall = time.perf_counter() - t1
-    t2 = time.perf_counter()
-    pred = model.predict(r.parameters, obs.fitted(), sensitivities=list(FREE))
-    one = time.perf_counter() - t2
-    protos = pred.info.get("protocols", {})
-    assembly = float(sum(p.get("assembly_s", 0.0) for p in protos.values()))
-    solve = float(sum(p.get("linear_solve_s", 0.0) for p in protos.values()))
-    n_dof = int(next(iter(protos.values())).get("n_dof", 0)) if protos else 0
-    newton = float(np.mean([p.get("newton_per_step", np.nan) for p in protos.values()])) if protos else None
-    if hasattr(model, "close"):
+        t1 = time.perf_counter()
+        r = fit(model, obs, list(FREE), start=start, progress=progress)
+        wall = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        pred = model.predict(r.parameters, obs.fitted(), sensitivities=list(FREE))
+        one = time.perf_counter() - t2
+        protos = pred.info.get("protocols", {})
+        assembly = float(sum(p.get("assembly_s", 0.0) for p in protos.values()))
+        solve = float(sum(p.get("linear_solve_s", 0.0) for p in protos.values()))
+        n_dof = int(next(iter(protos.values())).get("n_dof", 0)) if protos else 0
+        newton = (float(np.mean([p.get("newton_per_step", np.nan) for p in protos.values()]))
+                  if protos else None)
+    finally:
         model.close()
     est = {n: r.parameters[n] for n in FREE}
     return {"n_protocols": n_protocols, "periods": periods, "n_dof": n_dof, "workers": workers,

@@ -470,8 +470,7 @@ def _oracle(lab: Any, obs: Any, free: Sequence[str], effects: Sequence[Mapping[s
                 "se": {k: float(r.se.get(k, math.nan)) for k in names}, "converged": bool(r.converged),
                 "n_forward": int(r.n_forward)}
     finally:
-        if hasattr(model, "close"):
-            model.close()
+        model.close()
 
 
 def shrinkage(before_chi2: float, before_dof: float, after_chi2: float, after_dof: float, *,

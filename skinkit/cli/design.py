@@ -73,8 +73,7 @@ def design(model_file: str, session: str, free: str | None, at: str | None, cand
 
         res = rank_protocols(model, obs, values or None, names, cands, progress=progress)
     finally:
-        if hasattr(model, "close"):
-            model.close()
+        model.close()
     res["session"] = str(session)
     if as_json:
         click.echo(jsonio.dumps(res, indent=2, default=float))

@@ -53,10 +53,8 @@ def _forces_from_trajectories(spec, obs, workers):
     disp = copy.deepcopy(spec)
     disp.pop("effects", None)
     disp["indenter"] = {**dict(disp.get("indenter", {}) or {}), "mode": "displacement"}
-    m = load(disp, workers=workers)
-    pred = m.predict(m.parameters(), obs)
-    if hasattr(m, "close"):
-        m.close()
+    with load(disp, workers=workers) as m:
+        pred = m.predict(m.parameters(), obs)
     out = {}
     for po in obs:
         ch = dict(po.channels)

@@ -105,71 +105,73 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
 
     _check_choices(weighting, optimiser)
     model = load(model_file, workers=workers)
-    if error_estimate:
-        from skinkit.inverse.discretisation import has_mesh
-        if not has_mesh(model):
-            raise SkinkitError(f"--error-estimate: model {model.name!r} is lumped; it has no mesh whose "
-                               "discretisation error could be estimated")
-    obs = read_session(model, session, holdout, segments, protocols=protocols)
-    if until_s is not None:
-        obs = obs.until(until_s)
-    fit_name = fit_name or f"fit-{model.name}"
-    stores = str(session).lower().endswith((".h5", ".hdf5"))
-    # default: named after the fit (fit-<model name> unless --name), in the current directory
-    out = Path(out_dir) if out_dir else Path.cwd() / check_name(fit_name, "--name")
-    evals_dir = out / "evaluations"
-    state_file = out / "checkpoint.json"
-    params, bounds, given = _fit_parameters(model, free, bound_items, start_items)
-    names = params.free_names
-    # what makes two runs the same fit: a resumed run must match it exactly
-    identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
-                "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
-                "holdout": split_names(holdout), "start": given,
-                "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "until": until_s,
-                "protocols": split_names(protocols),
-                "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations}
-    _check_out(out, state_file, identity, resume=resume, session=session, stores=stores, fit_name=fit_name,
-               overwrite=overwrite)
-    if not resume:   # a fresh fit: evaluations of an earlier one in this --out are not its own
+    try:
+        if error_estimate:
+            from skinkit.inverse.discretisation import has_mesh
+            if not has_mesh(model):
+                raise SkinkitError(f"--error-estimate: model {model.name!r} is lumped; it has no mesh whose "
+                                   "discretisation error could be estimated")
+        obs = read_session(model, session, holdout, segments, protocols=protocols)
+        if until_s is not None:
+            obs = obs.until(until_s)
+        fit_name = fit_name or f"fit-{model.name}"
+        stores = str(session).lower().endswith((".h5", ".hdf5"))
+        # default: named after the fit (fit-<model name> unless --name), in the current directory
+        out = Path(out_dir) if out_dir else Path.cwd() / check_name(fit_name, "--name")
+        evals_dir = out / "evaluations"
+        state_file = out / "checkpoint.json"
+        params, bounds, given = _fit_parameters(model, free, bound_items, start_items)
+        names = params.free_names
+        # what makes two runs the same fit: a resumed run must match it exactly
+        identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
+                    "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
+                    "holdout": split_names(holdout), "start": given,
+                    "bounds": {k: list(v) for k, v in bounds.items()}, "segments": segments, "until": until_s,
+                    "protocols": split_names(protocols),
+                    "ftol": ftol, "xtol": xtol, "max_iterations": max_iterations}
+        _check_out(out, state_file, identity, resume=resume, session=session, stores=stores,
+                   fit_name=fit_name,
+                   overwrite=overwrite)
+        if not resume:   # a fresh fit: evaluations of an earlier one in this --out are not its own
+            shutil.rmtree(evals_dir, ignore_errors=True)
+        out.mkdir(parents=True, exist_ok=True)
+        _checkpoint(state_file, identity)
+        sc, x_starts = _start_points(params, names, starts)
+
+        def run_start(k: int, start_vals: dict[str, float], progress) -> object:
+            from skinkit.inverse import fit as run_fit
+            return run_fit(model, obs, names, weighting=weighting, optimiser=optimiser, start=start_vals,
+                           ftol=ftol, xtol=xtol, max_iterations=max_iterations, bounds=bounds or None,
+                           checkpoint=evals_dir / f"start-{k:03d}", progress=progress)
+
+        results, done = _run_starts(run_start, sc, x_starts, names, as_json)
+        best_result = min(results, key=lambda r: r.objective)
+        best_result.starts = done
+        if error_estimate:
+            from skinkit.inverse.discretisation import attach, estimate
+            say = None if as_json else (lambda m: click.echo(f"  {m}", err=True))
+            attach(best_result, estimate(model, obs, best_result.parameters, names, weighting=weighting,
+                                         progress=say))
+        if stores:
+            from skinkit.store import open_experiment
+            with open_experiment(session, "a") as exp:
+                exp.write_fit(fit_name, best_result)
+        best = fit_json(best_result)
+        best["n_forward"] = sum(r.n_forward for r in results)
+        best["n_sensitivity"] = sum(r.n_sensitivity for r in results)
+        best["n_replayed"] = sum(r.extra.get("n_replayed", 0) for r in results)
+        best["model"] = model.name
+        best["session"] = str(session)
+        if stores:
+            best["stored_as"] = fit_name
+        if plots:
+            from skinkit.inverse.plots import fit_plots
+            best["plots"] = [str(p) for p in fit_plots(model, obs, best_result, out)]
+        _checkpoint(out / "fit.json", best)
+        # the fit is whole: its evaluations are no longer needed to resume it
         shutil.rmtree(evals_dir, ignore_errors=True)
-    out.mkdir(parents=True, exist_ok=True)
-    _checkpoint(state_file, identity)
-    sc, x_starts = _start_points(params, names, starts)
-
-    def run_start(k: int, start_vals: dict[str, float], progress) -> object:
-        from skinkit.inverse import fit as run_fit
-        return run_fit(model, obs, names, weighting=weighting, optimiser=optimiser, start=start_vals,
-                       ftol=ftol, xtol=xtol, max_iterations=max_iterations, bounds=bounds or None,
-                       checkpoint=evals_dir / f"start-{k:03d}", progress=progress)
-
-    results, done = _run_starts(run_start, sc, x_starts, names, as_json)
-    best_result = min(results, key=lambda r: r.objective)
-    best_result.starts = done
-    if error_estimate:
-        from skinkit.inverse.discretisation import attach, estimate
-        say = None if as_json else (lambda m: click.echo(f"  {m}", err=True))
-        attach(best_result, estimate(model, obs, best_result.parameters, names, weighting=weighting,
-                                     progress=say))
-    if stores:
-        from skinkit.store import open_experiment
-        with open_experiment(session, "a") as exp:
-            exp.write_fit(fit_name, best_result)
-    best = fit_json(best_result)
-    best["n_forward"] = sum(r.n_forward for r in results)
-    best["n_sensitivity"] = sum(r.n_sensitivity for r in results)
-    best["n_replayed"] = sum(r.extra.get("n_replayed", 0) for r in results)
-    best["model"] = model.name
-    best["session"] = str(session)
-    if stores:
-        best["stored_as"] = fit_name
-    if plots:
-        from skinkit.inverse.plots import fit_plots
-        best["plots"] = [str(p) for p in fit_plots(model, obs, best_result, out)]
-    _checkpoint(out / "fit.json", best)
-    # the fit is whole: its evaluations are no longer needed to resume it
-    shutil.rmtree(evals_dir, ignore_errors=True)
-    state_file.unlink(missing_ok=True)
-    if hasattr(model, "close"):
+        state_file.unlink(missing_ok=True)
+    finally:
         model.close()
     if as_json:
         click.echo(jsonio.dumps(best, indent=2, default=float))

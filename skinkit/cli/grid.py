@@ -132,28 +132,33 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
         raise SkinkitError(f"--objective {weighting!r}: must be one of {', '.join(WEIGHTINGS)}")
     fitted = _read_fit(at) if at else None
     model, obs = _session(model_file, session, holdout, workers)
-    base = model.parameters()
-    unknown = [p for p in names if p not in base]
-    if unknown:
-        raise GridError(f"--pair: the model has no parameter {', '.join(unknown)}; "
-                        f"it has {', '.join(base.names)}")
-    around = base
-    if fitted is not None:
-        around = base.with_values({k: v for k, v in fitted["values"].items() if k in base})
-    half = None if span is None else _parse_span(span, fitted, around, names)
-    out = Path(out_dir) if out_dir else Path.cwd() / f"grid-{model.name}-{names[0]}-{names[1]}"
-    check_result_files(out, ("grid.json", "grid.png"), "--out", overwrite=overwrite)  # before the grid runs
-    say = _say
-    say(f"{n} x {n} forward predictions of {model.name} on {session}")
-    g = objective_grid(model, obs, (names[0], names[1]), n=n, span=half, weighting=weighting, around=around,
-                       progress=say)
-    if fitted is not None and fitted["covariance"] is not None and all(p in fitted["names"] for p in names):
-        g = attach_covariance(g, fitted["names"], fitted["covariance"], fitted["values"], fitted["inflation"])
-    g = _clean({**g, "session": str(session)})
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "grid.json").write_text(jsonio.dumps(g, indent=1))
-    png = grid_plot(g, out / "grid.png")
-    if hasattr(model, "close"):
+    try:
+        base = model.parameters()
+        unknown = [p for p in names if p not in base]
+        if unknown:
+            raise GridError(f"--pair: the model has no parameter {', '.join(unknown)}; "
+                            f"it has {', '.join(base.names)}")
+        around = base
+        if fitted is not None:
+            around = base.with_values({k: v for k, v in fitted["values"].items() if k in base})
+        half = None if span is None else _parse_span(span, fitted, around, names)
+        out = Path(out_dir) if out_dir else Path.cwd() / f"grid-{model.name}-{names[0]}-{names[1]}"
+        # before the grid runs
+        check_result_files(out, ("grid.json", "grid.png"), "--out", overwrite=overwrite)
+        say = _say
+        say(f"{n} x {n} forward predictions of {model.name} on {session}")
+        g = objective_grid(model, obs, (names[0], names[1]), n=n, span=half, weighting=weighting,
+                           around=around,
+                           progress=say)
+        if (fitted is not None and fitted["covariance"] is not None
+                and all(p in fitted["names"] for p in names)):
+            g = attach_covariance(g, fitted["names"], fitted["covariance"], fitted["values"],
+                                  fitted["inflation"])
+        g = _clean({**g, "session": str(session)})
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "grid.json").write_text(jsonio.dumps(g, indent=1))
+        png = grid_plot(g, out / "grid.png")
+    finally:
         model.close()
     if as_json:
         click.echo(jsonio.dumps(g, indent=2))
@@ -205,15 +210,17 @@ def profile(model_file: str, session: str, name: str, free: str | None, n: int, 
         except ValueError:
             raise GridError(f"--values {values!r}: give numbers in SI, comma-separated") from None
     model, obs = _session(model_file, session, holdout, workers)
-    out = Path(out_dir) if out_dir else Path.cwd() / f"profile-{model.name}-{name}"
-    check_result_files(out, ("profile.json", "profile.png"), "--out", overwrite=overwrite)  # before it runs
-    pr = profile_likelihood(model, obs, name, split_names(free) or None, values=vals, n=n,
-                            weighting=weighting, progress=_say)
-    pr = _clean({**pr, "session": str(session)})
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "profile.json").write_text(jsonio.dumps(pr, indent=1))
-    png = profile_plot(pr, out / "profile.png")
-    if hasattr(model, "close"):
+    try:
+        out = Path(out_dir) if out_dir else Path.cwd() / f"profile-{model.name}-{name}"
+        # before it runs
+        check_result_files(out, ("profile.json", "profile.png"), "--out", overwrite=overwrite)
+        pr = profile_likelihood(model, obs, name, split_names(free) or None, values=vals, n=n,
+                                weighting=weighting, progress=_say)
+        pr = _clean({**pr, "session": str(session)})
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "profile.json").write_text(jsonio.dumps(pr, indent=1))
+        png = profile_plot(pr, out / "profile.png")
+    finally:
         model.close()
     if as_json:
         click.echo(jsonio.dumps(pr, indent=2))

@@ -52,32 +52,34 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
                                "or --overwrite to replace it")
 
     model = load(model_file, workers=workers, scheduler=scheduler)
-    obs = read_session(model, session, holdout, segments, axis, protocols)
-    if until_s is not None:
-        obs = obs.until(until_s)
-    params = model.parameters()
-    values = {}
-    for item in sets:
-        name, eq, val = item.partition("=")
-        if not eq:
-            raise SkinkitError(f"--set {item!r}: expected NAME=VALUE")
-        name = name.strip()
-        if name not in params:
-            raise SkinkitError(f"--set {name!r}: no such parameter; the model has {params.names}")
-        values[name] = quantity(val.strip() if not _is_number(val) else float(val), params.param(name).unit,
-                                f"--set {name}")
-    params = params.with_values(values) if values else params
-    pred = model.predict(params, obs, sensitivities=sensitivities)
-    summary = summarise(pred, obs)
-    summary["model"] = model.name
-    summary["session"] = str(session)
-    summary["inputs"] = pred.inputs
-    summary["methods"] = pred.methods
-    summary["solver"] = {k: v for k, v in pred.info.items() if k != "protocols"}
-    if out_file:
-        _write(Path(out_file), pred, summary)
-        summary["file"] = out_file
-    if hasattr(model, "close"):
+    try:
+        obs = read_session(model, session, holdout, segments, axis, protocols)
+        if until_s is not None:
+            obs = obs.until(until_s)
+        params = model.parameters()
+        values = {}
+        for item in sets:
+            name, eq, val = item.partition("=")
+            if not eq:
+                raise SkinkitError(f"--set {item!r}: expected NAME=VALUE")
+            name = name.strip()
+            if name not in params:
+                raise SkinkitError(f"--set {name!r}: no such parameter; the model has {params.names}")
+            values[name] = quantity(val.strip() if not _is_number(val) else float(val),
+                                    params.param(name).unit,
+                                    f"--set {name}")
+        params = params.with_values(values) if values else params
+        pred = model.predict(params, obs, sensitivities=sensitivities)
+        summary = summarise(pred, obs)
+        summary["model"] = model.name
+        summary["session"] = str(session)
+        summary["inputs"] = pred.inputs
+        summary["methods"] = pred.methods
+        summary["solver"] = {k: v for k, v in pred.info.items() if k != "protocols"}
+        if out_file:
+            _write(Path(out_file), pred, summary)
+            summary["file"] = out_file
+    finally:
         model.close()
     if as_json:
         click.echo(jsonio.dumps(summary, indent=2, default=float))

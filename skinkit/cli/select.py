@@ -55,8 +55,7 @@ def select(model_file: str, session: str, subsets: str, weighting: str, holdout:
         res = run_select(model, obs, wanted, weighting, None if fold == "none" else fold, rank_by=rank_by,
                          progress=progress)
     finally:
-        if hasattr(model, "close"):
-            model.close()
+        model.close()
     res["session"] = str(session)
     if as_json:
         click.echo(jsonio.dumps(res, indent=2, default=float))

@@ -59,6 +59,7 @@ from skinkit.gap.score import (
     with_effects,
 )
 from skinkit.schemas import EffectScore, FitResult, GapReport, Observations, Prediction
+from skinkit.units import unit_suffix
 
 #: an effect is named only if its refit lowers the AIC by more than this (module docstring)
 AIC_MARGIN = 10.0
@@ -679,7 +680,7 @@ def _named_messages(named: Sequence[str], rounds: Sequence[dict[str, Any]]) -> l
         if c is None:
             continue
         pars = ", ".join(f"{n} = {v['value']:.4g}" + (f" ± {1.96 * v['se']:.2g}" if v.get("se") else "")
-                         + f" {v.get('unit', '')}".rstrip() for n, v in (c.get("parameters") or {}).items())
+                         + unit_suffix(v.get("unit")) for n, v in (c.get("parameters") or {}).items())
         shr = (f"shrinkage {100 * c['shrinkage']:.0f} % of the excess" if c["shrinkage"] is not None
                else "no excess above the noise as a whole to shrink")
         out.append(f"`{e}` named: ΔAIC {c['delta_aic']:.1f}, {shr} ({pars}).")

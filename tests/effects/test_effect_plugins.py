@@ -128,7 +128,7 @@ def test_declared_parameters_are_si_bounded_with_null_and_typical_inside(name):
 
 
 def test_the_typical_magnitudes_are_those_the_guidance_asks_for():
-    """Spot checks in the units a reader thinks in (the full list is docs/effects.md's table)."""
+    """Spot checks in the units a reader thinks in (the full list is docs/guide/effects.md's table)."""
     assert typical("viscoelastic") == pytest.approx({"g1": 0.3, "tau1": 2.0})
     assert typical("prestress") == pytest.approx({"l1": 1.10, "l2": 1.03, "angle": math.radians(20)})
     assert typical("fibres")["k1"] == pytest.approx(20e3)

@@ -1,4 +1,4 @@
-"""Built-in candidate effects (entry-point group ``skinkit.effects``); see ``docs/effects.md``.
+"""Built-in candidate effects (entry-point group ``skinkit.effects``); see ``docs/guide/effects.md``.
 
 * :mod:`.material`: ``viscoelastic``, ``prestress``, ``fibres`` (edits of the skin's law);
 * :mod:`.fields`: ``layer-slip``, ``fascia``, ``inclusion``, ``preconditioning`` (``[[fields]]``);

@@ -1,5 +1,5 @@
 """Effects that are smooth factors φ on a layer's elastic response (``[[fields]]``, see
-``docs/effects.md``): ``layer-slip``, ``fascia``, ``inclusion`` and ``preconditioning``.
+``docs/guide/effects.md``): ``layer-slip``, ``fascia``, ``inclusion`` and ``preconditioning``.
 
 Each writes one field named after the effect, so the field's parameters ``"<effect>.<key>"``
 are the effect's own (no binding needed) and the forward model differentiates them
@@ -90,7 +90,7 @@ class Inclusion(BaseEffect):
 
 class Preconditioning(BaseEffect):
     """Softening of the elastic response with the largest load seen so far: φ(t) = 1 − softening ·
-    m(t)/m_ref (``docs/effects.md``), ``softening`` [1] in [0, 0.9], null 0. Finite elements: a
+    m(t)/m_ref (``docs/guide/effects.md``), ``softening`` [1] in [0, 0.9], null 0. Finite elements: a
     ``softening`` field on the skin layer. Lumped: ``[lumped.preconditioning] softening``, bound
     to ``lumped.softening``."""
 

@@ -1,7 +1,7 @@
 """Effects on the geometry and the support: ``thickness`` and ``support-compliance``.
 
 Neither is a parameter the forward model differentiates analytically: both are
-differentiated by central differences (``docs/effects.md``).
+differentiated by central differences (``docs/guide/effects.md``).
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Instrument effects: linear transforms between what the skin saw and what was recorded
-(``[[instrument]]`` entries, ``docs/effects.md``), differentiated analytically by the forward
+(``[[instrument]]`` entries, ``docs/guide/effects.md``), differentiated analytically by the forward
 model. Each entry's ``parameter`` is the effect parameter itself, value 0 is no effect exactly.
 
 ``indenter-tilt`` and ``tracking-bias`` apply to finite-element models (a probe axis and 3D

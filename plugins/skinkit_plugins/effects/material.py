@@ -3,7 +3,7 @@
 
 The skin is the first (top) ``[[layers]]`` table, whatever its name. Every parameter of these
 effects is bound to a model parameter the forward model differentiates analytically
-(``bindings``, ``docs/effects.md``).
+(``bindings``, ``docs/guide/effects.md``).
 """
 
 from __future__ import annotations
