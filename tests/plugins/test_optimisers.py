@@ -40,6 +40,18 @@ def test_exponential_fit_without_a_jacobian(name):
     res = opt.minimise(lambda x: x[0] * (1 - np.exp(-x[1] * t)) - y, np.array([5.0, 1.0]),
                        np.array([0.0, 0.0]), np.array([20.0, 5.0]))
     assert res.success, res.message
-    # a global search (crs2) stops on its population's spread: looser than a local method
-    np.testing.assert_allclose(res.x, [8.6, 0.51], rtol=1e-3)
-    assert res.fun < 1e-6 and res.nfev > 0
+    # a global search refines its best point locally, so it meets a local method's tolerance
+    np.testing.assert_allclose(res.x, [8.6, 0.51], rtol=1e-4)
+    assert res.fun < 1e-8 and res.nfev > 0
+
+
+@pytest.mark.parametrize("name", _derivative_free())
+def test_the_same_seed_gives_the_same_answer(name):
+    # stochastic searches draw from NLopt's generator: seeded, a fit is repeatable
+    t = np.linspace(0, 10, 50)
+    y = 8.6 * (1 - np.exp(-0.51 * t)) + 0.05 * np.sin(7 * t)
+    opt = registry.create("skinkit.optimisers", name)
+    runs = [opt.minimise(lambda x: x[0] * (1 - np.exp(-x[1] * t)) - y, np.array([5.0, 1.0]),
+                         np.array([0.0, 0.0]), np.array([20.0, 5.0]), options={"seed": 3})
+            for _ in range(2)]
+    np.testing.assert_array_equal(runs[0].x, runs[1].x)

@@ -31,7 +31,9 @@ class NloptOptimiser:
     """An NLopt algorithm behind skinkit's optimiser interface (``skinkit.interfaces.Optimiser``).
 
     ``fun`` may return a residual vector (φ = ½‖r‖²) or a scalar. ``options``: ``xtol_rel``
-    (default 1e-8), ``ftol_rel`` (1e-12), ``maxeval`` (2000), ``population`` (CRS2 only).
+    (default 1e-8), ``ftol_rel`` (1e-12), ``maxeval`` (2000), ``population`` (CRS2 only),
+    ``seed`` (0: NLopt's random generator, used by the stochastic algorithms, is seeded so that
+    the same fit gives the same answer; ``None`` leaves it seeded from the clock).
     """
 
     name = "nlopt"
@@ -81,8 +83,10 @@ class NloptOptimiser:
         opt.set_xtol_rel(float(opts["xtol_rel"]))
         opt.set_ftol_rel(float(opts["ftol_rel"]))
         opt.set_maxeval(int(opts["maxeval"]))
-        if "population" in opts:
+        if opts.get("population") is not None:
             opt.set_population(int(opts["population"]))
+        if opts.get("seed", 0) is not None:
+            nlopt.srand(int(opts.get("seed", 0)))
         try:
             x = opt.optimize(np.clip(x0, lower, upper))
             code = opt.last_optimize_result()
@@ -94,7 +98,14 @@ class NloptOptimiser:
             x, fval, success, message = best["x"], best["f"], False, "roundoff limited"
         except RuntimeError as exc:   # NLopt's generic failure (e.g. SLSQP after rejected points)
             x, fval, success, message = best["x"], best["f"], False, f"nlopt failure: {exc or 'generic'}"
-        return OptimiseResult(np.asarray(x), fval, nfev, success, message)
+        result = OptimiseResult(np.asarray(x), fval, nfev, success, message)
+        return self._polish(result, fun, lower, upper, jac, opts)
+
+    def _polish(self, result: OptimiseResult, fun: Callable[[np.ndarray], Any], lower: np.ndarray,
+                upper: np.ndarray, jac: Callable[[np.ndarray], np.ndarray] | None,
+                opts: Mapping[str, Any]) -> OptimiseResult:
+        """The result as found; a global search refines it locally (see :class:`NloptCrs2`)."""
+        return result
 
 
 class NloptBobyqa(NloptOptimiser):
@@ -105,11 +116,31 @@ class NloptBobyqa(NloptOptimiser):
 
 
 class NloptCrs2(NloptOptimiser):
-    """NLopt ``GN_CRS2_LM``: global derivative-free controlled random search (Lavigne et al.)."""
+    """NLopt ``GN_CRS2_LM``: global derivative-free controlled random search (Lavigne et al.).
+
+    The search stops when its population has gathered around one basin, which locates the
+    minimum only to the population's spread; as NLopt's documentation advises for its global
+    algorithms, the best point is then refined by a local search (BOBYQA) with the evaluations
+    left of ``maxeval``. ``options["polish"] = False`` returns the global search's point as is.
+    """
 
     name = "nlopt-crs2"
     algorithm = nlopt.GN_CRS2_LM
     needs_finite_bounds = True
+
+    def _polish(self, result: OptimiseResult, fun: Callable[[np.ndarray], Any], lower: np.ndarray,
+                upper: np.ndarray, jac: Callable[[np.ndarray], np.ndarray] | None,
+                opts: Mapping[str, Any]) -> OptimiseResult:
+        left = int(opts["maxeval"]) - result.nfev
+        if not opts.get("polish", True) or left < 2 * result.x.size + 2 or not np.all(np.isfinite(result.x)):
+            return result
+        local = NloptBobyqa().minimise(fun, result.x, lower, upper, jac,
+                                       {**opts, "maxeval": left, "population": None, "polish": False})
+        nfev = result.nfev + local.nfev
+        if not local.fun <= result.fun:
+            return OptimiseResult(result.x, result.fun, nfev, result.success, result.message)
+        return OptimiseResult(local.x, local.fun, nfev, result.success or local.success,
+                              f"{result.message}; refined locally: {local.message}")
 
 
 class NloptMma(NloptOptimiser):
