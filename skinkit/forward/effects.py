@@ -4,6 +4,16 @@ An ``[[effects]]`` table names an effect plugin (``name``) and gives any subset 
 parameters (numbers in SI or ``"<number> <unit>"`` strings); the others take the effect's
 null value, so ``[[effects]] name = "prestress"`` alone leaves the model unchanged.
 Effect parameters are named ``"<effect>.<parameter>"`` in the model's parameter set.
+
+An effect that declares ``repeatable = True`` may be given again with an ``instance`` label
+(``{name = "viscoelastic", instance = "viscoelastic-2"}``): the plugin is applied once more under
+that label, which names its parameters (``"viscoelastic-2.g1"``), bindings, fields and
+instrument entries in place of the effect's name. Labels are unique and no other installed
+effect's name.
+
+An effect that declares ``forms`` (its first the default) may be given in another form
+(``{name = "preconditioning", form = "largest-load"}``): the plugin is applied as a copy whose
+``form`` is the chosen one, with that form's parameters.
 """
 
 from __future__ import annotations
@@ -21,12 +31,19 @@ from skinkit.schemas import Parameter, ParameterSet
 
 @dataclass
 class AppliedEffect:
-    """One effect of a model: the plugin, its declared parameters and the values in use [SI]."""
+    """One effect of a model: the plugin, its declared parameters and the values in use [SI].
+
+    ``name`` is the label its parameters are named after (the effect's name, or the table's
+    ``instance``); ``effect`` the plugin's name (the same unless an instance)."""
 
     name: str
     plugin: Any
     declared: dict[str, Parameter]
     values: dict[str, float]
+    effect: str = ""
+
+    def __post_init__(self) -> None:
+        self.effect = self.effect or self.name
 
     def parameter_set(self) -> list[Parameter]:
         """The effect's parameters under their model names (``"<effect>.<local>"``), values in use."""
@@ -43,6 +60,54 @@ def effect_plugin(name: str, entry: str = "effects") -> Any:
         return registry.create("skinkit.effects", name)
     except PluginError as exc:
         raise EffectError(entry, f"unknown effect {name!r}: {exc}") from None
+
+
+def _label(t: Mapping[str, Any], name: str, plugin: Any, entry: str, seen: set[str]) -> str:
+    """The table's label: its ``instance`` (checked) or the effect's name; not one of ``seen``."""
+    if "instance" not in t:
+        if name in seen:
+            more = (f"; a further instance needs a label (instance = \"{name}-2\")"
+                    if getattr(plugin, "repeatable", False) else "")
+            raise EffectError(f"{entry}.name", f"effect {name!r} is given twice{more}")
+        return name
+    label = t["instance"]
+    e = f"{entry}.instance"
+    if not getattr(plugin, "repeatable", False):
+        raise EffectError(e, f"effect {name!r} is not repeatable: it takes no instance label")
+    if not isinstance(label, str) or not label or "." in label or label != label.strip():
+        # the label heads parameter names "<label>.<local>"
+        raise EffectError(e, f"must be a non-empty name without '.' or surrounding spaces, got {label!r}")
+    if label in seen:
+        raise EffectError(e, f"label {label!r} is given twice")
+    if label != name and label in registry.names("skinkit.effects"):
+        raise EffectError(e, f"label {label!r} is the name of another installed effect")
+    return label
+
+
+def _instance(plugin: Any, label: str) -> Any:
+    """The plugin under ``label``: a shallow copy whose ``name`` is the label (the plugin itself
+    when the label is its name), so everything it names after itself takes the label."""
+    if label == getattr(plugin, "name", label):
+        return plugin
+    inst = copy.copy(plugin)
+    inst.name = label
+    return inst
+
+
+def _in_form(t: Mapping[str, Any], name: str, plugin: Any, entry: str) -> Any:
+    """The plugin in the table's ``form`` (a shallow copy whose ``form`` is set), or the
+    plugin itself when the table chooses none."""
+    if "form" not in t:
+        return plugin
+    forms = tuple(getattr(plugin, "forms", ()) or ())
+    if not forms:
+        raise EffectError(f"{entry}.form", f"effect {name!r} has only one form: it takes no 'form'")
+    if t["form"] not in forms:
+        raise EffectError(f"{entry}.form", f"effect {name!r} has the forms {list(forms)}, "
+                          f"not {t['form']!r}")
+    inst = copy.copy(plugin)
+    inst.form = t["form"]
+    return inst
 
 
 def _quantity(value: Any, unit: str, entry: str) -> float:
@@ -81,17 +146,17 @@ def resolve(tables: Any, kind: str, plugins: Mapping[str, Any] | None = None) ->
         if not isinstance(t, Mapping) or "name" not in t:
             raise EffectError(entry, "needs a 'name' (an effect of the skinkit.effects group)")
         name = str(t["name"])
-        if name in seen:
-            raise EffectError(f"{entry}.name", f"effect {name!r} is given twice")
-        seen.add(name)
         plugin = plugins[name] if plugins and name in plugins else effect_plugin(name, f"{entry}.name")
+        label = _label(t, name, plugin, entry, seen)
+        seen.add(label)
         kinds = tuple(getattr(plugin, "kinds", ()))
         if kind not in kinds:
             raise EffectError(f"{entry}.name", f"effect {name!r} applies to {', '.join(kinds) or 'no'} "
                               f"models, not to a {kind!r} model")
+        plugin = _in_form(t, name, plugin, entry)
         declared = {p.name: p for p in plugin.parameters()}
         null = dict(plugin.null())
-        unknown = sorted(set(t) - set(declared) - {"name"})
+        unknown = sorted(set(t) - set(declared) - {"name", "instance", "form"})
         if unknown:
             raise EffectError(entry, f"unknown parameter(s) {unknown} for effect {name!r}; "
                               f"it has {sorted(declared)}")
@@ -99,8 +164,8 @@ def resolve(tables: Any, kind: str, plugins: Mapping[str, Any] | None = None) ->
         for local, d in declared.items():
             e = f"{entry}.{local}"
             v = _quantity(t[local], d.unit, e) if local in t else float(null.get(local, d.value))
-            values[local] = check_value(name, d, v, e)
-        out.append(AppliedEffect(name, plugin, declared, values))
+            values[local] = check_value(label, d, v, e)
+        out.append(AppliedEffect(label, _instance(plugin, label), declared, values, name))
     return out
 
 

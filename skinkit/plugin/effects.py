@@ -80,15 +80,34 @@ class BaseEffect:
     checked), and ``once``, True when ``apply`` recognises the effect in a description it
     already edited and refuses a second application (an effect that only moves a value
     already in the description cannot).
+
+    ``repeatable``, True when the effect may be added more than once ("more of the same", e.g.
+    one more Prony term): a further ``[[effects]]`` table with an ``instance`` label applies a
+    shallow copy of the plugin whose ``name`` is the label, so an effect that names everything
+    after ``self.name`` (as the accessors below do) needs nothing else; its edits must then
+    compose with those of the earlier instances (append, not overwrite).
+
+    ``forms``, the forms an effect comes in when it has several (a constitutive choice with
+    its own parameters), the first the default: an ``[[effects]]`` table may then choose one
+    (``form = "..."``) and :func:`skinkit.forward.effects.resolve` applies a shallow copy of the
+    plugin whose ``form`` is the chosen one; ``_declared`` and ``_apply_*`` read
+    :meth:`chosen_form`.
     """
 
     name: str = ""
     kinds: tuple[str, ...] = ("fe",)
     touches: ClassVar[Mapping[str, frozenset[str]]] = MappingProxyType({})
     once: ClassVar[bool] = True
+    repeatable: ClassVar[bool] = False
+    forms: ClassVar[tuple[str, ...]] = ()
+    form: str = ""
 
     def _declared(self) -> list[Declared]:
         raise NotImplementedError
+
+    def chosen_form(self) -> str:
+        """The form in use: ``form`` when set, else the first of ``forms`` (``""`` without forms)."""
+        return self.form or (self.forms[0] if self.forms else "")
 
     @property
     def entry(self) -> str:

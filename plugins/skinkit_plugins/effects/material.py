@@ -29,10 +29,15 @@ class Viscoelastic(BaseEffect):
     ``<skin>.g<n>``, ``viscoelastic.tau1`` -> ``<skin>.tau<n>``. Lumped: a ``[[lumped.relaxation]]``
     term ``{g, tau}``, bound to ``lumped.g<n>``, ``lumped.tau<n>``. The moduli of all terms
     must sum below 1 (refused otherwise).
+
+    Repeatable: each further instance (``instance = "viscoelastic-2"``) appends the next term
+    the same way, its parameters ``viscoelastic-2.g1``, ``viscoelastic-2.tau1``; the sum check
+    counts the terms of the earlier instances, which are in the description by then.
     """
 
     name = "viscoelastic"
     kinds = ("fe", "lumped")
+    repeatable = True
     touches = {"fe": frozenset({"bindings", "layers"}), "lumped": frozenset({"bindings", "lumped"})}
 
     def _declared(self) -> list[Declared]:
