@@ -11,14 +11,14 @@ from skinkit import jsonio
 from skinkit.cli._bench_out import page_option, write_page
 
 
-def _names(text: str | None) -> list[str] | None:
+def _names(text: str | None, option: str = "--effects") -> list[str] | None:
     from skinkit.bench.gap_cases import BenchmarkError
 
     if text is None:
         return None
     out = [s.strip() for s in text.split(",") if s.strip()]
     if not out:
-        raise BenchmarkError("--effects: no effect named")
+        raise BenchmarkError(f"{option}: nothing named")
     return out
 
 
@@ -30,8 +30,9 @@ def _names(text: str | None) -> list[str] | None:
 @click.option("--seeds", type=click.IntRange(1), default=None, help="seeds per effect and magnitude "
               "(default 1 quick, 3 full)")
 @click.option("--effects", default=None, metavar="NAME,...", help="only these effects in the truths")
-@click.option("--model", default="quick", show_default=True,
-              help="preset (quick: coarse in vivo; lumped: extension-relaxation) or a model file")
+@click.option("--model", default=None,
+              help="preset (quick: coarse in vivo, the default; lumped: extension-relaxation) "
+              "or a model file")
 @click.option("--nulls", type=click.IntRange(0), default=None,
               help="null sessions (default 2 quick, 20 full)")
 @click.option("--parallel", type=click.IntRange(1), default=2, show_default=True,
@@ -41,19 +42,57 @@ def _names(text: str | None) -> list[str] | None:
               "holds: resume a stopped run, or add seeds or null sessions to a finished one")
 @click.option("--recorded-only", is_flag=True, help="run nothing: score the cases the --journal holds "
               "(a run under way or stopped)")
+@click.option("--alternative", is_flag=True, help="truths written apart from the effect plugins (other "
+              "forms of the effects, coloured and spiky noise, artefacts no effect describes) on the lumped "
+              "extension model; see 'Outside its own forms' in docs/guide/gap-benchmark.md")
+@click.option("--forms", default=None, metavar="NAME,...", help="with --alternative: only these truth forms")
 @page_option
 def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, effects: str | None,
-              model: str, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool,
-              page: Path | None) -> None:
+              model: str | None, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool,
+              alternative: bool, forms: str | None, page: Path | None) -> None:
     """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
     from skinkit.bench.gap_benchmark import run as benchmark_run
     from skinkit.bench.gap_benchmark import summary_lines
+    from skinkit.bench.gap_cases import BenchmarkError
 
+    if alternative:
+        _alternative(quick, scheduler, as_json, seeds, parallel, journal, recorded_only, forms, page,
+                     effects=effects, model=model, nulls=nulls)
+        return
+    if forms is not None:
+        raise BenchmarkError("--forms chooses the truths of --alternative: add --alternative, "
+                             "or use --effects")
     res = benchmark_run(quick, scheduler=scheduler, seeds=seeds, progress=lambda s: click.echo(s, err=True),
-              model=model, effects=_names(effects), nulls=nulls, parallel=parallel, journal=journal,
-              recorded_only=recorded_only)
+              model=model or "quick", effects=_names(effects), nulls=nulls, parallel=parallel,
+              journal=journal, recorded_only=recorded_only)
     lines = summary_lines(res)
     write_page(page, "Withheld-effect benchmark of the gap diagnosis", res, lines)
+    if as_json:
+        click.echo(jsonio.dumps(res, indent=1, default=float))
+        return
+    for line in lines:
+        click.echo(line)
+
+
+def _alternative(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, parallel: int,
+                 journal: str | None, recorded_only: bool, forms: str | None, page: Path | None, *,
+                 effects: str | None, model: str | None, nulls: int | None) -> None:
+    """``--alternative``: the options that choose the withheld-effect benchmark's truths are refused."""
+    from skinkit.bench.gap_alternative import run, summary_lines
+    from skinkit.bench.gap_cases import BenchmarkError
+
+    if model is not None:
+        raise BenchmarkError("--alternative runs on the lumped extension model only (its truths are written "
+                             "for it; a finite-element version is not built): leave out --model")
+    if effects is not None:
+        raise BenchmarkError("--alternative: --effects chooses plugin truths; choose its truths with --forms")
+    if nulls is not None:
+        raise BenchmarkError("--alternative: its null sessions are the null forms (white, AR(1), spikes) at "
+                             "--seeds seeds each; leave out --nulls")
+    res = run(quick, seeds=seeds, forms_=_names(forms, "--forms"), parallel=parallel, scheduler=scheduler,
+              journal=journal, recorded_only=recorded_only, progress=lambda s: click.echo(s, err=True))
+    lines = summary_lines(res)
+    write_page(page, "The gap diagnosis on truths it did not make", res, lines)
     if as_json:
         click.echo(jsonio.dumps(res, indent=1, default=float))
         return

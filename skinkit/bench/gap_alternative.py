@@ -1,0 +1,364 @@
+"""The alternative gap benchmark: the diagnosis checked on truths it did not make.
+
+The withheld-effect benchmark (:mod:`skinkit.bench.gap_benchmark`) makes its truths with the
+effect plugins the diagnosis tests, in their own forms, with white Gaussian noise: it shows
+the diagnosis consistent with itself. Here the truths come from :mod:`skinkit.lab.alternative`
+(NumPy forms written apart from the plugins, coloured and spiky noise, artefacts no effect
+describes) on the lumped extension model, and the model without any effect is diagnosed
+(:func:`skinkit.gap.diagnose.diagnose`, the same as ``skinkit gap diagnose``).
+
+**Reading a report.** The causes are the report's ``named`` list, in naming order (the
+candidates whose ``role`` is ``"cause"`` when ``named`` is absent); an instance label
+``<effect>-<k>`` (a further term of an effect) counts as ``<effect>``. What is left is the
+report's ``remaining`` block; a report without one leaves it unknown, except when nothing is
+named: the remainder is then the first gap, and its ``significant`` is the gap's.
+
+**Scores** (:func:`score`), each with a Clopper–Pearson 95 % interval:
+
+* ``top1_accuracy``: effect cases whose first cause is the truth's effect;
+* ``spurious_rate``: effect cases with a cause named that the truth lacks;
+* ``null_false_alarm_rate``: null sessions with any cause named;
+* ``null_gap_significant_rate``: null sessions reported as a significant gap (``gap`` or
+  ``remaining``);
+* ``unexplained_recall``: out-of-library cases with no cause named and the remainder
+  significant (the right answer: nothing explains it, and something is there).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import re
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skinkit.bench.gap_benchmark import _open_journal, _Pool
+from skinkit.bench.gap_cases import ALPHA, BenchmarkError
+from skinkit.bench.gap_score import clopper_pearson
+from skinkit.errors import SkinkitError
+
+#: the diagnosed model's free parameters: the element's a, b and the force zero
+FREE = ("lumped.a", "lumped.b", "offset.x")
+FULL_SEEDS = 5
+QUICK_SEEDS = 1
+#: version of these definitions a journal's cases were made under
+DEFINITIONS = 1
+#: the diagnosis options: quick as the withheld-effect benchmark's quick run, full as its full run
+QUICK_DIAGNOSE = {"max_effects": 1, "candidates": 2}
+FULL_DIAGNOSE = {"max_effects": 2, "candidates": 3}
+
+
+def model_spec() -> dict[str, Any]:
+    """``docs/models/extension_relaxation_lumped.toml``: the exponential element and the force
+    zero, no effect (the model every truth is diagnosed with)."""
+    from skinkit.examples import example_model
+    from skinkit.fem.model import read_model
+
+    spec = dict(read_model(example_model("extension_relaxation_lumped")))
+    spec.pop("effects", None)
+    spec.pop("session", None)
+    return spec
+
+
+def forms(names: Sequence[str] | None = None) -> list[Any]:
+    """The truth forms (:data:`skinkit.lab.alternative.FORMS`), or those ``names``
+    (:class:`BenchmarkError` naming the known ones for an unknown name)."""
+    from skinkit.lab.alternative import FORMS
+
+    if names is None:
+        return list(FORMS)
+    known = {f.name: f for f in FORMS}
+    bad = [n for n in names if n not in known]
+    if bad:
+        raise BenchmarkError(f"--forms: unknown {', '.join(bad)} (forms: {', '.join(known)})")
+    return [known[n] for n in dict.fromkeys(names)]
+
+
+def coverage(selected: Sequence[Any], applicable: Sequence[str]) -> tuple[list[Any], dict[str, str]]:
+    """The forms that can run (an effect form needs one of its accepted effects among the
+    ``applicable`` ones: otherwise no answer could be right) and why the others, and the
+    applicable effects no form stands for, are left out."""
+    from skinkit.lab.alternative import SKIPPED_EFFECTS
+
+    ok, skipped = [], {}
+    for f in selected:
+        if f.family == "effect" and not set(f.accepted) & set(applicable):
+            skipped[f"form {f.name}"] = (f"{' or '.join(f.accepted)} is not installed or does not apply to "
+                                         "lumped models: no answer could be right")
+        else:
+            ok.append(f)
+    covered = {e for f in ok for e in f.accepted}
+    for e in applicable:
+        if e not in covered:
+            skipped[e] = SKIPPED_EFFECTS.get(e, "no truth form stands for it (none written, or none chosen)")
+    return ok, skipped
+
+
+def plan(selected: Sequence[Any], seeds: int) -> list[dict[str, Any]]:
+    """One case per form and seed (0 … ``seeds`` − 1), seed by seed so that a stopped run holds
+    whole seeds: ``id`` ``family/form/seed``, ``family``, ``form``, ``effect`` (the form's
+    effect), ``accepted`` (the effects a right answer may name), ``seed``."""
+    return [{"id": f"{f.family}/{f.name}/{s}", "family": f.family, "form": f.name, "effect": f.effect,
+             "accepted": list(f.accepted), "seed": s} for s in range(seeds) for f in selected]
+
+
+# -- one case ---------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=32)
+def visible_excess(name: str) -> dict[str, float]:
+    """What form ``name`` shows beyond noise: the χ² (noise variances) the model leaves when fitted
+    to the noiseless truth, its degrees of freedom and its multiple of the global χ² test's
+    critical excess at α = 0.05 (the detection threshold)."""
+    from scipy.stats import chi2
+
+    from skinkit.forward import load
+    from skinkit.inverse.fit import fit
+    from skinkit.lab.alternative import session
+
+    obs = session(name, None)
+    with load(model_spec()) as model:
+        r = fit(model, obs, list(FREE))
+    n = sum(int(np.asarray(po.channels["tip_force"].values).shape[0]) for po in obs)
+    dof = n - len(FREE)
+    excess = float(r.chi2_per_dof) * dof
+    threshold = float(chi2.ppf(1 - ALPHA, dof) - dof)
+    return {"chi2": excess, "dof": dof, "threshold": threshold, "multiple": excess / threshold}
+
+
+_INSTANCE = re.compile(r"^(?P<effect>.+)-(?P<k>\d+)$")
+
+
+def effect_of(label: str) -> str:
+    """The effect an instance label names: ``viscoelastic-2`` -> ``viscoelastic``."""
+    m = _INSTANCE.match(label)
+    return m.group("effect") if m else label
+
+
+def reading(rep: Mapping[str, Any]) -> dict[str, Any]:
+    """What a diagnosis report (``GapReport.to_dict()``) says, in the scores' terms: ``named``
+    (causes as effects, naming order), ``labels`` (as reported), ``roles`` {label: role},
+    ``shares`` {label: share}, ``gap_significant``, ``remaining`` (the report's block, or the first
+    gap's verdict when nothing is named and the report has none; ``source`` says which)."""
+    cands = [c for c in rep.get("candidates", []) or [] if isinstance(c, Mapping)]
+    has_roles = any("role" in c for c in cands)
+    if rep.get("named") is not None:
+        labels = [str(x) for x in rep["named"]]
+    else:
+        labels = [str(c["effect"]) for c in cands if c.get("role") == "cause"]
+    roles = ({str(c["effect"]): c.get("role") for c in cands} if has_roles
+             else {label: "cause" for label in labels})
+    shares = {str(c["effect"]): c.get("share", c.get("shrinkage")) for c in cands}
+    gap = rep.get("gap", {}) or {}
+    gap_sig = bool(gap.get("significant"))
+    rem = rep.get("remaining")
+    if isinstance(rem, Mapping):
+        remaining = {k: rem.get(k) for k in ("chi2_per_dof", "significant", "unexplained_share")}
+        remaining["cells"] = [dict(c) for c in rem.get("cells", []) or [] if c.get("significant", True)]
+        remaining["source"] = "report"
+    elif not labels:
+        c2 = rep.get("chi2", {}) or {}
+        cpd = c2["before"] / c2["dof_before"] if c2.get("dof_before") else gap.get("chi2_per_dof")
+        remaining = {"chi2_per_dof": cpd, "significant": gap_sig,
+                     "unexplained_share": 1.0 if gap_sig else None, "cells": [],
+                     "source": "gap (nothing named)"}
+    else:
+        c2 = rep.get("chi2", {}) or {}
+        cpd = c2["after"] / c2["dof_after"] if c2.get("dof_after") else None
+        remaining = {"chi2_per_dof": cpd, "significant": None, "unexplained_share": None, "cells": [],
+                     "source": "unknown (the report has no remaining block)"}
+    return {"named": [effect_of(x) for x in labels], "labels": labels, "roles": roles, "shares": shares,
+            "gap_significant": gap_sig, "remaining": remaining}
+
+
+def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
+    """One case (a task): ``payload`` has ``id``, ``family``, ``form``, ``effect``, ``seed`` and
+    ``diagnose`` (options). Returns the JSON-ready record :func:`score` reads."""
+    from skinkit.gap.diagnose import diagnose
+    from skinkit.lab.alternative import truth
+
+    t0 = time.perf_counter()
+    rec: dict[str, Any] = {k: payload[k] for k in ("id", "family", "form", "effect", "accepted", "seed")}
+    rec["name"] = payload["id"]
+    try:
+        from skinkit.lab.alternative import session
+
+        rec["visible_excess"] = visible_excess(payload["form"])
+        rec["truth_info"] = truth(payload["form"], int(payload["seed"]))["info"]
+        obs = session(payload["form"], int(payload["seed"]))
+        td = time.perf_counter()
+        opts = {"error_estimate": False, **dict(payload.get("diagnose", {}))}
+        rep = diagnose(model_spec(), obs, free=list(FREE), workers=1, **opts).to_dict()
+        rec["diagnose_s"] = time.perf_counter() - td
+        rec.update(reading(rep))
+        rec["messages"] = list(rep.get("messages", []) or [])
+    except SkinkitError as exc:
+        rec["error"] = str(exc)
+    rec["wall_s"] = time.perf_counter() - t0
+    return rec
+
+
+# -- scores -------------------------------------------------------------------------------------------
+def _rate(k: int, n: int) -> dict[str, Any]:
+    return {"k": int(k), "n": int(n), "rate": (k / n) if n else None, "interval_95": clopper_pearson(k, n)}
+
+
+def verdict(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """One case judged: ``right`` (the family's right answer), and the parts the scores count."""
+    named, rem = list(rec.get("named", [])), rec.get("remaining", {}) or {}
+    if rec["family"] == "effect":
+        accepted = set(rec.get("accepted") or [rec["effect"]])
+        top1 = bool(named) and named[0] in accepted
+        spurious = any(n not in accepted for n in named)
+        return {"top1": top1, "spurious": spurious, "right": top1 and not spurious}
+    if rec["family"] == "null":
+        alarm = bool(named)
+        sig = bool(rec.get("gap_significant")) or bool(rem.get("significant"))
+        return {"false_alarm": alarm, "gap_significant": sig, "right": not alarm}
+    recalled = not named and rem.get("significant") is True
+    return {"recalled": recalled, "right": recalled}
+
+
+def score(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The figures of the case ``records`` of :func:`run_case` (module docstring), JSON-ready."""
+    ok = [r for r in records if "error" not in r]
+    fam = {f: [(r, verdict(r)) for r in ok if r["family"] == f] for f in ("effect", "null", "out-of-library")}
+    out: dict[str, Any] = {}
+
+    def put(key: str, rate_key: str, family: str, part: str) -> None:
+        sel = fam[family]
+        out[key] = _rate(sum(v[part] for _, v in sel), len(sel))
+        out[rate_key] = out[key]["rate"]
+
+    put("top1", "top1_accuracy", "effect", "top1")
+    put("spurious", "spurious_rate", "effect", "spurious")
+    put("null_false_alarm", "null_false_alarm_rate", "null", "false_alarm")
+    put("null_gap_significant", "null_gap_significant_rate", "null", "gap_significant")
+    put("unexplained", "unexplained_recall", "out-of-library", "recalled")
+    confusion: dict[str, dict[str, int]] = {}
+    by_form: dict[str, dict[str, Any]] = {}
+    for r in ok:
+        got = "+".join(r["named"]) or "none"
+        row = confusion.setdefault(r["form"], {})
+        row[got] = row.get(got, 0) + 1
+        visible = (r.get("visible_excess") or {}).get("multiple")
+        f = by_form.setdefault(r["form"], {"family": r["family"], "accepted": r.get("accepted", []),
+                                           "cases": 0, "right": 0, "visible_multiple": visible})
+        f["cases"] += 1
+        f["right"] += bool(verdict(r)["right"])
+    out["confusion"] = confusion
+    out["by_form"] = by_form
+    walls = [r["wall_s"] for r in records]
+    out["case_wall_s"] = {"median": float(np.median(walls)) if walls else None,
+                          "max": float(np.max(walls)) if walls else None}
+    out["failed"] = [{"id": r["id"], "error": r["error"]} for r in records if "error" in r]
+    return out
+
+
+# -- running ----------------------------------------------------------------------------------------------
+def run(quick: bool, *, seeds: int | None = None, forms_: Sequence[str] | None = None,
+        parallel: int | None = None, scheduler: str | None = None,
+        journal: str | os.PathLike[str] | None = None, recorded_only: bool = False,
+        progress: Callable[[str], None] | None = None, max_effects: int | None = None,
+        candidates: int | None = None) -> dict[str, Any]:
+    """Run the alternative benchmark and score it (JSON-ready; keys in :func:`score`, plus
+    ``cases``, ``forms``, ``skipped``, ``wall_s``).
+
+    ``quick``: one seed per form and the quick diagnosis options (one effect named at most, two
+    refits per round); otherwise :data:`FULL_SEEDS` seeds and the full options. ``forms_``: only
+    these forms. ``parallel`` worker processes (default 2; 1 runs here) or a Dask ``scheduler``;
+    ``journal``: record each case as it finishes and skip those it holds (as the withheld-effect
+    benchmark's, :mod:`skinkit.bench.gap_journal`); ``recorded_only``: score the planned cases the
+    journal holds, run nothing. ``progress(line)``: one line per case."""
+    from skinkit.forward.visibility import applicable_effects
+
+    t0 = time.perf_counter()
+    say = progress or (lambda line: None)
+    selected, skipped = coverage(forms(forms_), applicable_effects("lumped"))
+    seeds = (QUICK_SEEDS if quick else FULL_SEEDS) if seeds is None else int(seeds)
+    base_opts = QUICK_DIAGNOSE if quick else FULL_DIAGNOSE
+    opts = {"max_effects": base_opts["max_effects"] if max_effects is None else int(max_effects),
+            "candidates": base_opts["candidates"] if candidates is None else int(candidates)}
+    if recorded_only and journal is None:
+        raise BenchmarkError("--recorded-only scores a journal's cases: give --journal FILE")
+    if recorded_only and not Path(journal).is_file():
+        raise BenchmarkError(f"--recorded-only: journal {journal} does not exist")
+    spec = model_spec()
+    described = {f.name: {"family": f.family, "accepted": list(f.accepted), "description": f.description}
+                 for f in selected}
+    settings = {"benchmark": "alternative", "definitions": DEFINITIONS, "model": spec, "free": list(FREE),
+                "diagnose": opts, "alpha": ALPHA, "forms": described}
+    jr = _open_journal(journal, settings, say)
+    cases = plan(selected, seeds)
+    payloads = [dict(c, diagnose=opts) for c in cases]
+    known = {} if jr is None else jr.cases
+    before = {p["id"]: known[p["id"]] for p in payloads if p["id"] in known}
+    todo = [] if recorded_only else [p for p in payloads if p["id"] not in before]
+    if before:
+        say(f"{len(before)} of {len(payloads)} cases from the journal, {len(todo)} to run")
+    count = [len(before)]
+
+    def case_line(r: Mapping[str, Any]) -> None:
+        count[0] += 1
+        if "error" in r:
+            what = f"error: {r['error']}"
+        else:
+            rem = r["remaining"].get("significant")
+            what = f"named {', '.join(r['named']) or 'none'}, remainder significant {rem}"
+        say(f"case {count[0]}/{len(payloads)} {r['id']}: {what}, {r['wall_s']:.1f} s")
+        if jr is not None:
+            jr.add_case(r)
+
+    pool = _Pool(1 if recorded_only else (2 if parallel is None else int(parallel)), scheduler)
+    try:
+        fresh = {r["id"]: r for r in pool.map(run_case, todo, case_line)}
+    finally:
+        pool.close()
+    done = {**before, **fresh}
+    records = [done[p["id"]] for p in payloads if p["id"] in done]
+    out = score(records)
+    out.update({"model": spec.get("model", {}).get("name"), "kind": "lumped", "free": list(FREE),
+                "quick": bool(quick), "seeds": seeds, "diagnose_options": opts, "alpha": ALPHA,
+                "forms": described, "skipped": skipped, "cases": records,
+                "planned_cases": len(payloads), "resumed_cases": len(before),
+                "wall_s": time.perf_counter() - t0})
+    return out
+
+
+def summary_lines(res: Mapping[str, Any]) -> list[str]:
+    """The run's figures as the lines ``skinkit gap benchmark --alternative`` prints."""
+    def pct(r: Mapping[str, Any]) -> str:
+        if not r["n"]:
+            return "-"
+        lo, hi = r["interval_95"]
+        return f"{100 * r['rate']:.0f} % ({r['k']}/{r['n']}; 95 % CI {100 * lo:.0f}-{100 * hi:.0f} %)"
+
+    lines = [f"alternative truths on {res['model']} (lumped), {len(res['cases'])} of {res['planned_cases']} "
+             f"planned cases, {res['wall_s'] / 60:.1f} min",
+             f"top-1 attribution (effect cases): {pct(res['top1'])}",
+             f"spurious causes (effect cases): {pct(res['spurious'])}",
+             f"false alarms on null sessions: {pct(res['null_false_alarm'])}",
+             f"'significant gap' on null sessions: {pct(res['null_gap_significant'])}",
+             f"out-of-library reported unexplained: {pct(res['unexplained'])}",
+             f"time per case: median {res['case_wall_s']['median'] or 0:.1f} s, "
+             f"max {res['case_wall_s']['max'] or 0:.1f} s"]
+    for e, why in res["skipped"].items():
+        lines.append(f"left out {e}: {why}")
+    for f in res["failed"]:
+        lines.append(f"failed {f['id']}: {f['error']}")
+    lines.append("by form (right / cases; named):")
+    for name, f in res["by_form"].items():
+        mult = f.get("visible_multiple")
+        vis = "" if mult is None or not math.isfinite(mult) else f", visible {mult:.0f}x threshold"
+        row = sorted(res["confusion"][name].items(), key=lambda kv: -kv[1])
+        named = ", ".join(f"{k} {v}" for k, v in row)
+        lines.append(f"  {f['family']}/{name} ({' or '.join(f['accepted']) or 'nothing'}{vis}): "
+                     f"{f['right']}/{f['cases']}; {named}")
+    return lines
+
+
+__all__ = ["DEFINITIONS", "FREE", "FULL_SEEDS", "QUICK_SEEDS", "effect_of", "forms", "model_spec", "plan",
+           "reading", "run", "run_case", "score", "summary_lines", "verdict", "visible_excess"]
