@@ -32,6 +32,11 @@ Three refinements the effects need:
 * **Absorbed directions.** A column of J_e that lies in span(J_θ) (an offset the model already
   fits) is indistinguishable from the fitted parameters: it is dropped and named.
 
+**More of the same.** An effect the model already has and that is repeatable (a second Prony
+term: ``viscoelastic`` declares ``repeatable = True``) is a candidate again under an instance
+label ``"<effect>-<k>"`` (:func:`repeat_candidates`); everywhere below a candidate is such a
+label or an effect's name, and its parameters are ``"<label>.<local>"``.
+
 **Separability.** Two effects leave "nearly the same signature" when the residual parts they
 explain, s_e = J_e⊥ δ_e, have |cos| > :data:`COS_NOT_SEPARABLE`; they are then *not separable*
 unless the data still tell them apart: the conditional score test of each given the other
@@ -111,10 +116,57 @@ class Sensitivities:
     notes: list[str] = field(default_factory=list)
 
 
-def effect_table(name: str, values: Mapping[str, float] | None = None) -> dict[str, Any]:
-    """An ``[[effects]]`` table for effect ``name``: its parameters from ``values`` (model names
-    ``"<name>.<local>"`` -> SI), the others at their null."""
-    out: dict[str, Any] = {"name": name}
+def _repeatable(effect: str) -> bool:
+    """Whether the installed effect ``effect`` declares ``repeatable = True`` (False if unknown)."""
+    try:
+        return bool(getattr(registry.create("skinkit.effects", effect), "repeatable", False))
+    except SkinkitError:
+        return False
+
+
+def effect_of(label: str) -> str:
+    """The effect a candidate stands for: ``label`` itself when it is an installed effect's name,
+    ``<effect>`` for an instance label ``"<effect>-<k>"`` (k ≥ 2) of a repeatable installed
+    effect, else ``label`` unchanged (loading it then names what is wrong)."""
+    installed = registry.names("skinkit.effects")
+    if label in installed:
+        return label
+    head, _, k = label.rpartition("-")
+    if head in installed and k.isdigit() and int(k) >= 2 and _repeatable(head):
+        return head
+    return label
+
+
+def repeat_candidates(tables: Sequence[Mapping[str, Any]]) -> list[tuple[str, str]]:
+    """``(label, effect)`` of one more instance of each repeatable effect among the model's
+    ``[[effects]]`` ``tables``: with k instances of ``effect`` there, ``label`` is
+    ``"<effect>-<k+1>"`` (the next free number when the model's own labels took it). Effects in
+    the order of their first table."""
+    count: dict[str, int] = {}
+    labels = set()
+    for t in tables:
+        name = str(t.get("name"))
+        count[name] = count.get(name, 0) + 1
+        labels.add(str(t.get("instance", name)))
+    out = []
+    for effect, k in count.items():
+        if not _repeatable(effect):
+            continue
+        n = k + 1
+        while f"{effect}-{n}" in labels:
+            n += 1
+        out.append((f"{effect}-{n}", effect))
+    return out
+
+
+def effect_table(name: str, values: Mapping[str, float] | None = None, *,
+                 effect: str | None = None) -> dict[str, Any]:
+    """An ``[[effects]]`` table for candidate ``name`` (an effect's name or an instance label):
+    its parameters from ``values`` (model names ``"<name>.<local>"`` -> SI), the others at their
+    null. An instance label gives ``{"name": <effect>, "instance": <label>, ...}``; ``effect``:
+    the effect of a label not of the form :func:`repeat_candidates` gives."""
+    of = effect or effect_of(name)
+    out: dict[str, Any] = {"name": of} if of == name else {"name": of, "instance": name}
     for k, v in (values or {}).items():
         head, _, local = k.partition(".")
         if head == name and local:
@@ -130,7 +182,8 @@ def with_effects(spec: Mapping[str, Any], tables: Sequence[Mapping[str, Any]]) -
 
 
 def _declared(name: str) -> tuple[dict[str, Any], dict[str, float]]:
-    plugin = registry.create("skinkit.effects", name)
+    """Local name -> declared parameter, and local name -> null [SI], of candidate ``name``."""
+    plugin = registry.create("skinkit.effects", effect_of(name))
     declared = {p.name: p for p in plugin.parameters()}
     null = {k: float(dict(plugin.null()).get(k, d.value)) for k, d in declared.items()}
     return declared, null
@@ -143,7 +196,7 @@ def _only(pred: Prediction, names: Sequence[str]) -> Prediction:
 
 
 def _load_group(spec: Mapping[str, Any], effects: Sequence[str], load: Callable[..., Any]) -> Any:
-    return load(with_effects(spec, [{"name": e} for e in effects]))
+    return load(with_effects(spec, [effect_table(e) for e in effects]))
 
 
 def collect(spec: Mapping[str, Any], observations: Observations, values: Mapping[str, float],
@@ -152,6 +205,8 @@ def collect(spec: Mapping[str, Any], observations: Observations, values: Mapping
     """Sensitivities of the calibrated model ``spec`` (at ``values``: name -> SI, the fitted
     ones) to ``theta`` and to every effect of ``effects`` at its null, on the fitted protocols
     of ``observations``. ``load(spec)`` builds a forward model (workers bound by the caller).
+    ``effects``: effects' names or instance labels of effects ``spec`` already has
+    (:func:`repeat_candidates`).
 
     All candidates go into one model and one prediction; if the combination is refused (two
     effects editing the same thing), each effect is first tried alone (those refused alone
@@ -580,5 +635,6 @@ def separating_protocol(spec: Mapping[str, Any], observations: Observations, val
 
 
 __all__ = ["COS_NOT_SEPARABLE", "EffectColumns", "ScoreTest", "Sensitivities", "collect", "conditional_test",
-           "corrected", "cosine", "directed_p", "effect_table", "fitted_basis", "score_all", "score_test",
-           "separability", "separating_protocol", "with_effects"]
+           "corrected", "cosine", "directed_p", "effect_of", "effect_table", "fitted_basis",
+           "repeat_candidates", "score_all", "score_test", "separability", "separating_protocol",
+           "with_effects"]
