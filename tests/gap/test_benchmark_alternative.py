@@ -253,6 +253,15 @@ def test_score_counts_each_family() -> None:
     assert 0 <= lo <= 0.75 <= hi <= 1
 
 
+def test_forms_whose_answer_is_not_installed_are_left_out_with_the_reason() -> None:
+    ok, skipped = ga.coverage(alt.FORMS, ["viscoelastic", "force-drift", "force-offset", "robot-compliance"])
+    names = {f.name for f in ok}
+    assert "clock-skew" not in names and "form clock-skew" in skipped       # channel-lag absent
+    assert {"prony-two-term", "warmup-drift", "white", "mains"} <= names
+    assert "force-offset" in skipped and "robot-compliance" in skipped
+    assert "preconditioning" not in skipped                                  # not applicable here
+
+
 def test_every_form_is_clearly_visible_or_a_null() -> None:
     # documented: effect and artefact forms leave ≥ 20 detection thresholds after the model's fit
     for f in alt.FORMS:
