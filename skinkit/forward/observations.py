@@ -42,6 +42,8 @@ from skinkit.schemas import Channel, Observations, ProtocolObservations, RobotRe
 _FLIP = np.array([1.0, 1.0, -1.0])
 _MIN_REST = 50
 _MAD = 1.4826
+#: how a robot record's noise is modelled (:func:`channels_from_record`)
+NOISE_MODELS = ("auto", "white", "ar")
 
 
 def _mad(x: np.ndarray) -> float:
@@ -114,17 +116,88 @@ def _channel_noise(values: np.ndarray, name: str, where: str) -> tuple[np.ndarra
     return np.array(out), ", ".join(sorted(srcs)) or "none"
 
 
-def channels_from_record(record: RobotRecord, where: str = "record") -> dict[str, Channel]:
-    """``tip_force`` and ``tip_position`` channels (skin frame) of a robot record."""
-    out: dict[str, Channel] = {}
+def channels_from_record(record: RobotRecord, where: str = "record",
+                         noise: str = "auto") -> dict[str, Channel]:
+    """``tip_force`` and ``tip_position`` channels (skin frame) of a robot record.
+
+    ``noise``: ``"auto"`` (spikes flagged; an autoregressive model of each component's colour
+    from the rest segment where it has one and BIC prefers it: :mod:`skinkit.forward.noise_model`),
+    ``"white"`` (the levels of :func:`sample_noise` only, spikes still flagged) or ``"ar"``
+    (an AR model required: an error when the rest segment is too short)."""
+    if noise not in NOISE_MODELS:
+        raise SchemaError("--noise", f"must be one of {list(NOISE_MODELS)}, got {noise!r}")
+    raw = {}
     for name in ("tip_force", "tip_position"):
         v = getattr(record, name)
-        if v is None or not np.isfinite(v).any():
+        if v is not None and np.isfinite(v).any():
+            raw[name] = np.asarray(v, dtype=float) * _FLIP
+    n_rest = _record_rest(raw.get("tip_position"), f"{where}.tip_position")
+    t = record.time_s - record.time_s[0]
+    return {name: _noise_channel(name, t, v, n_rest, noise, f"{where}.{name}") for name, v in raw.items()}
+
+
+def _record_rest(position: np.ndarray | None, where: str) -> int:
+    """Samples before the recorded position first moves (0 without a position channel)."""
+    from skinkit.forward.noise_model import rest_length
+
+    if position is None:
+        return 0
+    lev, _ = _channel_noise(position, "tip_position", where)
+    res = np.array([_resolution(position[:, j]) for j in range(position.shape[1])])
+    return rest_length(position, lev, res)
+
+
+def _component_ar(seg: np.ndarray, mode: str, axis: str, where: str) -> tuple[np.ndarray, float, float]:
+    """``(φ, σ_e, σ)`` of one component's rest segment ``seg`` (φ empty: white)."""
+    from skinkit.forward import noise_model as nm
+
+    need = nm.samples_needed(1)
+    if seg.size < need:
+        if mode == "ar":
+            raise SchemaError(where, f"cannot estimate an AR noise model of component {axis}: its rest "
+                              f"segment (before the position first moves) has {seg.size} samples, "
+                              f"at least {need} are needed (record more rest, or use --noise white)")
+        return np.zeros(0), 0.0, 0.0
+    if mode == "ar":
+        orders = [nm.fit_ar(seg, order=p) for p in range(1, nm.MAX_ORDER + 1)]
+        n = seg.size - nm.MAX_ORDER
+        return min(orders, key=lambda o: n * np.log(o[1] ** 2) + o[0].size * np.log(n))
+    return nm.fit_ar(seg)
+
+
+def _noise_channel(name: str, t: np.ndarray, v: np.ndarray, n_rest: int, mode: str, where: str) -> Channel:
+    """A tip channel with its spikes flagged and its noise model (see :func:`channels_from_record`)."""
+    from skinkit.forward import noise_model as nm
+
+    outliers = np.zeros(v.shape, bool)
+    for j in range(v.shape[1]):
+        outliers[nm.spikes(v[:, j]), j] = True
+    clean = np.where(outliers, np.nan, v)
+    level, src = _channel_noise(clean, name, where)
+    ars, innov, srcs = [], level.copy(), set()
+    scale = np.ones(v.shape)
+    for j in range(v.shape[1]):
+        ars.append(np.zeros(0))
+        if mode == "white" or not np.isfinite(clean[:, j]).any():
             continue
-        v = np.asarray(v, dtype=float) * _FLIP
-        noise, src = _channel_noise(v, name, f"{where}.{name}")
-        out[name] = Channel(name, record.time_s - record.time_s[0], v, np.isfinite(v), noise, src)
-    return out
+        seg = clean[:n_rest, j]
+        phi, se, sigma = _component_ar(seg[np.isfinite(seg)], mode, "xyz"[j], where)
+        # a rest segment within the sensor's resolution says nothing of its colour
+        floor = _resolution(clean[:, j]) / np.sqrt(12.0)
+        if phi.size and sigma > floor and 0 < se < sigma:
+            ars[j], level[j], innov[j] = phi, sigma, se
+            scale[:, j] = nm.local_scale(v[:, j], ~outliers[:, j], n_rest, phi)
+            srcs.add(nm.describe(phi.size, int(np.isfinite(seg).sum())))
+    if srcs:
+        white = sum(1 for j, a in enumerate(ars) if not a.size and np.isfinite(clean[:, j]).any())
+        src = ", ".join(sorted(srcs) + ([src] if white else []))
+    n_out = int(outliers.sum())
+    if n_out:
+        src += f"; {n_out} spike(s) left out"
+    coloured = bool(srcs)
+    return Channel(name, t, v, np.isfinite(v) & ~outliers, level, src,
+                   noise_ar=tuple(ars) if coloured else None, noise_innovation=innov if coloured else None,
+                   outliers=outliers if n_out else None, noise_scale=scale if coloured else None)
 
 
 def track_noise(track: SurfaceTrack) -> tuple[np.ndarray, str]:

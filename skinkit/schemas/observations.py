@@ -60,6 +60,15 @@ class Channel:
         window_m: side [m] of the square of skin a point channel's value averages over (a
             subset tracker follows the mean motion of its subset, not its centre's), or None
             for a material point.
+        noise_ar: for a tip channel whose noise is coloured, per component the ``(p,)``
+            coefficients of its autoregressive model (an empty array: white), or None (all
+            white); see :mod:`skinkit.forward.noise_model`.
+        noise_innovation: ``(k,)`` standard deviation of the AR model's white innovation
+            [unit] (None: equal to ``noise``).
+        outliers: bool, the shape of ``values``: samples flagged as isolated spikes (they are
+            also not ``valid``), or None.
+        noise_scale: ``(T, k)`` the AR innovation's standard deviation at each sample over
+            ``noise_innovation`` (≥ 1: a sensor noisier under load than at rest), or None (1).
     """
 
     name: str
@@ -71,6 +80,10 @@ class Channel:
     reference: Any = None
     reference_frame: int | None = None
     window_m: float | None = None
+    noise_ar: Any = None
+    noise_innovation: Any = None
+    outliers: Any = None
+    noise_scale: Any = None
 
     def __post_init__(self) -> None:
         if self.name not in CHANNELS:
@@ -106,11 +119,31 @@ class Channel:
             if not (math.isfinite(w) and w > 0):
                 raise SchemaError(f"{f}.window_m", f"must be positive and finite, got {self.window_m!r}")
             self.window_m = w
+        self._check_noise_model(f, k)
         if self.reference is not None:
             ref = np.asarray(self.reference, dtype=float)
             if lead == 0 or ref.shape != (v.shape[0], 3):
                 raise SchemaError(f"{f}.reference", f"expected (P, 3) for a point channel, got {ref.shape}")
             self.reference = ref
+
+    def _check_noise_model(self, f: str, k: int) -> None:
+        """Validate ``noise_ar`` and ``noise_innovation`` (``f``: the channel's entry name)."""
+        if self.noise_ar is None:
+            return
+        if self.is_points or len(self.noise_ar) != k:
+            raise SchemaError(f"{f}.noise_ar", f"one AR coefficient array per component ({k}) "
+                              "of a tip channel")
+        self.noise_ar = tuple(np.asarray(a, dtype=float).ravel() for a in self.noise_ar)
+        inn = self.noise if self.noise_innovation is None else \
+            np.broadcast_to(np.asarray(self.noise_innovation, dtype=float), (k,)).copy()
+        if not np.all(np.isfinite(inn)) or np.any(inn <= 0):
+            raise SchemaError(f"{f}.noise_innovation", f"must be positive and finite, got {inn.tolist()}")
+        self.noise_innovation = inn
+        if self.noise_scale is not None:
+            sc = np.asarray(self.noise_scale, dtype=float)
+            if sc.shape != self.values.shape or not np.all(np.isfinite(sc)) or np.any(sc <= 0):
+                raise SchemaError(f"{f}.noise_scale", f"must be positive, finite and {self.values.shape}")
+            self.noise_scale = sc
 
     @property
     def unit(self) -> str:
@@ -135,8 +168,30 @@ class Channel:
             m[:, self.reference_frame] = False
         return m
 
+    @property
+    def coloured(self) -> bool:
+        """True when some component's noise has an autoregressive model."""
+        return self.noise_ar is not None and any(a.size for a in self.noise_ar)
+
+    def _by_component(self, a: np.ndarray, mask: np.ndarray, inverse: bool) -> np.ndarray:
+        """Prewhiten (or colour, ``inverse``) a tip channel's ``(T, k)`` array per component."""
+        from skinkit.schemas.ar_filter import colour_series, whiten_series
+
+        out = np.array(np.where(mask, a, 0.0), copy=True)
+        for j, ar in enumerate(self.noise_ar):
+            if ar.size:
+                ratio = float(self.noise[j] / self.noise_innovation[j])
+                fn = colour_series if inverse else whiten_series
+                sc = None if self.noise_scale is None else self.noise_scale[:, j]
+                out[:, j] = fn(out[:, j], mask[:, j], ar, ratio, sc)
+        return np.where(mask, out, 0.0)
+
     def whiten(self, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """Decorrelate noise-normalised residuals (or their derivatives) ``a`` along frames.
+        """Decorrelate noise-normalised residuals (or their derivatives) ``a``.
+
+        A tip channel with coloured noise (``noise_ar``) is prewhitened along time per component
+        (:func:`skinkit.forward.noise_model.whiten_series`): Σ r² is then χ² under its noise model.
+        For points, along frames:
 
         When the reference positions are the measured frame ``reference_frame``, a point's
         residuals over its other m frames share that frame's noise: their covariance is
@@ -144,6 +199,8 @@ class Channel:
         independent standard normals again, so Σ r² is χ² with m degrees of freedom per point
         and component. Linear in ``a`` (Jacobians go through the same map). Other channels
         are returned unchanged."""
+        if self.coloured:
+            return self._by_component(a, mask, inverse=False)
         if not self.is_points or self.reference_frame is None:
             return a
         a = np.where(mask, a, 0.0)
@@ -155,7 +212,10 @@ class Channel:
 
     def unwhiten(self, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """The inverse of :meth:`whiten`: multiply by (I + 11ᵀ)^(1/2) = I + (√(1+m) − 1)/m 11ᵀ
-        along frames (residuals that whiten to ``a``); other channels unchanged."""
+        along frames (residuals that whiten to ``a``), or colour a tip channel's samples with its
+        noise model; other channels unchanged."""
+        if self.coloured:
+            return self._by_component(a, mask, inverse=True)
         if not self.is_points or self.reference_frame is None:
             return a
         a = np.where(mask, a, 0.0)
@@ -277,7 +337,10 @@ class Observations:
                     continue
                 sl = (slice(None), slice(0, k)) if c.is_points else (slice(0, k),)
                 chans[c.name] = Channel(c.name, c.time_s[:k], c.values[sl], c.valid[sl], c.noise,
-                                        c.noise_source, c.reference, c.reference_frame, c.window_m)
+                                        c.noise_source, c.reference, c.reference_frame, c.window_m,
+                                        c.noise_ar, c.noise_innovation,
+                                        None if c.outliers is None else c.outliers[sl],
+                                        None if c.noise_scale is None else c.noise_scale[sl])
             out[p.name] = ProtocolObservations(p.protocol, chans, p.held_out)
         return Observations(out, self.profile, self.source)
 
