@@ -1,11 +1,15 @@
 """``[[instrument]]`` entries: linear transforms between what the skin saw and what was recorded.
 
-Each entry is linear in one parameter (``parameter``, value ``value``; 0 is no effect, exactly)
-and applies to one channel (``docs/guide/effects.md``):
+Each entry has one main parameter (``parameter``, value ``value``; 0 is no effect, exactly),
+linear in it but for a lag's shift in time, and applies to one channel (``docs/guide/effects.md``):
 
 * ``bias``: recorded = true + value · b(t) on ``component`` of ``channel``, b = 1
-  (``basis = "constant"``) or t [s] (``"time"``). On the channel that drives a model the
-  model is driven by recorded − value · b(t).
+  (``basis = "constant"``), t [s] (``"time"``) or 1 − exp(−t/τ) (``"warmup"``: a sensor's
+  zero settling to ``value`` with time constant ``tau`` [s] > 0, a second parameter when
+  ``tau_parameter`` names it). On the channel that drives a model the model is driven by
+  recorded − value · b(t). t is the channel's sample time, counted from its protocol's
+  start (``Channel.time_s``): a time basis restarts at 0 with every protocol, as for a
+  sensor zeroed at the start of each record.
 * ``series``: recorded ``channel`` = true + value · ``source`` channel (a compliance [m/N]
   between the motor and the tip: ``channel = "tip_position"``, ``source = "tip_force"``).
 * ``similarity``: recorded points = (1 + value) p (``mode = "scale"``) or p turned by
@@ -16,6 +20,16 @@ and applies to one channel (``docs/guide/effects.md``):
   it records acts along turned directions on the skin, and the tip channels it records
   are the skin-frame ones turned back (points, seen by the cameras, are not). ``azimuth``
   is a second parameter when ``azimuth_parameter`` names it.
+* ``lag``: the ``channel`` (``tip_force``, the default, or ``tip_position``) is sampled
+  ``value`` [s] late relative to the others (two acquisition chains whose clocks are skewed):
+  recorded(t) = c(t − value), c what the channel's chain put out (the true channel with the
+  channel's other entries). |value| ≤ ``MAX_LAG_S``. c between samples is the not-a-knot
+  cubic spline through the channel's samples (exact for cubics; error ≤ ~(5/384) h⁴ max|c⁗|
+  for a sampling step h); before the first sample c is the first sample's value and after
+  the last the last's (the record starts and ends at rest). ∂/∂value = −c′(t − value), the
+  spline's own derivative (so it is the exact derivative of the transform, not an estimate),
+  0 where t − value lies outside the record. Tracked points are never shifted. On the
+  driving channel the model is driven by the recorded channel read ``value`` earlier.
 
 API (model-agnostic; arrays in, arrays and derivative dicts out; shapes: tip channels
 ``(T, 3)``, points ``(P, T, 3)``, 2D points ``(P, T, 2)``, times ``(T,)`` [s]):
@@ -24,8 +38,8 @@ API (model-agnostic; arrays in, arrays and derivative dicts out; shapes: tip cha
   ``value`` and ``azimuth`` are numbers in SI or ``"<number> <unit>"`` strings);
 * ``parameter_names(entries) -> list[str]`` and ``parameter_unit(entry) -> str``;
 * ``drive(entries, channel, time_s, recorded, names) -> (true, {name: d true/d name})``: the
-  recorded drive ``(T, 3)`` to what the skin saw (biases of that channel removed, then the
-  tilt). A series entry on the driving channel is refused here: it couples the drive to the
+  recorded drive ``(T, 3)`` to what the skin saw (lags of that channel undone, its biases
+  removed, then the tilt). A series entry on the driving channel is refused here: it couples the drive to the
   prediction, so the model itself must solve it (the lumped model does);
 * ``unrecord_points(entries, channel, recorded, shift) -> (P, k)``: the material reference
   positions of tracked points whose reference was itself recorded (a measured reference frame:
@@ -34,9 +48,17 @@ API (model-agnostic; arrays in, arrays and derivative dicts out; shapes: tip cha
   a predicted channel (skin frame) with the model's derivatives ``d`` to what the instrument
   records, the model's derivatives carried through and the instrument's own added for
   ``names``; ``channels`` maps every channel the model knows (predicted or driving) to
-  ``(values, derivatives)`` for the ``source`` of series entries (chain rule included).
+  ``(values, derivatives)`` for the ``source`` of series entries (chain rule included);
+* ``with_values(entries, values) -> list[Entry]``: the entries with the parameters named in
+  ``values`` set (``value``, ``azimuth``, ``tau``);
+* ``shift(time_s, y, delay) -> (y(t − delay), y′(t − delay))``: the lag's interpolation.
 
-Every transform is exactly the identity at value 0 (a tilt: at angle 0, any azimuth).
+Every transform is exactly the identity at value 0 (a tilt: at angle 0, any azimuth; a
+warm-up: at any ``tau``).
+
+Order: on a measured channel the ``bias``, ``series``, ``similarity`` and ``tilt`` entries
+apply in the order given, then the channel's ``lag`` entries (the acquisition reads the whole
+chain late); on the driving channel the inverse: lags undone, biases removed, tilt.
 """
 
 from __future__ import annotations
@@ -47,13 +69,19 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from skinkit.errors import ForwardError
 from skinkit.schemas import Parameter
 
-KINDS = ("bias", "series", "similarity", "tilt")
+KINDS = ("bias", "series", "similarity", "tilt", "lag")
 _CHANNELS = ("tip_force", "tip_position", "points", "points_2d")
+_TIP = ("tip_force", "tip_position")
 _POINTS = ("points", "points_2d")
+_BASES = ("constant", "time", "warmup")
+#: largest |lag| [s]: a skew between acquisition chains is milliseconds; half a second is a
+#: misaligned record, not a lag
+MAX_LAG_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -70,6 +98,8 @@ class Entry:
     mode: str = ""
     azimuth: float = 0.0
     azimuth_parameter: str = ""
+    tau: float = 0.0
+    tau_parameter: str = ""
 
 
 def parse(entries: Any) -> list[Entry]:
@@ -78,43 +108,73 @@ def parse(entries: Any) -> list[Entry]:
         return []
     if not isinstance(entries, list):
         raise ForwardError("instrument", "must be an array of tables ([[instrument]])")
-    out = []
-    for i, e in enumerate(entries):
-        w = f"instrument[{i}]"
-        if not isinstance(e, Mapping):
-            raise ForwardError(w, "must be a table")
-        kind = e.get("kind")
-        if kind not in KINDS:
-            raise ForwardError(f"{w}.kind", f"must be one of {list(KINDS)}, got {kind!r}")
-        allowed = {"kind", "parameter", "value", "channel", "component", "basis", "source", "mode", "azimuth",
-                   "azimuth_parameter"}
-        extra = sorted(set(e) - allowed)
-        if extra:
-            raise ForwardError(w, f"unknown key(s) {extra}")
-        par = str(e.get("parameter", ""))
-        if not par:
-            raise ForwardError(f"{w}.parameter", "needs a parameter name")
-        ch = str(e.get("channel", "tip_position" if kind == "series" else ""))
-        if kind in ("bias", "series", "similarity") and ch not in _CHANNELS:
-            raise ForwardError(f"{w}.channel", f"must be one of {list(_CHANNELS)}, got {ch!r}")
-        comp = e.get("component", 0)
-        if kind == "bias" and comp not in (0, 1, 2):
-            raise ForwardError(f"{w}.component", f"must be 0, 1 or 2, got {comp!r}")
-        basis = str(e.get("basis", "constant"))
-        if basis not in ("constant", "time"):
-            raise ForwardError(f"{w}.basis", f"must be 'constant' or 'time', got {basis!r}")
-        mode = str(e.get("mode", "scale" if kind == "similarity" else ""))
-        if kind == "similarity" and mode not in ("scale", "rotation"):
-            raise ForwardError(f"{w}.mode", f"must be 'scale' or 'rotation', got {mode!r}")
-        src = str(e.get("source", "tip_force" if kind == "series" else ""))
-        if kind == "series" and src not in ("tip_force", "tip_position"):
-            raise ForwardError(f"{w}.source", f"must be 'tip_force' or 'tip_position', got {src!r}")
-        entry = Entry(kind, par, 0.0, ch if kind != "tilt" else "", int(comp), basis, src, mode, 0.0,
-                      str(e.get("azimuth_parameter", "")))
-        value = _number(e.get("value", 0.0), parameter_unit(entry), f"{w}.value")
-        az = _number(e.get("azimuth", 0.0), "rad", f"{w}.azimuth")
-        out.append(replace(entry, value=value, azimuth=az))
-    return out
+    return [_entry(f"instrument[{i}]", e) for i, e in enumerate(entries)]
+
+
+_KEYS = {"kind", "parameter", "value", "channel", "component", "basis", "source", "mode", "azimuth",
+         "azimuth_parameter", "tau", "tau_parameter"}
+
+
+def _entry(w: str, e: Any) -> Entry:
+    """One table as an :class:`Entry` (``w``: its name in errors, ``instrument[i]``)."""
+    if not isinstance(e, Mapping):
+        raise ForwardError(w, "must be a table")
+    kind = e.get("kind")
+    if kind not in KINDS:
+        raise ForwardError(f"{w}.kind", f"must be one of {list(KINDS)}, got {kind!r}")
+    extra = sorted(set(e) - _KEYS)
+    if extra:
+        raise ForwardError(w, f"unknown key(s) {extra}")
+    par = str(e.get("parameter", ""))
+    if not par:
+        raise ForwardError(f"{w}.parameter", "needs a parameter name")
+    ch = _channel(w, kind, e)
+    comp = e.get("component", 0)
+    if kind == "bias" and comp not in (0, 1, 2):
+        raise ForwardError(f"{w}.component", f"must be 0, 1 or 2, got {comp!r}")
+    basis = str(e.get("basis", "constant"))
+    if basis not in _BASES:
+        raise ForwardError(f"{w}.basis", f"must be one of {list(_BASES)}, got {basis!r}")
+    if ("tau" in e or "tau_parameter" in e) and not (kind == "bias" and basis == "warmup"):
+        raise ForwardError(f"{w}.tau", "a time constant belongs to a bias with basis = 'warmup' only")
+    mode = str(e.get("mode", "scale" if kind == "similarity" else ""))
+    if kind == "similarity" and mode not in ("scale", "rotation"):
+        raise ForwardError(f"{w}.mode", f"must be 'scale' or 'rotation', got {mode!r}")
+    src = str(e.get("source", "tip_force" if kind == "series" else ""))
+    if kind == "series" and src not in ("tip_force", "tip_position"):
+        raise ForwardError(f"{w}.source", f"must be 'tip_force' or 'tip_position', got {src!r}")
+    entry = Entry(kind, par, 0.0, ch, int(comp), basis, src, mode, 0.0, str(e.get("azimuth_parameter", "")),
+                  0.0, str(e.get("tau_parameter", "")))
+    value = _number(e.get("value", 0.0), parameter_unit(entry), f"{w}.value")
+    if kind == "lag" and not abs(value) <= MAX_LAG_S:
+        raise ForwardError(f"{w}.value", f"a lag of {value:g} s is outside ±{MAX_LAG_S:g} s")
+    az = _number(e.get("azimuth", 0.0), "rad", f"{w}.azimuth")
+    return replace(entry, value=value, azimuth=az, tau=_tau(e, basis, w))
+
+
+def _channel(w: str, kind: str, e: Mapping[str, Any]) -> str:
+    """The channel an entry acts on (``""`` for a tilt: both tip channels)."""
+    if kind == "tilt":
+        return ""
+    ch = str(e.get("channel", {"series": "tip_position", "lag": "tip_force"}.get(kind, "")))
+    if kind == "lag" and ch not in _TIP:
+        raise ForwardError(f"{w}.channel", f"a lag shifts a tip channel in time: must be one of "
+                           f"{list(_TIP)}, got {ch!r}")
+    if ch not in _CHANNELS:
+        raise ForwardError(f"{w}.channel", f"must be one of {list(_CHANNELS)}, got {ch!r}")
+    return ch
+
+
+def _tau(e: Mapping[str, Any], basis: str, where: str) -> float:
+    """A warm-up's time constant [s] (> 0, required); 0 for the other bases."""
+    if basis != "warmup":
+        return 0.0
+    if "tau" not in e:
+        raise ForwardError(f"{where}.tau", "a bias with basis = 'warmup' needs a time constant tau [s]")
+    tau = _number(e["tau"], "s", f"{where}.tau")
+    if not tau > 0:
+        raise ForwardError(f"{where}.tau", f"a warm-up time constant must be positive, got {tau:g} s")
+    return tau
 
 
 def _number(value: Any, unit: str, where: str) -> float:
@@ -137,10 +197,11 @@ def _number(value: Any, unit: str, where: str) -> float:
 
 
 def parameter_names(entries: Sequence[Entry]) -> list[str]:
-    """Every parameter the entries are linear (or, for a tilt's azimuth, smooth) in."""
+    """Every parameter the entries are linear (or, for a tilt's azimuth, a warm-up's time
+    constant and a lag, smooth) in."""
     out: list[str] = []
     for e in entries:
-        for n in (e.parameter, e.azimuth_parameter):
+        for n in (e.parameter, e.azimuth_parameter, e.tau_parameter):
             if n and n not in out:
                 out.append(n)
     return out
@@ -148,21 +209,44 @@ def parameter_names(entries: Sequence[Entry]) -> list[str]:
 
 def parameters(entries: Sequence[Entry], exclude: set[str] | frozenset[str] = frozenset()) -> list[Parameter]:
     """The entries' parameters (value, SI unit, bounds: a series compliance that starts
-    non-negative stays so), each once, skipping names in ``exclude``."""
+    non-negative stays so, a time constant is positive, a lag within ±``MAX_LAG_S``), each
+    once, skipping names in ``exclude``."""
     out: list[Parameter] = []
     seen = set(exclude)
     for e in entries:
         for nm, val, unit in ((e.parameter, e.value, parameter_unit(e)),
-                              (e.azimuth_parameter, e.azimuth, "rad")):
+                              (e.azimuth_parameter, e.azimuth, "rad"),
+                              (e.tau_parameter, e.tau, "s")):
             if nm and nm not in seen:
-                lo = 0.0 if e.kind == "series" and val >= 0 else -math.inf
-                out.append(Parameter(nm, val, unit, lo, math.inf))
+                lo, hi = _bounds(e, nm, val)
+                out.append(Parameter(nm, val, unit, lo, hi))
                 seen.add(nm)
     return out
 
 
+def _bounds(e: Entry, name: str, value: float) -> tuple[float, float]:
+    """Admissible range of parameter ``name`` of entry ``e`` at its current ``value``."""
+    if name == e.tau_parameter:
+        return 0.0, math.inf
+    if e.kind == "lag" and name == e.parameter:
+        return -MAX_LAG_S, MAX_LAG_S
+    return (0.0 if e.kind == "series" and value >= 0 else -math.inf), math.inf
+
+
 def _basis(e: Entry, t: np.ndarray) -> np.ndarray:
-    return np.ones_like(t) if e.basis == "constant" else np.asarray(t, dtype=float)
+    """b(t) ``(T,)`` of a bias: 1, t [s] or 1 − exp(−t/τ) (by ``expm1``: exact for t ≪ τ)."""
+    t = np.asarray(t, dtype=float)
+    if e.basis == "constant":
+        return np.ones_like(t)
+    if e.basis == "time":
+        return t
+    return -np.expm1(-t / e.tau)
+
+
+def _basis_dtau(e: Entry, t: np.ndarray) -> np.ndarray:
+    """∂b/∂τ ``(T,)`` [1/s] of a warm-up basis: −(t/τ²) exp(−t/τ)."""
+    t = np.asarray(t, dtype=float)
+    return -(t / e.tau**2) * np.exp(-t / e.tau)
 
 
 def _tilt(angle: float, azimuth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -182,14 +266,17 @@ def _tilt(angle: float, azimuth: float) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 
 #: SI unit of an entry's parameter, by kind (bias: by channel and basis)
-_BIAS_UNITS = {("tip_force", "constant"): "N", ("tip_force", "time"): "N/s",
-               ("tip_position", "constant"): "m", ("tip_position", "time"): "m/s"}
+_BIAS_UNITS = {("tip_force", "constant"): "N", ("tip_force", "time"): "N/s", ("tip_force", "warmup"): "N",
+               ("tip_position", "constant"): "m", ("tip_position", "time"): "m/s",
+               ("tip_position", "warmup"): "m"}
 
 
 def parameter_unit(entry: Entry) -> str:
     """The SI unit of ``entry.parameter`` (``"1"`` where skinkit's unit table has no name for it)."""
     if entry.kind == "bias":
-        return _BIAS_UNITS.get((entry.channel, entry.basis), "m" if entry.basis == "constant" else "m/s")
+        return _BIAS_UNITS.get((entry.channel, entry.basis), "m/s" if entry.basis == "time" else "m")
+    if entry.kind == "lag":
+        return "s"
     if entry.kind == "series":
         return "m/N" if (entry.channel, entry.source) == ("tip_position", "tip_force") else "1"
     if entry.kind == "tilt" or entry.mode == "rotation":
@@ -200,8 +287,8 @@ def parameter_unit(entry: Entry) -> str:
 def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: np.ndarray,
           names: Sequence[str] = ()) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """What the skin saw when ``channel`` recorded ``recorded`` ``(T, 3)`` at ``time_s`` ``(T,)``:
-    biases of that channel removed, then a tilt applied. Returns the true drive ``(T, 3)`` and
-    its derivatives ``(T, 3)`` for the parameters in ``names`` it depends on."""
+    lags of that channel undone, its biases removed, then a tilt applied. Returns the true
+    drive ``(T, 3)`` and its derivatives ``(T, 3)`` for the parameters in ``names`` it depends on."""
     x = np.array(recorded, dtype=float)
     d: dict[str, np.ndarray] = {}
     for e in entries:
@@ -210,6 +297,8 @@ def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: 
                                f"a series compliance on the driving channel {channel!r} makes the drive "
                                "depend on the predicted force; drive the model by the tip force "
                                "([indenter] mode = \"force\") to include it")
+    for e in reversed([e for e in entries if e.kind == "lag" and e.channel == channel]):
+        x = _lagged(e, time_s, x, d, names, -1.0)    # the chain's output at t was recorded at t + lag
     for e in entries:
         if e.kind == "bias" and e.channel == channel:
             b = _basis(e, time_s)
@@ -217,6 +306,9 @@ def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: 
             if e.parameter in names:
                 dd = d.setdefault(e.parameter, np.zeros_like(x))
                 dd[:, e.component] -= b
+            if e.tau_parameter and e.tau_parameter in names:
+                dt = d.setdefault(e.tau_parameter, np.zeros_like(x))
+                dt[:, e.component] -= e.value * _basis_dtau(e, time_s)
     for e in entries:
         if e.kind != "tilt":
             continue
@@ -248,9 +340,24 @@ def measure(entries: Sequence[Entry], channel: str, time_s: np.ndarray, values: 
             v = _series(e, channels, v, out, names)
         elif e.kind == "similarity" and channel in _POINTS and e.channel in _POINTS:
             v = _similarity(e, v, out, names)
-        elif e.kind == "tilt" and channel in ("tip_force", "tip_position"):
+        elif e.kind == "tilt" and channel in _TIP:
             v = _tilted(e, v, out, names)
+    for e in entries:
+        if e.kind == "lag" and e.channel == channel:
+            v = _lagged(e, time_s, v, out, names, 1.0)
     return v, out
+
+
+def with_values(entries: Sequence[Entry], values: Mapping[str, float]) -> list[Entry]:
+    """The entries with every parameter named in ``values`` (name -> SI value) set: ``value``,
+    ``azimuth`` and ``tau`` by their parameter names. Bounds are not checked here."""
+    out = []
+    for e in entries:
+        out.append(replace(e, value=float(values.get(e.parameter, e.value)),
+                           azimuth=float(values.get(e.azimuth_parameter, e.azimuth)) if e.azimuth_parameter
+                           else e.azimuth,
+                           tau=float(values.get(e.tau_parameter, e.tau)) if e.tau_parameter else e.tau))
+    return out
 
 
 def similarity_parameters(entries: Sequence[Entry], channel: str) -> list[str]:
@@ -290,7 +397,48 @@ def _bias(e: Entry, time_s: np.ndarray, v: np.ndarray, out: dict[str, np.ndarray
     v[:, e.component] += e.value * b
     if e.parameter in names:
         out.setdefault(e.parameter, np.zeros_like(v))[:, e.component] += b
+    if e.tau_parameter and e.tau_parameter in names:
+        # entries of several components may share one time constant: their parts add up
+        out.setdefault(e.tau_parameter, np.zeros_like(v))[:, e.component] += e.value * _basis_dtau(e, time_s)
     return v
+
+
+def shift(time_s: np.ndarray, y: np.ndarray, delay: float) -> tuple[np.ndarray, np.ndarray]:
+    """``y`` ``(T, ...)`` sampled at ``time_s`` ``(T,)`` [s], read ``delay`` [s] late:
+    ``(y(t − delay), y′(t − delay))``, both ``(T, ...)``, y′ in [unit of y / s].
+
+    Between samples y is the not-a-knot cubic spline through them (samples with a non-finite
+    component and repeated times, after the first, are left out); outside the record it is
+    held at the first or last sample, where y′ is 0. At ``delay = 0`` the values are ``y``
+    itself (the null is exact, not merely interpolated)."""
+    y = np.asarray(y, dtype=float)
+    t = np.asarray(time_s, dtype=float)
+    flat = y.reshape(t.size, -1)
+    finite = np.all(np.isfinite(flat), axis=1)
+    knots, first = np.unique(t[finite], return_index=True)
+    if knots.size < 2:   # nothing to interpolate: a constant record
+        return y.copy(), np.zeros_like(y)
+    spline = CubicSpline(knots, flat[finite][first], axis=0)
+    q = t - delay
+    at = np.clip(q, knots[0], knots[-1])
+    inside = (q >= knots[0]) & (q <= knots[-1])
+    val = y.copy() if delay == 0 else spline(at).reshape(y.shape)
+    der = (spline(at, 1) * inside[:, None]).reshape(y.shape)
+    return val, der
+
+
+def _lagged(e: Entry, time_s: np.ndarray, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str],
+            sign: float) -> np.ndarray:
+    """The channel read ``sign · value`` late (``sign = 1``: as recorded; −1: the recording
+    undone), the derivatives in ``out`` shifted alike and ∂/∂value = −sign · v′ added."""
+    keys = list(out)
+    stacked = np.stack([v, *(out[k] for k in keys)], axis=-1)
+    val, der = shift(time_s, stacked, sign * e.value)
+    for i, k in enumerate(keys):
+        out[k] = val[..., i + 1].copy()
+    if e.parameter in names:
+        out[e.parameter] = out.get(e.parameter, np.zeros_like(v)) - sign * der[..., 0]
+    return val[..., 0].copy()
 
 
 def _series(e: Entry, channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
@@ -343,5 +491,5 @@ def _tilted(e: Entry, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence
     return v @ R
 
 
-__all__ = ["KINDS", "Entry", "drive", "measure", "parameter_names", "parameter_unit", "parameters", "parse",
-           "similarity_parameters", "unrecord_points"]
+__all__ = ["KINDS", "MAX_LAG_S", "Entry", "drive", "measure", "parameter_names", "parameter_unit",
+           "parameters", "parse", "shift", "similarity_parameters", "unrecord_points", "with_values"]

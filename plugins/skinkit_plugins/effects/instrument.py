@@ -3,7 +3,12 @@
 model. Each entry's ``parameter`` is the effect parameter itself, value 0 is no effect exactly.
 
 ``indenter-tilt`` and ``tracking-bias`` apply to finite-element models (a probe axis and 3D
-points exist only there); ``force-offset``, ``force-drift`` and ``robot-compliance`` to any model.
+points exist only there); ``force-offset``, ``force-drift``, ``force-warmup``, ``channel-lag`` and
+``robot-compliance`` to any model.
+
+Time t in these effects is each record's own, from its protocol's start (``Channel.time_s``): a
+drift or a warm-up restarts at every protocol, as for a sensor zeroed (tared) at the start of
+each record.
 """
 
 from __future__ import annotations
@@ -64,8 +69,16 @@ class ForceOffset(_ForceBias):
 
 class ForceDrift(_ForceBias):
     """A linear drift of the recorded tip force, ``x``, ``y``, ``z`` [N/s] (null 0): recorded =
-    true + rate · t, t [s] the record's time. The typical 0.5 mN/s drifts by 15 mN over a 30 s
-    protocol, about 9 force-noise levels (σ ≈ 1.7 mN), where 0.2 mN/s would stay below 5."""
+    true + rate · t, t [s] the record's time from its protocol's start (the drift restarts at 0
+    with every protocol: a sensor tared at each start). The typical 0.5 mN/s drifts by 15 mN
+    over a 30 s protocol, about 9 force-noise levels (σ ≈ 1.7 mN), where 0.2 mN/s would stay
+    below 5.
+
+    This is the linear shape, the first term of any slow drift (a zero wandering with the room's
+    temperature over minutes). A zero that settles, the exponential warm-up of a sensor's bridge
+    and amplifier, is ``force-warmup``; over a protocol much shorter than its time constant the
+    two look alike (A (1 − e^{−t/τ}) ≈ (A/τ) t) and the diagnosis reports them as not separable.
+    Three ``bias`` entries with ``basis = "time"``."""
 
     name = "force-drift"
     touches = {"fe": frozenset({"instrument"}), "lumped": frozenset({"instrument"})}
@@ -73,6 +86,82 @@ class ForceDrift(_ForceBias):
 
     def _declared(self) -> list[Declared]:
         return [declare(a, 0.5, 0.0, "mN/s", -10.0, 10.0) for a in _AXES]
+
+
+class ForceWarmup(_ForceBias):
+    """The force sensor's zero settling after it was switched on or tared: recorded = true +
+    A (1 − exp(−t/τ)) per axis, amplitudes ``x``, ``y``, ``z`` [N] (null 0) and one time
+    constant ``tau`` [s], t the record's time from its protocol's start.
+
+    Phenomenon: a strain-gauge load cell's bridge warms under its excitation current and its
+    amplifier under its own dissipation, so the zero moves until both reach thermal equilibrium,
+    to first order as a single-time-constant transient; manufacturers state a warm-up time for
+    it (tens of minutes for a six-axis transducer) and calibration procedures for
+    force-measuring instruments (ISO 376) take readings only once the instrument is stable.
+    Taring at a protocol's start removes the offset reached so far: what remains within the
+    protocol is again A′ (1 − e^{−t/τ}), with A′ = A e^{−t₀/τ} the part still to come. The
+    effect takes one A′ for every protocol (exact for a single protocol, or for a transient
+    that each taring or contact restarts). The typical 10 mN over τ = 10 s is about 6
+    force-noise levels, settled within a 30 s protocol, so it is distinct from a linear drift.
+
+    Not covered: one warm-up running across the whole session (A′ shrinking from protocol to
+    protocol), several time constants, a zero that follows the room's temperature, creep of the
+    reading under a held load, hysteresis between loading and unloading. ``force-drift`` is the
+    linear shape.
+
+    Three ``bias`` entries with ``basis = "warmup"``, sharing ``tau`` (``tau_parameter``). The
+    amplitudes enter linearly; ∂/∂τ = −A (t/τ²) e^{−t/τ} analytically. At the null (A = 0) τ
+    changes nothing: it has no signature there and the gap diagnosis holds it at its null
+    (its typical value), identified only once the amplitudes are switched on."""
+
+    name = "force-warmup"
+    touches = {"fe": frozenset({"instrument"}), "lumped": frozenset({"instrument"})}
+    basis = "warmup"
+
+    def _declared(self) -> list[Declared]:
+        return [*(declare(a, 10.0, 0.0, "mN", -1000.0, 1000.0) for a in _AXES),
+                declare("tau", 10.0, 10.0, "s", 0.1, 3600.0)]
+
+    def _entries(self, v: dict[str, float]) -> list[dict[str, Any]]:
+        return [{**e, "tau": v["tau"], "tau_parameter": f"{self.name}.tau"} for e in super()._entries(v)]
+
+
+class ChannelLag(BaseEffect):
+    """The force channel recorded ``lag`` [s] late relative to the position channel and the
+    cameras (null 0, typical 10 ms, admissible ±0.5 s): recorded force(t) = true force(t − lag).
+
+    Phenomenon: force and position are sampled by different electronics (a force transducer's
+    acquisition card, the robot's controller) whose clocks and buffering are not synchronised:
+    a constant skew of a few milliseconds between the channels is common unless the devices
+    share a hardware trigger or a synchronised clock (IEEE 1588). It turns a hysteresis-free
+    skin into an apparently dissipative one: a loop in force against position whose area grows
+    with the rate.
+
+    Form: one ``lag`` instrument entry on ``tip_force``. The shifted force is the not-a-knot
+    cubic spline through the predicted force samples, read at t − lag (held at the first or last
+    sample outside the record); ∂/∂lag = −f′(t − lag), the spline's own derivative. On a model
+    driven by force (the finite-element models by default) the drive is the recorded force read
+    lag later. Tracked points are not shifted; a positive lag means the force is late.
+
+    Not covered: a lag that varies in time (clocks running at different rates, so the skew
+    grows through a record, or jitter from sample to sample), the frequency-dependent phase of
+    an anti-aliasing filter (not a pure delay), a lag of the cameras relative to the robot."""
+
+    name = "channel-lag"
+    kinds = ("fe", "lumped")
+    touches = {"fe": frozenset({"instrument"}), "lumped": frozenset({"instrument"})}
+
+    def _declared(self) -> list[Declared]:
+        return [declare("lag", 10.0, 0.0, "ms", -500.0, 500.0)]
+
+    def _entries(self, v: dict[str, float]) -> list[dict[str, Any]]:
+        return [{"kind": "lag", "parameter": f"{self.name}.lag", "value": v["lag"], "channel": "tip_force"}]
+
+    def _apply_fe(self, model: dict[str, Any], v: dict[str, float]) -> None:
+        self.add_instrument(model, self._entries(v))
+
+    def _apply_lumped(self, model: dict[str, Any], v: dict[str, float]) -> None:
+        self.add_instrument(model, self._entries(v))
 
 
 class RobotCompliance(BaseEffect):
@@ -117,4 +206,5 @@ class TrackingBias(BaseEffect):
              "mode": mode} for m, mode in (("scale", "scale"), ("rotation", "rotation"))])
 
 
-__all__ = ["ForceDrift", "ForceOffset", "IndenterTilt", "RobotCompliance", "TrackingBias"]
+__all__ = ["ChannelLag", "ForceDrift", "ForceOffset", "ForceWarmup", "IndenterTilt", "RobotCompliance",
+           "TrackingBias"]
