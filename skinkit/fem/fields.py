@@ -14,7 +14,10 @@ Kinds (see ``docs/guide/effects.md``):
 * ``band``: φ = 1 + (ratio − 1) w, w = ½ [tanh((d − depth + hw)/δ) − tanh((d − depth − hw)/δ)],
   d the depth below the top surface, hw = ``half_width``, δ = ``width`` (default hw/2);
 * ``softening``: φ(t) = 1 − softening · level(t), level(t) in [0, 1] set by whoever drives the
-  model (the largest load seen so far over the largest of the session).
+  model (the largest load seen so far over the largest of the session); with a ``cycles``
+  parameter φ(t) = 1 − softening (1 − exp(−strokes(t)/cycles)), strokes(t) ≥ 0 set likewise
+  (the loading strokes so far: increases of the drive magnitude summed over the session, over
+  its largest), so the softening develops cycle after cycle and levels off.
 """
 
 from __future__ import annotations
@@ -33,22 +36,24 @@ _CS = 1e-30
 KINDS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "inclusion": (("x", "y", "radius", "ratio"), ("width",)),
     "band": (("depth", "half_width", "ratio"), ("width",)),
-    "softening": (("softening",), ()),
+    "softening": (("softening",), ("cycles",)),
 }
 UNITS = {"x": "m", "y": "m", "radius": "m", "ratio": "1", "width": "m", "depth": "m",
-         "half_width": "m", "softening": "1"}
+         "half_width": "m", "softening": "1", "cycles": "1"}
 
 
 @dataclass
 class Field:
     """One field: ``name`` (its parameters are ``"<name>.<key>"``), ``kind``, the ``layers``
-    it acts on and its parameter values [SI]. ``level`` gives the softening level at time t."""
+    it acts on and its parameter values [SI]. ``level`` gives the softening level at time t
+    [s], ``strokes`` the loading strokes so far (a softening field with ``cycles``)."""
 
     name: str
     kind: str
     layers: list[str]
     params: dict[str, float]
     level: Callable[[float], float] = field(default=lambda t: 0.0)
+    strokes: Callable[[float], float] = field(default=lambda t: 0.0)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -64,7 +69,7 @@ class Field:
         p = self.params
         if "ratio" in p and not p["ratio"] > 0:
             raise ModelError(f"fields[{self.name}].ratio", f"must be positive, got {p['ratio']}")
-        for k in ("radius", "half_width", "width"):
+        for k in ("radius", "half_width", "width", "cycles"):
             if k in p and not p[k] > 0:
                 raise ModelError(f"fields[{self.name}].{k}", f"must be positive, got {p[k]}")
         if self.kind == "softening" and not 0 <= p["softening"] < 1:
@@ -76,6 +81,9 @@ class Field:
         return [f"{self.name}.{k}" for k in self.params]
 
     def _phi(self, p: Mapping[str, Any], Xq: np.ndarray, depth: np.ndarray, t: float):
+        if self.kind == "softening" and "cycles" in p:
+            a = float(self.strokes(t))
+            return 1.0 - p["softening"] * (1.0 - np.exp(-a / p["cycles"])) + 0.0 * depth
         if self.kind == "softening":
             return 1.0 - p["softening"] * float(self.level(t)) + 0.0 * depth
         if self.kind == "inclusion":

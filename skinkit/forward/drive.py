@@ -81,4 +81,16 @@ def running_level(drive_steps: np.ndarray, previous_max: float, reference: float
     return m / reference if reference > 0 else np.zeros_like(m)
 
 
-__all__ = ["fill_invalid", "running_level", "smooth_at", "step_times"]
+def running_strokes(drive_steps: np.ndarray, previous: float, reference: float) -> np.ndarray:
+    """Loading strokes so far ``(n,)`` [1]: ``previous`` (earlier protocols' strokes) plus the
+    sum of the increases of the drive magnitude up to each step, from 0 at the protocol's start
+    (the solver's programme starts unloaded), over the session's largest magnitude
+    ``reference``: one ramp from 0 to it adds 1."""
+    mag = np.linalg.norm(drive_steps, axis=1)
+    if not reference > 0:
+        return np.full(mag.shape, float(previous))
+    up = np.maximum(np.diff(mag, prepend=0.0), 0.0)
+    return previous + np.cumsum(up) / reference
+
+
+__all__ = ["fill_invalid", "running_level", "running_strokes", "smooth_at", "step_times"]

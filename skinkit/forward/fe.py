@@ -55,6 +55,7 @@ class ProtocolJob:
     embed: tuple[np.ndarray, np.ndarray] | None   # (element (P,), local (P, 3)) of tracked points
     sens: list[str]                       # FE parameter names to differentiate
     options: dict[str, Any] = field(default_factory=dict)
+    strokes: np.ndarray | None = None     # (n,) loading strokes so far [1], or None
 
 
 def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np.ndarray]:
@@ -97,7 +98,9 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
         rigid.derivatives = {n: _interp_table(job.times, d) for n, d in job.drive_d.items()}
         for f in model.problem.fields:
             if f.kind == "softening":
-                f.level = _interp_table(job.times, job.level if job.level is not None else 0 * job.times)
+                none = 0 * job.times
+                f.level = _interp_table(job.times, job.level if job.level is not None else none)
+                f.strokes = _interp_table(job.times, job.strokes if job.strokes is not None else none)
         solver = NewtonSolver(model.problem, model.bc, model.options)
         sol = solver.run(job.times, viscous_time=model.problem.viscous, sensitivities=job.sens or False,
                          extrapolate=job.options.get("extrapolate", True))
@@ -481,13 +484,15 @@ class FEForwardModel(ForwardModel):
                     embeds[c.name], sets[c.name] = self._embed_channel(
                         mesh, c, depth, f"session protocol {po.name!r}.{c.name}", entries, inst_names)
             meta[po.name] = {"drive": drive_name, "embeds": embeds, "sets": sets}
-        # softening level over the session, protocols in order
+        # softening level and loading strokes over the session, protocols in order
         ref = max((float(np.linalg.norm(d[1], axis=1).max()) for d in drives.values()), default=0.0)
-        running = 0.0
+        running, done = 0.0, 0.0
         for po in observations:
             times, dsteps, dd = drives[po.name]
             level = drive_mod.running_level(dsteps, running, ref)
+            strokes = drive_mod.running_strokes(dsteps, done, ref)
             running = max(running, float(np.linalg.norm(dsteps, axis=1).max()))
+            done = float(strokes[-1])
             emb = None
             embeds = meta[po.name]["embeds"]
             if embeds:
@@ -495,7 +500,7 @@ class FEForwardModel(ForwardModel):
                 locs = np.concatenate([e[1] for e in embeds.values()])
                 emb = (els, locs)
             jobs.append(ProtocolJob(po.name, spec, nodes, mode, times, dsteps, dd, level, emb,
-                                    list(fe_names) + list(dd)))
+                                    list(fe_names) + list(dd), strokes=strokes))
         results = self._run(jobs)
         return results, meta
 

@@ -5,12 +5,14 @@ Families (``[lumped] family``; vocabulary in :mod:`skinkit.forward.lumped_spec`)
 * ``quasi-static`` — extension, relaxation and indentation records. Displacement in, force
   out (``drive = "tip_position"``)::
 
-      f(t) = g∞ φ Fe(u) + Σᵢ gᵢ hᵢ,   φ(t) = 1 − softening · m(t)/m_ref
+      f(t) = g∞ φ Fe(u) + Σᵢ gᵢ hᵢ,   φ(t) = 1 − softening (1 − exp(−A(t)/cycles))
 
   with the elastic element Fe (``linear``, ``exponential``, ``polynomial``), the exact Prony
-  recurrence of ``[[lumped.relaxation]]`` terms and the preconditioning factor φ
-  (:mod:`skinkit.forward.lumped_elements`); or force in, displacement out (``drive =
-  "tip_force"``): the QLV filter and the element inverted sample by sample.
+  recurrence of ``[[lumped.relaxation]]`` terms and the preconditioning factor φ, A(t) the
+  loading strokes so far in units of the session's largest drive (or, in the largest-load
+  form, φ = 1 − softening · m(t)/m_ref; :mod:`skinkit.forward.lumped_elements`); or force in,
+  displacement out (``drive = "tip_force"``): the QLV filter and the element inverted sample
+  by sample.
 * ``kbi`` and ``wiener`` — the dynamic models of :mod:`skinkit.sysid` (force in, position out)
   on a uniformly sampled record (:mod:`skinkit.forward.lumped_dynamic`).
 
@@ -21,8 +23,8 @@ and times, with the components other than the axis 0 and marked not predicted.
 ``[[instrument]]`` entries (:mod:`skinkit.forward.instrument`) turn the recorded drive into
 what the skin saw and the prediction into what was recorded. A series compliance on a
 displacement drive (the motor's position recorded, the tip lagging by c f) is solved with the
-element: u + c f(u) = recorded, Newton per sample. m(t) is the largest |drive| along the axis
-after the bias and tilt entries (what the motor imposed).
+element: u + c f(u) = recorded, Newton per sample. A(t) and m(t) are taken from the drive along
+the axis after the bias and tilt entries (what the motor imposed).
 
 Sensitivities: parameters of the element, relaxation, preconditioning and a drive-side series
 compliance by the complex step (the simulation is complex-safe; exact to rounding); instrument
@@ -80,11 +82,12 @@ def simulate(ls: LumpedSpec, v: Mapping[str, Any], drives: Sequence[tuple[np.nda
     p = {n: v[f"lumped.{n}"] for n in ls.names}
     g = [v[f"lumped.g{i}"] for i in range(1, ls.n_terms + 1)]
     tau = [v[f"lumped.tau{i}"] for i in range(1, ls.n_terms + 1)]
-    soft = v.get("lumped.softening", 0.0)
-    levels = el.softening_levels([u for _, u in drives]) if ls.has_preconditioning else [0.0] * len(drives)
+    phis: list[Any] = [1.0] * len(drives)
+    if ls.has_preconditioning:
+        phis = el.softening_factors(ls.preconditioning_form, [u for _, u in drives], v["lumped.softening"],
+                                    v.get("lumped.cycles", 1.0))
     series = [e for e in ls.entries if e.kind == "series" and e.channel == ls.drive]
-    for (t, u), lev in zip(drives, levels, strict=True):
-        phi = 1 - soft * lev
+    for (t, u), phi in zip(drives, phis, strict=True):
         if ls.drive == "tip_force":
             fe = el.qlv_inverse(t, u, g, tau) / phi
             out.append(el.elastic_inverse(ls.elastic, p, fe, "lumped.parameters"))

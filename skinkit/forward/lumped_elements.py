@@ -10,8 +10,10 @@ coordinate ``u`` [m] and force ``f`` [N] are signed along the model's loading di
   βᵢ = τᵢ (1 − eᵢ)/Δt (exact for Fe piecewise linear in time, as
   :mod:`skinkit.fem.viscoelastic`). The record starts relaxed under its first sample
   (hᵢ⁰ = 0, so f⁰ = g∞ Fe⁰ — the steady state of the filter).
-* Preconditioning: Fe is scaled by φ = 1 − softening · m(t)/m_ref, m the largest |drive| so
-  far over the session's protocols in order, m_ref the session's largest.
+* Preconditioning: Fe is scaled by φ(t). Cycles form: φ = 1 − softening (1 − exp(−A(t)/cycles)),
+  A(t) the loading strokes so far (the increases of |drive| summed over the session's protocols
+  in order, each protocol starting from the unloaded skin) over m_ref, the session's largest
+  |drive|. Largest-load form: φ = 1 − softening · m(t)/m_ref, m the largest |drive| so far.
 """
 
 from __future__ import annotations
@@ -268,5 +270,38 @@ def softening_levels(drives: Sequence[np.ndarray]) -> list[np.ndarray]:
     return out
 
 
+def running_strokes(u: np.ndarray, previous: Any = 0.0) -> np.ndarray:
+    """S(t) ``(T,)``: ``previous`` plus the sum of the increases of |u| up to t, |u| counted from
+    0 before the first sample (a protocol starts from the unloaded skin). Complex-safe: the
+    sign and which steps are increases are chosen on real parts; the values carry the
+    derivative."""
+    a = u * np.where(np.real(u) < 0, -1.0, 1.0)
+    steps = np.diff(a, prepend=0 * a[:1])
+    return previous + np.cumsum(np.where(np.real(steps) > 0, steps, 0 * steps))
+
+
+def stroke_levels(drives: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """A(t) per protocol (``drives`` in session order), each ``(T,)``: the strokes so far over
+    the session's largest |drive| (one ramp from 0 to it adds 1); zeros without motion."""
+    strokes, prev, ref = [], 0.0, 0.0
+    for u in drives:
+        s = running_strokes(u, prev)
+        strokes.append(s)
+        prev = s[-1]
+        ref = running_extreme(u, ref)[-1]
+    return [s / ref if np.real(ref) > 0 else 0 * s for s in strokes]
+
+
+def softening_factors(form: str, drives: Sequence[np.ndarray], softening: Any, cycles: Any = 1.0
+                      ) -> list[np.ndarray]:
+    """φ(t) per protocol (``drives`` in session order), each ``(T,)`` [1]: ``form``
+    ``"cycles"`` 1 − softening (1 − exp(−A/cycles)), ``"largest-load"`` 1 − softening m/m_ref.
+    Exactly 1 at softening = 0."""
+    if form == "cycles":
+        return [1 - softening * (1 - np.exp(-a / cycles)) for a in stroke_levels(drives)]
+    return [1 - softening * lev for lev in softening_levels(drives)]
+
+
 __all__ = ["ELASTIC_PARAMETERS", "elastic_force", "elastic_inverse", "elastic_slope", "poly_names", "qlv",
-           "qlv_inverse", "running_extreme", "series_solve", "softening_levels"]
+           "qlv_inverse", "running_extreme", "running_strokes", "series_solve", "softening_factors",
+           "softening_levels", "stroke_levels"]

@@ -14,8 +14,11 @@ Vocabulary (``docs/guide/effects.md``, "Lumped descriptions"; every quantity a n
   ``polynomial`` (``c1`` [N/m], ``c2`` [N/m²], ... ``cn``), values in ``[lumped.parameters]``.
 * ``[lumped.parameters]`` of ``kbi``: ``K`` [N/m], ``B`` [N s/m], ``I`` [kg]; of ``wiener``:
   ``Is`` [s²], ``Bs`` [s], ``C1`` [m], ``C2`` [1/N]. ``hold``: ``"foh"`` (default) or ``"zoh"``.
-* ``[[lumped.relaxation]]`` ``g``, ``tau`` and ``[lumped.preconditioning] softening``:
-  quasi-static only.
+* ``[[lumped.relaxation]]`` ``g``, ``tau`` and ``[lumped.preconditioning]``: quasi-static
+  only. Preconditioning comes in two forms (``form``): ``"cycles"`` (``softening``, ``cycles``:
+  softening that develops over the loading strokes) and ``"largest-load"`` (``softening``: with
+  the largest load so far); without ``form`` a table with ``cycles`` is the cycles form, one
+  with only ``softening`` the largest-load form.
 * ``test``: a free label (``"extension"``, ``"relaxation"``, ``"indentation"``).
 """
 
@@ -63,6 +66,8 @@ class LumpedSpec:
     has_preconditioning: bool
     hold: str
     entries: list[inst_mod.Entry] = field(default_factory=list)
+    #: ``"cycles"`` or ``"largest-load"`` (``""`` without preconditioning)
+    preconditioning_form: str = ""
 
     @property
     def predicted(self) -> str:
@@ -85,6 +90,8 @@ class LumpedSpec:
             return ("1", 0.0, 0.99)
         if local.startswith("tau"):
             return ("s", 1e-4, 1e5)
+        if local == "cycles":
+            return ("1", 1e-3, 1e3)
         return ("1", 0.0, 0.99)   # softening
 
 
@@ -141,7 +148,7 @@ def parse_lumped(spec: Mapping[str, Any]) -> LumpedSpec:
         values[f"lumped.{n}"] = _q(given[n], _READ_UNITS.get(n, "1"), f"lumped.parameters.{n}")
     n_rel, pre = _relaxation_and_preconditioning(lt, values)
     out = LumpedSpec(family, _AXES[ax.lstrip("-")], sense, drive, elastic, names, values, n_rel,
-                     pre, hold, inst_mod.parse(spec.get("instrument")))
+                     bool(pre), hold, inst_mod.parse(spec.get("instrument")), pre)
     check_values(out, out.values)
     _check_instrument(out.entries, drive)
     return out
@@ -163,9 +170,10 @@ def _parameter_names(lt: Mapping[str, Any], family: str, given: Mapping[str, Any
     return elastic, names
 
 
-def _relaxation_and_preconditioning(lt: Mapping[str, Any], values: dict[str, float]) -> tuple[int, bool]:
+def _relaxation_and_preconditioning(lt: Mapping[str, Any], values: dict[str, float]) -> tuple[int, str]:
     """Read ``[[lumped.relaxation]]`` (g, tau [s]) and ``[lumped.preconditioning]`` into
-    ``values``; returns the number of relaxation terms and whether preconditioning is on."""
+    ``values``; returns the number of relaxation terms and the preconditioning form (``""``
+    without it)."""
     rel = lt.get("relaxation", []) or []
     if not isinstance(rel, list) or not all(isinstance(r, Mapping) for r in rel):
         raise ForwardError("lumped.relaxation", "must be an array of tables ([[lumped.relaxation]])")
@@ -176,11 +184,32 @@ def _relaxation_and_preconditioning(lt: Mapping[str, Any], values: dict[str, flo
         values[f"lumped.g{i}"] = _q(r["g"], "1", f"lumped.relaxation[{i - 1}].g")
         values[f"lumped.tau{i}"] = _q(r["tau"], "s", f"lumped.relaxation[{i - 1}].tau")
     pre = lt.get("preconditioning")
-    if pre is not None:
-        if not isinstance(pre, Mapping) or sorted(pre) != ["softening"]:
-            raise ForwardError("lumped.preconditioning", "must be a table with exactly 'softening'")
-        values["lumped.softening"] = _q(pre["softening"], "1", "lumped.preconditioning.softening")
-    return len(rel), pre is not None
+    return len(rel), ("" if pre is None else _preconditioning(pre, values))
+
+
+#: preconditioning form -> the keys of its table besides ``form``
+PRECONDITIONING_FORMS = {"cycles": ("softening", "cycles"), "largest-load": ("softening",)}
+
+
+def _preconditioning(pre: Any, values: dict[str, float]) -> str:
+    """Read a ``[lumped.preconditioning]`` table into ``values`` (``lumped.softening``,
+    ``lumped.cycles``); returns its form. A table without ``form`` is the cycles form if it
+    gives ``cycles``, else the largest-load form (older descriptions: ``softening`` only)."""
+    e = "lumped.preconditioning"
+    if not isinstance(pre, Mapping):
+        raise ForwardError(e, "must be a table")
+    form = str(pre.get("form", "cycles" if "cycles" in pre else "largest-load"))
+    if form not in PRECONDITIONING_FORMS:
+        raise ForwardError(f"{e}.form", f"must be one of {list(PRECONDITIONING_FORMS)}, got {form!r}")
+    keys = PRECONDITIONING_FORMS[form]
+    given = sorted(set(pre) - {"form"})
+    if given != sorted(keys):
+        raise ForwardError(e, f"the {form} form takes exactly {list(keys)}, got {given}")
+    for k in keys:
+        values[f"lumped.{k}"] = _q(pre[k], "1", f"{e}.{k}")
+    if form == "cycles" and not values["lumped.cycles"] > 0:
+        raise ForwardError(f"{e}.cycles", f"must be positive (strokes), got {values['lumped.cycles']:g}")
+    return form
 
 
 def _check_instrument(entries: Any, drive: str) -> None:
@@ -202,8 +231,8 @@ def entry_of(name: str) -> str:
     for key in ("tau", "g"):
         if local.startswith(key) and local[len(key):].isdigit():
             return f"lumped.relaxation[{int(local[len(key):]) - 1}].{key}"
-    if local == "softening":
-        return "lumped.preconditioning.softening"
+    if local in ("softening", "cycles"):
+        return f"lumped.preconditioning.{local}"
     return f"lumped.parameters.{local}" if name.startswith("lumped.") else name
 
 

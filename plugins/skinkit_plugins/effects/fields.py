@@ -89,28 +89,59 @@ class Inclusion(BaseEffect):
 
 
 class Preconditioning(BaseEffect):
-    """Softening of the elastic response with the largest load seen so far: φ(t) = 1 − softening ·
-    m(t)/m_ref (``docs/guide/effects.md``), ``softening`` [1] in [0, 0.9], null 0. Finite elements: a
-    ``softening`` field on the skin layer. Lumped: ``[lumped.preconditioning] softening``, bound
-    to ``lumped.softening``."""
+    """Preconditioning: the elastic response softens as the skin is loaded, cycle after cycle.
+
+    Soft tissue loaded repeatedly to the same stretch carries less force on each cycle, the fall
+    slowing until the response repeats (Fung's "preconditioning"; in mouse skin Muñoz et al.
+    2008, "An experimental study of the mouse skin behaviour: damage and inelastic aspects",
+    J. Biomech. 41; cyclic softening of soft tissue, Peña 2011, "Prediction of the softening and
+    damage effects with permanent set in fibrous biological materials", J. Mech. Phys. Solids
+    59). The effect is a factor φ(t) on the elastic response (``docs/guide/effects.md``), in
+    one of two forms (``[[effects]] form = "..."``):
+
+    * ``"cycles"`` (the default): φ(t) = 1 − softening · (1 − exp(−A(t)/cycles)), A(t) the
+      loading strokes so far: the sum of the increases of |drive| up to t over the session's
+      largest |drive| (protocols in session order; one ramp to full amplitude adds 1). The peak
+      of cycle k to the same amplitude is softened by 1 − softening (1 − e^(−k/cycles)): it
+      falls and levels off at 1 − softening. ``softening`` [1] in [0, 0.9] (null 0),
+      ``cycles`` [1] in [0.1, 50] (null and typical 1): the strokes over which the softening
+      develops (63 % of it after ``cycles`` strokes). At softening = 0, φ = 1 whatever ``cycles``.
+    * ``"largest-load"`` (Mullins-type; Mullins 1969, Ogden & Roxburgh 1999, "A pseudo-elastic
+      model for the Mullins effect in filled rubber", Proc. R. Soc. A 455): φ(t) = 1 − softening
+      · m(t)/m_ref, m the largest |drive| so far, m_ref the session's largest; ``softening``
+      only. Every cycle reaching the same stretch then has the same peak.
+
+    Neither form covers recovery during rest (the softening is permanent over the session),
+    direction-dependent softening (φ is isotropic: stretch along one axis softens all) nor the
+    residual strain that accompanies preconditioning (the unloaded length is unchanged).
+
+    Finite elements: a ``softening`` field on the skin layer (with ``cycles`` in the cycles
+    form). Lumped: a ``[lumped.preconditioning]`` table (``form``, ``softening``, ``cycles``),
+    the parameters bound to ``lumped.softening`` and ``lumped.cycles``.
+    """
 
     name = "preconditioning"
     kinds = ("fe", "lumped")
     touches = {"fe": frozenset({"fields"}), "lumped": frozenset({"bindings", "lumped"})}
+    forms = ("cycles", "largest-load")
 
     def _declared(self) -> list[Declared]:
-        return [declare("softening", 0.2, 0.0, "1", 0.0, 0.9)]
+        out = [declare("softening", 0.2, 0.0, "1", 0.0, 0.9)]
+        if self.chosen_form() == "cycles":
+            out.append(declare("cycles", 1.0, 1.0, "1", 0.1, 50.0))
+        return out
 
     def _apply_fe(self, model: dict[str, Any], v: dict[str, float]) -> None:
         skin = self.layers(model)[0]
-        self.add_field(model, {"kind": "softening", "layers": [skin["name"]], "softening": v["softening"]})
+        self.add_field(model, {"kind": "softening", "layers": [skin["name"]], **v})
 
     def _apply_lumped(self, model: dict[str, Any], v: dict[str, float]) -> None:
         lt = self.lumped(model)
         if lt.get("preconditioning"):
             raise self.fail("the lumped model already has a [lumped.preconditioning] table")
-        lt["preconditioning"] = {"softening": v["softening"]}
-        self.bind(model, "softening", "lumped.softening")
+        lt["preconditioning"] = {"form": self.chosen_form(), **v}
+        for local in v:
+            self.bind(model, local, f"lumped.{local}")
 
 
 __all__ = ["Fascia", "Inclusion", "LayerSlip", "Preconditioning"]
