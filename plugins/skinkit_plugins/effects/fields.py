@@ -89,15 +89,17 @@ class Inclusion(BaseEffect):
 
 
 class Preconditioning(BaseEffect):
-    """Preconditioning: the elastic response softens as the skin is loaded, cycle after cycle.
+    """Softening of the elastic response that develops cycle after cycle and levels off (form
+    ``cycles``, the default: φ(t) = 1 − softening (1 − exp(−A(t)/cycles)), A the loading strokes
+    so far) or follows the largest load so far (form ``largest-load``: φ(t) = 1 − softening ·
+    m(t)/m_ref); ``docs/guide/effects.md``.
 
     Soft tissue loaded repeatedly to the same stretch carries less force on each cycle, the fall
     slowing until the response repeats (Fung's "preconditioning"; in mouse skin Muñoz et al.
     2008, "An experimental study of the mouse skin behaviour: damage and inelastic aspects",
     J. Biomech. 41; cyclic softening of soft tissue, Peña 2011, "Prediction of the softening and
     damage effects with permanent set in fibrous biological materials", J. Mech. Phys. Solids
-    59). The effect is a factor φ(t) on the elastic response (``docs/guide/effects.md``), in
-    one of two forms (``[[effects]] form = "..."``):
+    59). The form is chosen in the ``[[effects]]`` table (``form = "largest-load"``):
 
     * ``"cycles"`` (the default): φ(t) = 1 − softening · (1 − exp(−A(t)/cycles)), A(t) the
       loading strokes so far: the sum of the increases of |drive| up to t over the session's
