@@ -33,8 +33,14 @@ def gap() -> None:
 @click.option("--protocols", default=None,
               help="read only these records of SESSION (comma-separated; default all)")
 @click.option("--holdout", default=None, help="protocols kept out of the fit and predicted (comma-separated)")
-@click.option("--max-effects", type=click.IntRange(min=0), default=2, show_default=True,
-              help="name at most this many effects, one per round (0: score and locate only)")
+@click.option("--max-effects", type=click.IntRange(min=0), default=3, show_default=True,
+              help="add at most this many effects, one per round (0: score and locate only)")
+@click.option("--min-share", type=float, default=0.5, show_default=True,
+              help="the share of the excess residual an added effect must remove to be named a cause; "
+                   "smaller significant improvements are reported as minor contributions")
+@click.option("--noise", type=click.Choice(["auto", "white", "ar"]), default="auto", show_default=True,
+              help="noise model of each record: auto (spikes left out; an autoregressive model of the "
+                   "colour from the rest segment where BIC prefers it), white, or ar (required)")
 @click.option("--candidates", type=click.IntRange(min=1), default=3, show_default=True,
               help="refit the model with this many top-scoring effects per round")
 @click.option("--free", default=None, help="parameters to calibrate (comma-separated; default: the model's)")
@@ -54,21 +60,26 @@ def gap() -> None:
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,
                  candidates: int, free: str | None, out_dir: str | None, gap_name: str | None,
                  overwrite: bool, workers: int | None, until_s: float | None, no_error_estimate: bool,
-                 as_json: bool, protocols: str | None) -> None:
+                 as_json: bool, protocols: str | None, min_share: float, noise: str) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
     then refits of the best), and how far the gap shrinks with it.
 
-    An effect is named only when the gap is significant, its score test survives the
+    An effect is added only when the gap is significant, its score test survives the
     correction for testing every effect, its refit lowers the AIC by more than 10 and does not
     worsen the held-out residual; for a finite-element model, also only when its score test
     survives with the mesh's discretisation error (the calibrated model solved on a mesh
-    refined 2x) projected out. An experiment-file SESSION stores the report (/gaps/<name>).
+    refined 2x) projected out. It is named a cause when it removes at least --min-share of the
+    excess residual, else a minor contribution; what no effect explains is reported as such.
+    Residuals are prewhitened by each record's noise model. An experiment-file SESSION stores
+    the report (/gaps/<name>).
     """
     from skinkit.forward import read_description
     from skinkit.gap.diagnose import diagnose, write_report
 
     stores = str(session).lower().endswith((".h5", ".hdf5"))
+    if not 0 < min_share <= 1:
+        raise SkinkitError(f"--min-share must be in (0, 1], got {min_share:g}")
     if not Path(model_file).is_file():
         raise SkinkitError(f"model file {model_file}: not found")
     if not Path(session).is_file():
@@ -94,7 +105,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
                       protocols=split_names(protocols) or None,
                       free=None if free is None else split_names(free), max_effects=max_effects,
                       candidates=candidates, workers=workers, until=until_s, progress=progress,
-                      error_estimate=not no_error_estimate)
+                      error_estimate=not no_error_estimate, min_share=min_share, noise=noise)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:
@@ -121,13 +132,13 @@ def _print(d: dict, written: list) -> None:
     if cands:
         click.echo("candidates (score test at the null, then refit):")
         for c in cands:
-            refit = (f"ΔAIC {c['delta_aic']:.1f}, shrinkage {100 * c['shrinkage']:.0f} %"
-                     if c["refitted"] and c["delta_aic"] is not None and c["shrinkage"] is not None
-                     else "not refitted")
+            refit = (f"ΔAIC {c['delta_aic']:.1f}, share {100 * c['share']:.0f} %"
+                     if c["refitted"] and c["delta_aic"] is not None and c.get("share") is not None
+                     else "refitted" if c["refitted"] else "not refitted")
             others = c["not_separable_from"]
             sep = f"; not separable from {', '.join(others)}" if others else ""
-            click.echo(f"  {c['effect']:20s} LM {c['score']:10.4g} (q {c['dof']}) p {c['p_value']:.3g}  "
-                       f"{refit}{sep}")
+            click.echo(f"  {c['effect']:20s} {c.get('role', ''):9s} LM {c['score']:10.4g} (q {c['dof']}) "
+                       f"p {c['p_value']:.3g}  {refit}{sep}")
     if d.get("stored_as"):
         click.echo(f"stored as /gaps/{d['stored_as']} in {d['session']}")
     for p in written:

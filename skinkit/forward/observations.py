@@ -242,7 +242,8 @@ def channel_from_track(track: SurfaceTrack, attrs: dict[str, Any], where: str) -
                    reference=ref, reference_frame=0, window_m=None if window is None else float(window))
 
 
-def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | None = None) -> Observations:
+def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | None = None,
+                     noise: str = "auto") -> Observations:
     from skinkit.store import open_experiment
 
     protocols: dict[str, ProtocolObservations] = {}
@@ -261,7 +262,7 @@ def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | 
             order.append((info.get("extra", {}).get("session_index", len(order)), n, info))
         for _, name, info in sorted(order):
             rec = exp.read_record(name)
-            chans = channels_from_record(rec, f"{path}:{name}")
+            chans = channels_from_record(rec, f"{path}:{name}", noise)
             if name in tracks:
                 tr = exp.read_track(name)
                 attrs = exp.track_attrs(name) if hasattr(exp, "track_attrs") else {}
@@ -279,14 +280,16 @@ def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | 
 
 
 def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = (), axis: str = "z",
-                      segments: str | None = None, protocols: Sequence[str] | None = None) -> Observations:
+                      segments: str | None = None, protocols: Sequence[str] | None = None,
+                      noise: str = "auto") -> Observations:
     """The observations of a session file: an experiment file or a CSV record.
 
     ``held_out``: protocol names to mark held out (in addition to those the file marks).
     ``axis``: the tip axis of one-axis CSV columns (``displacement_mm``, ``force_N``).
     ``segments``: split every record into protocols first (:func:`skinkit.forward.segments.split`;
     ``"cycles"``: one protocol per loading cycle, named ``<protocol>-cycle-<k>``), so that
-    ``held_out`` can name a segment (fit cycles 1-2, predict 3-4).
+    ``held_out`` can name a segment (fit cycles 1-2, predict 3-4). ``noise``: how each robot
+    record's noise is modelled (:func:`channels_from_record`).
     Raises :class:`StoreError` / :class:`SchemaError` naming the file and what is wrong.
     """
     p = Path(path)
@@ -300,9 +303,9 @@ def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = ()
             raise SchemaError("protocols", f"no record(s) {sorted(set(protocols))} in {p} (it has "
                                            f"{[rec.protocol.name]})")
         obs = Observations({rec.protocol.name: ProtocolObservations(
-            rec.protocol, channels_from_record(rec, str(p)), False)}, None, str(p))
+            rec.protocol, channels_from_record(rec, str(p), noise), False)}, None, str(p))
     else:
-        obs = _read_experiment(p, (), protocols)
+        obs = _read_experiment(p, (), protocols, noise)
     if segments is not None:
         from skinkit.forward.segments import split
 

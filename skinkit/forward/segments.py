@@ -143,7 +143,9 @@ def _cut_channel(c: Channel, t0: float, t1: float, shift: float) -> Channel | No
     rf = c.reference_frame
     rf = rf - a if rf is not None and a <= rf < b else None
     return Channel(c.name, c.time_s[a:b] - shift, c.values[sl], c.valid[sl], c.noise, c.noise_source,
-                   c.reference, rf, c.window_m)
+                   c.reference, rf, c.window_m, c.noise_ar, c.noise_innovation,
+                   None if c.outliers is None else c.outliers[sl],
+                   None if c.noise_scale is None else c.noise_scale[sl])
 
 
 def _split_cycles(po: ProtocolObservations) -> list[ProtocolObservations]:

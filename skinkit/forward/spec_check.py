@@ -14,6 +14,7 @@ The accepted ranges are listed in ``docs/reference/model-files.md``.
 
 from __future__ import annotations
 
+import copy
 import difflib
 import math
 from collections.abc import Mapping
@@ -221,10 +222,17 @@ def check_effects(value: Any) -> None:
                               f"{', '.join(sorted(installed)) or 'none'} (skinkit effects)")
         try:
             plugin = registry.create("skinkit.effects", name)
+            forms = tuple(getattr(plugin, "forms", ()) or ())
+            if "form" in t and t["form"] in forms:
+                plugin = copy.copy(plugin)
+                plugin.form = t["form"]
             declared = [p.name for p in plugin.parameters()]
         except Exception:  # a broken plugin is reported by the reader, with its own error
             continue
-        _keys(t, ["name", *declared], e, EffectError)
+        # settings the reader checks itself: an instance label (repeatable effects), a form
+        settings = ["instance"] if getattr(plugin, "repeatable", False) else []
+        settings += ["form"] if forms else []
+        _keys(t, ["name", *settings, *declared], e, EffectError)
 
 
 def check_bindings(value: Any) -> None:

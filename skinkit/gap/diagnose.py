@@ -53,13 +53,23 @@ from skinkit.gap.score import (
     collect,
     corrected,
     directed_p,
+    effect_of,
     effect_table,
     separability,
     separating_protocol,
     with_effects,
 )
+from skinkit.gap.sentences import messages, num
+from skinkit.gap.verdict import (
+    MIN_SHARE,
+    assign_roles,
+    fit_warnings,
+    noise_factor,
+    noise_summary,
+    remaining,
+    rest_warnings,
+)
 from skinkit.schemas import EffectScore, FitResult, GapReport, Observations, Prediction
-from skinkit.units import unit_suffix
 
 #: an effect is named only if its refit lowers the AIC by more than this (module docstring)
 AIC_MARGIN = 10.0
@@ -197,7 +207,7 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
     from skinkit.inverse.objective import Objective
 
     cols = sens.columns[test.effect]
-    model = load(with_effects(spec, effects_in + [{"name": test.effect}]))
+    model = load(with_effects(spec, effects_in + [effect_table(test.effect)]))
     try:
         ps = model.parameters()
         ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
@@ -225,6 +235,7 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
         model.close()
     state["added"] = added
     state["table"] = effect_table(test.effect, _values(r))
+    state["warnings"] = fit_warnings(r, f"the refit with {test.effect}", added)
     return state
 
 
@@ -243,7 +254,8 @@ def _candidate(test: ScoreTest, survives: bool, state: dict[str, Any] | None,
         pars[n] = {"value": v, "se": se, "unit": r.parameters.param(n).unit,
                    "interval": None if se is None else [v - 1.96 * se, v + 1.96 * se]}
     d_aic = float(r.aic - base["result"].aic)
-    extra.update({"chi2_per_dof": state["chi2"] / state["dof"], "held_out_chi2": state["held_chi2"],
+    extra.update({"chi2_per_dof": state["chi2"] / state["dof"], "chi2_refit": state["chi2"],
+                  "held_out_chi2": state["held_chi2"],
                   "held_out_chi2_before": base["held_chi2"], "converged": r.converged,
                   "n_forward": r.n_forward})
     shrink = _fraction(base["chi2"] - base["dof"], state["chi2"] - state["dof"])
@@ -291,6 +303,12 @@ class _Run:
     first_candidates: list[EffectScore] = field(default_factory=list)
     loc0: Any = None
     disc: dict[str, Any] | None = None
+    min_share: float = MIN_SHARE
+    additions: list[dict[str, Any]] = field(default_factory=list)
+    warnings: list[dict[str, Any]] = field(default_factory=list)
+    undermined: dict[str, str] = field(default_factory=dict)
+    winners: list[EffectScore] = field(default_factory=list)
+    first_scores: tuple[Any, Any] | None = None
 
 
 def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
@@ -299,7 +317,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              free: Sequence[str] | None = None, max_effects: int = 2, candidates: int = 3,
              alpha: float = 0.05, workers: int | None = None, until: float | None = None,
              progress: Callable[[str], None] | None = None,
-             protocols: Sequence[str] | None = None, error_estimate: bool = True) -> GapReport:
+             protocols: Sequence[str] | None = None, error_estimate: bool = True,
+             min_share: float = MIN_SHARE, noise: str = "auto") -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -313,7 +332,10 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     ``error_estimate``: for a finite-element model, once a candidate's score test is
     significant, solve the calibrated model on a mesh refined 2x and test every candidate again
     with the discretisation error's signature projected out: an effect that explains only what
-    a finer mesh would is neither refitted nor named (:mod:`skinkit.inverse.discretisation`).
+    a finer mesh would is neither refitted nor named (:mod:`skinkit.inverse.discretisation`);
+    ``min_share``: the share of the excess an added effect must remove to be named a cause
+    (:mod:`skinkit.gap.verdict`); ``noise``: how a record's noise is modelled (``"auto"``,
+    ``"white"``, ``"ar"``: :func:`skinkit.forward.observations.channels_from_record`).
     """
     from skinkit.forward import load, model_kind, read_description
 
@@ -323,6 +345,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         raise GapError(f"max_effects must be >= 0 and candidates >= 1, got {max_effects}, {candidates}")
     if not 0 < alpha < 1:
         raise GapError(f"alpha must be in (0, 1), got {alpha!r}")
+    if not (isinstance(min_share, (int, float)) and 0 < min_share <= 1):
+        raise GapError(f"--min-share must be in (0, 1], got {min_share!r}")
     spec = read_description(model)
     kind = model_kind(spec)
 
@@ -330,12 +354,13 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         return load(s, workers=workers)
 
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
-                     until=until, protocols=protocols, say=say)
+                     until=until, protocols=protocols, say=say, noise=noise)
     state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
     run = _Run(spec=spec, base=cal["base"], observations=cal["observations"], held=cal["held"],
                present=cal["present"], loader=loader, say=say, alpha=alpha, candidates=candidates,
                max_effects=max_effects, error_estimate=error_estimate, state0=state0, current=state0,
-               theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1)
+               theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1,
+               min_share=float(min_share))
     for rnd in range(max(max_effects, 1)):
         if not _round(run, rnd):
             break
@@ -345,7 +370,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
 def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
                observations: Observations | str | os.PathLike[str], *, effects: Sequence[str] | None,
                holdout: Sequence[str], free: Sequence[str] | None, until: float | None,
-               protocols: Sequence[str] | None, say: Callable[[str], None]) -> dict[str, Any]:
+               protocols: Sequence[str] | None, say: Callable[[str], None], noise: str = "auto"
+               ) -> dict[str, Any]:
     """The session read and checked, the candidate effects, and the model calibrated on it:
     ``name``, ``source``, ``observations``, ``held``, ``present`` (the model's effects),
     ``theta`` (free names), ``candidates``, ``result`` (the fit), ``state0`` (:func:`_state`),
@@ -361,7 +387,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
             from skinkit.forward.session import read_session
             source = str(observations)
             observations = read_session(base, observations, ",".join(holdout) or None,
-                                        protocols=",".join(protocols) if protocols else None)
+                                        protocols=",".join(protocols) if protocols else None, noise=noise)
         else:
             source = observations.source
             if holdout:
@@ -416,6 +442,7 @@ def _round(run: _Run, rnd: int) -> bool:
     _separate(run, seps, records, spec_r, values, sens, tests, rnd)
     if rnd == 0:
         run.first_candidates = records
+        run.first_scores = (sens, {t.effect: t for t in tests})
     entry["candidates"] = [c.to_dict() for c in records]
     entry["skipped"] = sens.skipped
     entry["notes"] = sens.notes
@@ -471,6 +498,8 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
         except SkinkitError as exc:
             run.say(f"refit with {t.effect} failed: {exc}")
             entry.setdefault("refit_failures", {})[t.effect] = str(exc)
+            run.warnings.append({"kind": "refit-failed", "where": t.effect, "message":
+                                 f"the refit with {t.effect} failed in round {entry['round']}: {exc}"})
     return states
 
 
@@ -549,16 +578,53 @@ def _name(run: _Run, winner: EffectScore, st: dict[str, Any], rnd: int) -> bool:
     """Add ``winner`` to the model at its refitted state; True when another round may follow."""
     run.named.append(winner.effect)
     run.rounds[-1]["named"] = winner.effect
+    run.additions.append({"effect": winner.effect, "before": run.current, "after": st, "round": rnd + 1})
+    for w in st.get("warnings", []):
+        run.warnings.append(w)
+        if w["kind"] in ("not-converged", "on-bound"):
+            run.undermined.setdefault(winner.effect, w["message"])
+    run.winners.append(winner)
     run.tables.append(st["table"])
     run.theta_r = run.theta_r + st["added"]
     run.current = st
     run.remaining = [e for e in run.remaining if e != winner.effect]
+    _more_of_the_same(run)
     if len(run.named) >= run.max_effects:
         run.rounds.append({"round": rnd + 2, "model_effects": run.present + [t["name"] for t in run.tables],
                            "chi2_per_dof": st["chi2"] / st["dof"], "candidates": [], "named": None,
                            "note": f"--max-effects {run.max_effects} reached"})
         return False
     return True
+
+
+def _more_of_the_same(run: _Run) -> None:
+    """One more instance of each repeatable effect the model now has joins the candidates (a
+    further Prony term competes with new effects on equal terms)."""
+    from skinkit.gap.score import repeat_candidates
+
+    tables = [t for t in (run.spec.get("effects") or []) if isinstance(t, Mapping)] + list(run.tables)
+    for label, _ in repeat_candidates(tables):
+        if label not in run.remaining:
+            run.remaining.append(label)
+
+
+def _alone(run: _Run, cal: Mapping[str, Any], label: str) -> float | None:
+    """χ² of the first model with ``label`` added and refitted alone (the first round's refit,
+    or one made now for an effect first added in a later round); None when it cannot be made."""
+    rec = next((c for c in run.first_candidates if c.effect == label and c.refitted), None)
+    if rec is not None and rec.extra.get("chi2_refit") is not None:
+        return float(rec.extra["chi2_refit"])
+    if run.first_scores is None or label not in run.first_scores[1]:
+        return None
+    sens, tests = run.first_scores
+    try:
+        st = _refit(run.spec, [], run.observations, run.held, _values(cal["result"]), cal["theta"],
+                    tests[label], sens, load=run.loader, say=run.say)
+    except SkinkitError as exc:
+        run.say(f"refit of the first model with {label} alone failed: {exc}")
+        return None
+    run.n_forward += st["result"].n_forward + 1
+    return float(st["chi2"])
 
 
 def _how_far(run: _Run) -> dict[str, Any]:
@@ -587,34 +653,87 @@ def _how_far(run: _Run) -> dict[str, Any]:
     return {"overall": overall, "held_out": held_out, "cells": shrink_cells, "loc_after": loc_after}
 
 
+def _final_parameters(c: EffectScore, final: Mapping[str, Any]) -> None:
+    """Replace an added candidate's parameter values and errors by the final model's."""
+    r: FitResult = final["result"]
+    for n, p in (c.parameters or {}).items():
+        if n in r.parameters.names:
+            se = num(r.se.get(n))
+            v = float(r.parameters[n])
+            p.update(value=v, se=se, interval=None if se is None else [v - 1.96 * se, v + 1.96 * se])
+
+
+def _verdict(run: _Run, cal: Mapping[str, Any], loc_final: Any) -> dict[str, Any]:
+    """Roles and shares on the candidates, ``remaining``, ``warnings``, ``noise`` and the causes."""
+    from skinkit import registry
+
+    final = run.current
+    # an added effect is reported by the record of the round that added it
+    won = {w.effect: w for w in run.winners}
+    first = {c.effect for c in run.first_candidates}
+    cands = [won.get(c.effect, c) for c in run.first_candidates]
+    cands += [w for w in run.winners if w.effect not in first]
+    added = [a["effect"] for a in run.additions]
+    for c in cands:
+        if c.effect in added:
+            _final_parameters(c, final)
+    dicts = [c.to_dict() for c in cands]
+    kappa = noise_factor(run.loc0)
+    known = registry.names("skinkit.effects")
+    firsts = {}
+    for lab in added:
+        firsts.setdefault(effect_of(lab), lab)
+    alone = {lab: _alone(run, cal, lab) for lab in firsts.values()}
+    causes, minor = assign_roles(dicts, run.additions, known, run.min_share, run.undermined, kappa,
+                                 alone=alone, chi2_first=run.state0["chi2"], dof_first=run.state0["dof"])
+    for c, d in zip(cands, dicts, strict=True):
+        c.extra.update({k: d[k] for k in ("role", "share", "role_reason") if k in d})
+    rem = remaining(loc_final, final, run.state0, kappa)
+    warns = fit_warnings(cal["result"], "the calibration", cal["theta"]) + list(run.warnings)
+    warns += rest_warnings(run.observations, final["prediction"])
+    if rem["significant"] and run.max_effects and len(added) >= run.max_effects:
+        warns.append({"kind": "max-effects-reached", "where": "diagnosis", "message":
+                      f"the diagnosis stopped at --max-effects {run.max_effects} while the remainder is "
+                      "still significant: more rounds may find more"})
+    return {"candidates": cands, "causes": causes, "minor": minor, "added": added, "remaining": rem,
+            "warnings": warns, "noise": noise_summary(run.observations)}
+
+
 def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], t0: float) -> GapReport:
     """The :class:`GapReport` of a finished diagnosis (``cal``: :func:`_calibrate`'s, ``far``:
     :func:`_how_far`'s; ``t0``: its start, ``time.perf_counter``)."""
     r0, theta, state0, final, loc0 = cal["result"], cal["theta"], run.state0, run.current, run.loc0
-    observations, named, loc_after = run.observations, run.named, far["loc_after"]
-    messages = _messages(loc0, run.gap0, run.first_candidates, named, far["overall"], run.separation,
-                         run.rounds, state0, run.disc)
+    observations, loc_after = run.observations, far["loc_after"]
+    v = _verdict(run, cal, loc_after if loc_after is not None else loc0)
     fit_d = {"parameters": {n: float(r0.parameters[n]) for n in theta}, "chi2_per_dof": r0.chi2_per_dof,
-             "n_forward": r0.n_forward, "se": {n: _num(r0.se.get(n)) for n in theta}, "aic": r0.aic,
+             "n_forward": r0.n_forward, "se": {n: num(r0.se.get(n)) for n in theta}, "aic": r0.aic,
              "held_out": r0.held_out, "converged": r0.converged, "free": list(theta)}
     extra = {"points": _points(observations),
              "point_map_after": {} if loc_after is None else
-             {k: [_num(x) for x in v] for k, v in loc_after.point_map.items()},
-             "separation": run.separation, "rounds": run.rounds, "messages": messages,
+             {k: [num(x) for x in v] for k, v in loc_after.point_map.items()},
+             "separation": run.separation, "rounds": run.rounds, "messages": [],
              "discretisation": None if run.disc is None else {k: v for k, v in run.disc.items() if k != "e"},
-             "effects_tested": list(cal["candidates"]), "alpha": run.alpha,
+             "effects_tested": list(cal["candidates"]), "alpha": run.alpha, "min_share": run.min_share,
              "chi2": {"before": state0["chi2"], "after": final["chi2"], "dof_before": state0["dof"],
                       "dof_after": final["dof"], "held_out_before": state0["held_chi2"],
                       "held_out_after": final["held_chi2"], "held_out_samples": state0["held_n"]},
              "final_parameters": {n: float(final["result"].parameters[n]) for n in run.theta_r},
-             "effects_model": [dict(t) for t in run.tables],
+             "effects_model": [dict(t) for t in run.tables], "minor": v["minor"],
+             "noise": v["noise"], "remaining": v["remaining"], "warnings": v["warnings"],
              "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0}
     gap_d = _gap_dict(loc0)
     gap_d.update(run.gap0 or {"significant": bool(loc0.significant),
                               "omnibus_significant": bool(loc0.significant), "directed": []})
-    return GapReport(cal["name"], cal["source"], fit=fit_d, gap=gap_d, candidates=run.first_candidates,
-                     named=named, shrinkage={"overall": far["overall"], "held_out": far["held_out"],
-                                             "cells": far["cells"]}, extra=extra)
+    report = GapReport(cal["name"], cal["source"], fit=fit_d, gap=gap_d, candidates=v["candidates"],
+                       named=v["causes"], shrinkage={"overall": far["overall"], "held_out": far["held_out"],
+                                                     "cells": far["cells"]}, extra=extra)
+    first = run.rounds[0] if run.rounds else {}
+    sig_tests = [c["effect"] for c in first.get("candidates", []) if c.get("significant")]
+    refit_any = any(c.get("refitted") for r in run.rounds for c in r.get("candidates", []))
+    cpd = state0["chi2"] / state0["dof"]
+    report.extra["messages"] = messages(report.to_dict(), loc0, run.gap0 or {}, cpd, v["added"],
+                                        run.min_share, sig_tests, refit_any)
+    return report
 
 
 def _discretisation(model: Any, observations: Observations, values: Mapping[str, float], coarse: Prediction,
@@ -646,92 +765,6 @@ def _mesh_only(disc: Mapping[str, Any] | None, sens: Any, tests: Sequence[ScoreT
     from skinkit.gap.score import score_all
     ok_exact = corrected(score_all(sens, nuisance=disc["e"][:, None]), alpha)
     return [t.effect for t in tests if ok[t.effect] and not ok_exact.get(t.effect, False)]
-
-
-def _num(x: Any) -> float | None:
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return None
-    return v if math.isfinite(v) else None
-
-
-def _disc_messages(disc: Mapping[str, Any] | None) -> list[str]:
-    """The discretisation check's sentences (none when it was not made)."""
-    if disc is None:
-        return []
-    frac = disc.get("explained_by_signature")
-    share = "" if frac is None else (f"; along its signature, at any size, a finer mesh would remove "
-                                     f"{100 * frac:.0f} % of the excess")
-    out = [f"Discretisation (mesh refined {disc['factor']}x, {disc['unknowns']:,} -> "
-           f"{disc['unknowns_refined']:,} unknowns): the error alone is χ² "
-           f"{disc['chi2_discretisation']:.4g} against ν {disc['dof']}{share}."]
-    if disc.get("explains"):
-        out.append(f"Not named, because discretisation explains the residual along their signatures: "
-                   f"{', '.join(disc['explains'])}.")
-    return out
-
-
-def _named_messages(named: Sequence[str], rounds: Sequence[dict[str, Any]]) -> list[str]:
-    """One sentence per named effect: ΔAIC, shrinkage and the identified parameters (95 % intervals)."""
-    out = []
-    for e in named:
-        c = next((c for r in rounds for c in r["candidates"] if c["effect"] == e and c.get("refitted")), None)
-        if c is None:
-            continue
-        pars = ", ".join(f"{n} = {v['value']:.4g}" + (f" ± {1.96 * v['se']:.2g}" if v.get("se") else "")
-                         + unit_suffix(v.get("unit")) for n, v in (c.get("parameters") or {}).items())
-        shr = (f"shrinkage {100 * c['shrinkage']:.0f} % of the excess" if c["shrinkage"] is not None
-               else "no excess above the noise as a whole to shrink")
-        out.append(f"`{e}` named: ΔAIC {c['delta_aic']:.1f}, {shr} ({pars}).")
-    return out
-
-
-def _messages(loc: Any, gap: Mapping[str, Any], cands: Sequence[EffectScore], named: Sequence[str],
-              overall: float | None, separation: Sequence[dict[str, Any]], rounds: Sequence[dict[str, Any]],
-              state0: dict[str, Any], disc: Mapping[str, Any] | None = None) -> list[str]:
-    """The verdict in plain sentences."""
-    out = _disc_messages(disc)
-    cpd = state0["chi2"] / state0["dof"]
-    if not gap.get("significant", loc.significant):
-        out.append(f"No significant gap: χ²/ν {cpd:.3g} is at the noise level; no effect named.")
-        return out
-    if not gap.get("omnibus_significant", True) and not any(c.significant for c in loc.cells):
-        top = next((c for c in cands if c.effect in gap.get("directed", [])), None)
-        out.append(f"No gap in the residual as a whole (χ²/ν {cpd:.3g} is within the noise), but the "
-                   f"score test finds one along {top.effect if top else 'a candidate'}'s signature"
-                   + (f" (LM {top.score:.3g}, p {top.p_value:.2g})." if top else "."))
-    ranked = loc.ranked()
-    where = []
-    for axis in ("protocol", "channel", "phase", "region", "frequency"):
-        cells = [c for c in ranked if c.axis == axis][:2]
-        if cells:
-            where.append(", ".join(f"{c.label} ({100 * c.share:.0f} % of the excess)" for c in cells))
-    if gap.get("omnibus_significant", True) or ranked:
-        located = f"; located in {'; '.join(where)}." if where else "."
-        out.append(f"Significant gap: χ²/ν {cpd:.3g}{located}")
-    if cands:
-        top = cands[0]
-        out.append(f"Best candidate by score: {top.effect} (LM {top.score:.3g}, q {top.dof}).")
-    out += _named_messages(named, rounds)
-    if named and overall is not None:
-        out.append(f"With {', '.join(named)} the excess residual shrinks by {100 * overall:.0f} %.")
-    if not named:
-        refitted = [c for c in cands if c.refitted]
-        if not refitted:
-            out.append("No installed effect's score test is significant: the gap is not explained by any "
-                       "candidate effect.")
-        else:
-            out.append("No effect named: " + "; ".join(
-                f"{r['not_named'][e]} ({e})" for r in rounds[:1] for e in r.get("not_named", {})) + ".")
-    for sp in separation:
-        a, b = sp["effects"]
-        if "protocol" in sp:
-            out.append(f"{a} and {b} are not separable on these protocols (|cos| {sp['cosine']:.3f}); "
-                       f"{sp['protocol']} would separate them best (|cos| {sp['cosine_after']:.3f}).")
-        else:
-            out.append(f"{a} and {b} are not separable on these protocols (|cos| {sp['cosine']:.3f}).")
-    return out
 
 
 def write_report(report: GapReport, out_dir: str | os.PathLike[str]) -> list[Path]:

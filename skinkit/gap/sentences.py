@@ -1,0 +1,165 @@
+"""The gap verdict in plain sentences, from the report's own numbers (the final model's).
+
+Every number a sentence quotes comes from the dict the JSON holds (``candidates`` with their
+final ``parameters``, ``share`` and ``role``; ``remaining``; ``warnings``), so that stdout, the
+HTML page and the JSON cannot disagree.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from skinkit.gap.verdict import noise_sentence, remaining_sentence
+from skinkit.units import unit_suffix
+
+
+def num(x: Any) -> float | None:
+    """``x`` as a finite float, or None."""
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def disc_messages(disc: Mapping[str, Any] | None) -> list[str]:
+    """The discretisation check's sentences (none when it was not made)."""
+    if disc is None:
+        return []
+    frac = disc.get("explained_by_signature")
+    share = (
+        ""
+        if frac is None
+        else (
+            f"; along its signature, at any size, a finer mesh would remove {100 * frac:.0f} % of the excess"
+        )
+    )
+    out = [
+        f"Discretisation (mesh refined {disc['factor']}x, {disc['unknowns']:,} -> "
+        f"{disc['unknowns_refined']:,} unknowns): the error alone is χ² "
+        f"{disc['chi2_discretisation']:.4g} against ν {disc['dof']}{share}."
+    ]
+    if disc.get("explains"):
+        out.append(
+            f"Not named, because discretisation explains the residual along their signatures: "
+            f"{', '.join(disc['explains'])}."
+        )
+    return out
+
+
+def parameter_text(pars: Mapping[str, Mapping[str, Any]]) -> str:
+    """``"n = v ± 1.96 se unit, ..."`` (one interval per estimate)."""
+    return ", ".join(
+        f"{n} = {v['value']:.4g}"
+        + (f" ± {1.96 * v['se']:.2g}" if v.get("se") else "")
+        + unit_suffix(v.get("unit"))
+        for n, v in pars.items()
+    )
+
+
+def added_messages(
+    candidates: Sequence[Mapping[str, Any]], added: Sequence[str], min_share: float
+) -> list[str]:
+    """One sentence per effect added to the model, cause or minor, with its final values."""
+    out = []
+    for lab in added:
+        c = next((c for c in candidates if c["effect"] == lab), None)
+        if c is None:
+            continue
+        share = c.get("share")
+        removed = (
+            "removes no part of the excess (there was none as a whole)"
+            if share is None
+            else f"removes {100 * share:.0f} % of the excess the noise level cannot account for"
+        )
+        pars = parameter_text(c.get("parameters") or {})
+        if c.get("role") == "cause":
+            out.append(f"`{lab}` is a cause: it {removed} (ΔAIC {c['delta_aic']:.1f}; {pars}).")
+        else:
+            why = c.get("role_reason") or f"less than the {100 * min_share:.0f} % a cause needs"
+            out.append(
+                f"`{lab}` is a minor contribution, not a cause: it {removed}, {why} "
+                f"(ΔAIC {c['delta_aic']:.1f}; {pars})."
+            )
+    return out
+
+
+def _location(loc: Any) -> list[str]:
+    where = []
+    ranked = [c for c in loc.ranked() if c.share > 0]
+    for axis in ("protocol", "channel", "phase", "region", "frequency"):
+        cells = [c for c in ranked if c.axis == axis][:2]
+        if cells:
+            where.append(", ".join(f"{c.label} ({100 * c.share:.0f} % of the excess)" for c in cells))
+    return where
+
+
+def messages(
+    report: Mapping[str, Any],
+    loc: Any,
+    gap: Mapping[str, Any],
+    chi2_per_dof: float,
+    added: Sequence[str],
+    min_share: float,
+    tests_significant: Sequence[str],
+    refit_any: bool,
+) -> list[str]:
+    """The verdict: noise, gap and where, each added effect, the remainder, separation, warnings.
+
+    ``report``: the JSON-ready report so far (``candidates``, ``remaining``, ``warnings``,
+    ``noise``, ``separation``, ``discretisation``); ``loc``: the first round's location;
+    ``gap``: the first round's gate; ``added``: labels added to the model, in order;
+    ``tests_significant``: candidates whose score test survived the correction in round 1;
+    ``refit_any``: whether any candidate was refitted."""
+    out = disc_messages(report.get("discretisation"))
+    ns = noise_sentence(report.get("noise") or {})
+    if ns:
+        out.append(ns)
+    if not gap.get("significant", loc.significant):
+        out.append(f"No significant gap: χ²/ν {chi2_per_dof:.3g} is at the noise level; no effect named.")
+        return out + [f"Warning: {w['message']}." for w in report.get("warnings", [])]
+    ranked = [c for c in loc.ranked() if c.share > 0]
+    if not gap.get("omnibus_significant", True) and not ranked:
+        top = next((c for c in report["candidates"] if c["effect"] in gap.get("directed", [])), None)
+        out.append(
+            f"No gap in the residual as a whole (χ²/ν {chi2_per_dof:.3g} is within the noise), but the "
+            f"score test finds one along {top['effect'] if top else 'a candidate'}'s signature"
+            + (f" (LM {top['score']:.3g}, p {top['p_value']:.2g})." if top else ".")
+        )
+    else:
+        where = _location(loc)
+        out.append(
+            f"Significant gap: χ²/ν {chi2_per_dof:.3g}"
+            + (f"; located in {'; '.join(where)}." if where else ".")
+        )
+    out += added_messages(report["candidates"], added, min_share)
+    if not added:
+        if tests_significant and not refit_any:
+            out.append(
+                f"The score tests of {', '.join(tests_significant)} are significant, but no candidate was "
+                "refitted (--max-effects 0, or every refit failed): nothing can be named."
+            )
+        elif not tests_significant:
+            out.append("No installed effect's score test is significant.")
+        else:
+            reasons = [f"{c['effect']}: {c['not_named']}" for c in report["candidates"] if c.get("not_named")]
+            out.append("No effect added: " + "; ".join(reasons) + "." if reasons else "No effect added.")
+    rem = report.get("remaining")
+    if rem is not None:
+        out.append(remaining_sentence(rem, added))
+    for sp in report.get("separation", []):
+        a, b = sp["effects"]
+        if "protocol" in sp:
+            out.append(
+                f"{a} and {b} are not separable on these protocols (|cos| {sp['cosine']:.3f}); "
+                f"{sp['protocol']} would separate them best (|cos| {sp['cosine_after']:.3f})."
+            )
+        else:
+            out.append(f"{a} and {b} are not separable on these protocols (|cos| {sp['cosine']:.3f}).")
+    out += [f"Warning: {w['message']}." for w in report.get("warnings", [])]
+    return out
+
+
+__all__ = ["added_messages", "disc_messages", "messages", "num", "parameter_text"]
