@@ -38,6 +38,9 @@ def gap() -> None:
 @click.option("--min-share", type=float, default=0.5, show_default=True,
               help="the share of the excess residual an added effect must remove to be named a cause; "
                    "smaller significant improvements are reported as minor contributions")
+@click.option("--max-iterations", type=click.IntRange(min=1), default=50, show_default=True,
+              help="evaluations each fit may make (the calibration and every refit); a fit that stops "
+                   "there is reported in the warnings")
 @click.option("--noise", type=click.Choice(["auto", "white", "ar"]), default="auto", show_default=True,
               help="noise model of each record: auto (spikes left out; an autoregressive model of the "
                    "colour from the rest segment where BIC prefers it), white, or ar (required)")
@@ -60,7 +63,8 @@ def gap() -> None:
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,
                  candidates: int, free: str | None, out_dir: str | None, gap_name: str | None,
                  overwrite: bool, workers: int | None, until_s: float | None, no_error_estimate: bool,
-                 as_json: bool, protocols: str | None, min_share: float, noise: str) -> None:
+                 as_json: bool, protocols: str | None, min_share: float, noise: str,
+                 max_iterations: int) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
     then refits of the best), and how far the gap shrinks with it.
@@ -105,7 +109,8 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
                       protocols=split_names(protocols) or None,
                       free=None if free is None else split_names(free), max_effects=max_effects,
                       candidates=candidates, workers=workers, until=until_s, progress=progress,
-                      error_estimate=not no_error_estimate, min_share=min_share, noise=noise)
+                      error_estimate=not no_error_estimate, min_share=min_share, noise=noise,
+                      max_iterations=max_iterations)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:

@@ -201,7 +201,8 @@ def _check_channels(model: Any, observations: Observations) -> None:
 # -------------------------------------------------------------------------------- the rounds
 def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observations: Observations,
            held: Observations, values: Mapping[str, float], theta: Sequence[str], test: ScoreTest,
-           sens: Sensitivities, *, load: Callable[..., Any], say: Callable[[str], None]) -> dict[str, Any]:
+           sens: Sensitivities, *, load: Callable[..., Any], say: Callable[[str], None],
+           max_iterations: int = 50) -> dict[str, Any]:
     """The model with ``test.effect`` added, refitted: its state, the added free parameters."""
     from skinkit.inverse import fit
     from skinkit.inverse.objective import Objective
@@ -229,7 +230,7 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
                     added.append(n)
         free = list(theta) + added
         say(f"refit with {test.effect}: free {', '.join(added)}")
-        r = fit(model, observations, free, start={n: ps[n] for n in free})
+        r = fit(model, observations, free, start={n: ps[n] for n in free}, max_iterations=max_iterations)
         state = _state(model, r, observations, held)
     finally:
         model.close()
@@ -309,6 +310,7 @@ class _Run:
     undermined: dict[str, str] = field(default_factory=dict)
     winners: list[EffectScore] = field(default_factory=list)
     first_scores: tuple[Any, Any] | None = None
+    max_iterations: int = 50
 
 
 def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
@@ -318,7 +320,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              alpha: float = 0.05, workers: int | None = None, until: float | None = None,
              progress: Callable[[str], None] | None = None,
              protocols: Sequence[str] | None = None, error_estimate: bool = True,
-             min_share: float = MIN_SHARE, noise: str = "auto") -> GapReport:
+             min_share: float = MIN_SHARE, noise: str = "auto", max_iterations: int = 50) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -335,7 +337,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     a finer mesh would is neither refitted nor named (:mod:`skinkit.inverse.discretisation`);
     ``min_share``: the share of the excess an added effect must remove to be named a cause
     (:mod:`skinkit.gap.verdict`); ``noise``: how a record's noise is modelled (``"auto"``,
-    ``"white"``, ``"ar"``: :func:`skinkit.forward.observations.channels_from_record`).
+    ``"white"``, ``"ar"``: :func:`skinkit.forward.observations.channels_from_record`);
+    ``max_iterations``: evaluations each fit may make (the calibration and every refit).
     """
     from skinkit.forward import load, model_kind, read_description
 
@@ -347,6 +350,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         raise GapError(f"alpha must be in (0, 1), got {alpha!r}")
     if not (isinstance(min_share, (int, float)) and 0 < min_share <= 1):
         raise GapError(f"--min-share must be in (0, 1], got {min_share!r}")
+    if not (isinstance(max_iterations, int) and max_iterations >= 1):
+        raise GapError(f"--max-iterations must be a whole number >= 1, got {max_iterations!r}")
     spec = read_description(model)
     kind = model_kind(spec)
 
@@ -354,13 +359,13 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         return load(s, workers=workers)
 
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
-                     until=until, protocols=protocols, say=say, noise=noise)
+                     until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations)
     state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
     run = _Run(spec=spec, base=cal["base"], observations=cal["observations"], held=cal["held"],
                present=cal["present"], loader=loader, say=say, alpha=alpha, candidates=candidates,
                max_effects=max_effects, error_estimate=error_estimate, state0=state0, current=state0,
                theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1,
-               min_share=float(min_share))
+               min_share=float(min_share), max_iterations=int(max_iterations))
     for rnd in range(max(max_effects, 1)):
         if not _round(run, rnd):
             break
@@ -370,8 +375,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
 def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
                observations: Observations | str | os.PathLike[str], *, effects: Sequence[str] | None,
                holdout: Sequence[str], free: Sequence[str] | None, until: float | None,
-               protocols: Sequence[str] | None, say: Callable[[str], None], noise: str = "auto"
-               ) -> dict[str, Any]:
+               protocols: Sequence[str] | None, say: Callable[[str], None], noise: str = "auto",
+               max_iterations: int = 50) -> dict[str, Any]:
     """The session read and checked, the candidate effects, and the model calibrated on it:
     ``name``, ``source``, ``observations``, ``held``, ``present`` (the model's effects),
     ``theta`` (free names), ``candidates``, ``result`` (the fit), ``state0`` (:func:`_state`),
@@ -406,7 +411,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         _check_channels(base, observations)
         held = observations.held_out()
         say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
-        r0 = fit(base, observations, theta)
+        r0 = fit(base, observations, theta, max_iterations=max_iterations)
         state0 = _state(base, r0, observations, held)
     finally:
         base.close()
@@ -493,7 +498,8 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
     for t in top:
         try:
             states[t.effect] = _refit(run.spec, run.tables, run.observations, run.held, values,
-                                      run.theta_r, t, sens, load=run.loader, say=run.say)
+                                      run.theta_r, t, sens, load=run.loader, say=run.say,
+                                      max_iterations=run.max_iterations)
             run.n_forward += states[t.effect]["result"].n_forward + 1
         except SkinkitError as exc:
             run.say(f"refit with {t.effect} failed: {exc}")
@@ -619,7 +625,7 @@ def _alone(run: _Run, cal: Mapping[str, Any], label: str) -> float | None:
     sens, tests = run.first_scores
     try:
         st = _refit(run.spec, [], run.observations, run.held, _values(cal["result"]), cal["theta"],
-                    tests[label], sens, load=run.loader, say=run.say)
+                    tests[label], sens, load=run.loader, say=run.say, max_iterations=run.max_iterations)
     except SkinkitError as exc:
         run.say(f"refit of the first model with {label} alone failed: {exc}")
         return None

@@ -224,63 +224,21 @@ def _pairs(report: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 
 def _verdict(report: Mapping[str, Any]) -> tuple[str, list[str]]:
-    """The verdict's CSS class and its sentences (plain text, not yet escaped)."""
+    """The verdict's CSS class and its sentences (plain text, not yet escaped): the diagnosis's
+    own sentences (``messages``, the ones stdout prints, from the final model's numbers), so
+    that the page, stdout and the JSON cannot disagree."""
     gap = report.get("gap") or {}
-    named = [str(n) for n in report.get("named") or []]
     sig = gap.get("significant")
-    r = gap.get("chi2_per_dof")
-    level = f"χ²/ν = {_num(r)}" if not math.isnan(_f(r)) else "χ²/ν not reported"
-    out: list[str] = []
-    if sig is None and not named and not gap:
-        kind = "unknown"
-        out.append("The report carries no residual analysis: whether there is a gap cannot be said.")
-    elif not sig and not named:
-        kind = "ok"
-        out.append(f"No significant gap: the residual is at the noise level ({level}, 1 at the noise level); "
-                   "no effect is named.")
-    else:
-        kind = "gap"
-        if sig or sig is None:
-            out.append(f"Significant gap: the model misses the data beyond the noise ({level}, "
-                       "1 at the noise level).")
-        else:
-            out.append(f"The residual as a whole is at the noise level ({level}), yet effects were named.")
-        top = [c for c in _ranked(_cells(report)) if c.get("significant")][:N_VERDICT_CELLS]
-        if top:
-            where = "; ".join(f"{c.get('label')} ({_axis_name(c)}, {_pct(c.get('share'))} of the excess "
-                              f"along it, χ²/dof {_num(c.get('chi2_per_dof'))})" for c in top)
-            out.append(f"It lies mainly in: {where}.")
-        if named:
-            what = []
-            for n in named:
-                mag = _magnitudes(_candidate(report, n))
-                what.append(f"{n} ({mag}; value ± standard error)" if mag else n)
-            out.append(f"Named effect{'s' if len(named) > 1 else ''}: {', '.join(what)}.")
-            shr = report.get("shrinkage") or {}
-            ov, ho = _f(shr.get("overall")), _f(shr.get("held_out"))
-            if not math.isnan(ov):
-                s = (f"Adding {'them' if len(named) > 1 else 'it'} removes {_pct(ov)} of the excess residual "
-                     "on the fitted protocols")
-                s += f" and {_pct(ho)} on the held-out ones." if not math.isnan(ho) else "."
-                out.append(s)
-        else:
-            out.append("No installed effect improves the fit significantly: none is named (the missing "
-                       "physics is not among the candidates, or not separable on these protocols).")
-        for p in _pairs(report):
-            a, b = p["effects"]
-            if named and a not in named and b not in named:
-                continue   # with a named effect, only the pairs that concern it belong in the verdict
-            s = f"{a} and {b} leave nearly the same signature on these protocols and cannot be told apart"
-            s += f"; protocol {p['protocol']} would separate them." if p.get("protocol") else "."
-            out.append(s)
-    # the diagnosis's own plain-language sentences, unless one of the above already says the same
-    # thing (same opening clause, e.g. "No significant gap: ...")
-    openings = {x.split(":")[0].strip().lower() for x in out}
-    for m in report.get("messages") or []:
-        m = str(m)
-        if m not in out and m.split(":")[0].strip().lower() not in openings:
-            out.append(m)
-    return kind, out
+    if sig is None and not report.get("named") and not gap:
+        return "unknown", ["The report carries no residual analysis: whether there is a gap cannot be said."]
+    kind = "gap" if sig or report.get("named") else "ok"
+    said = [str(m) for m in report.get("messages") or []]
+    if not said:
+        r = gap.get("chi2_per_dof")
+        level = f"χ²/ν = {_num(r)}" if not math.isnan(_f(r)) else "χ²/ν not reported"
+        said = [f"{'Significant gap' if sig else 'No significant gap'} ({level}); the report carries no "
+                "verdict sentences."]
+    return kind, said
 
 
 def _section_verdict(report: Mapping[str, Any]) -> str:
@@ -582,19 +540,22 @@ def _section_scores(report: Mapping[str, Any]) -> str:
     intro = ("<p>Each installed effect that applies to the model is tested at its null value by a score "
              "(Lagrange-multiplier) test with the fitted parameters' directions projected out (no refit); "
              "the top candidates are then refitted and compared by AIC (ΔAIC: the refit's AIC less the "
-             "model's without the effect) and by the fraction of the excess residual they remove.</p>")
+             "model's without the effect) and by the share of the excess residual they remove (an added "
+             "effect is a cause when its share reaches the report's min_share, else a minor "
+             "contribution).</p>")
     rows = []
     for i, c in enumerate(cands):
         eff = str(c.get("effect", "?"))
-        rows.append([_t(i + 1, i + 1), _t(eff + (" (named)" if eff in named else ""), eff),
+        role = str(c.get("role") or ("cause" if eff in named else ""))
+        rows.append([_t(i + 1, i + 1), _t(eff + (f" ({role})" if role else ""), eff),
                      _t(_num(c.get("score")), _f(c.get("score"))), _t(_num(c.get("dof")), _f(c.get("dof"))),
                      _t(_p(c.get("p_value")), _f(c.get("p_value"))),
                      _t("yes" if c.get("refitted") else "no", 1 if c.get("refitted") else 0),
                      _t(_num(c.get("delta_aic"), 4), _f(c.get("delta_aic"))),
-                     _t(_pct(c.get("shrinkage")), _f(c.get("shrinkage"))),
+                     _t(_pct(c.get("share", c.get("shrinkage"))), _f(c.get("share", c.get("shrinkage")))),
                      _t(_magnitudes(c) or "—", None),
                      _t(", ".join(str(x) for x in c.get("not_separable_from") or []) or "—", None)])
-    table = _table(["rank", "effect", "score", "q (its dof)", "p-value", "refitted", "ΔAIC", "shrinkage",
+    table = _table(["rank", "effect (role)", "score", "q (its dof)", "p-value", "refitted", "ΔAIC", "share",
                     "identified magnitude (value ± se)", "not separable from"], rows,
                    row_classes=["named" if str(c.get("effect")) in named else "" for c in cands])
     return head + intro + _img(_scores_figure(cands, named), "score statistic per candidate effect") + table \
