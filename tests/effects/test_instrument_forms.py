@@ -187,6 +187,30 @@ def test_finite_element_drive_sensitivities_agree_with_central_differences(effec
         np.testing.assert_allclose(proto[cname].d[name], fd, rtol=0, atol=1e-5 * scale, err_msg=cname)
 
 
+#: a lumped indentation model and its session (preconditioning ramp-and-hold, two indentation periods)
+GAP_MODEL = {
+    "model": {"kind": "lumped", "name": "gap-lumped"},
+    "lumped": {"test": "indentation", "family": "quasi-static", "axis": "-z", "drive": "tip_position",
+               "elastic": "exponential", "parameters": {"a": "15 mN", "b": 800.0}},
+    "session": {"protocols": ["preconditioning", "normal_indentation"],
+                "parameters": {"preconditioning": {"hold": 15.0}, "normal_indentation": {"periods": 2}}},
+}
+
+
+@pytest.mark.parametrize("effect", [{"name": "channel-lag", "lag": 0.03},
+                                    {"name": "force-warmup", "z": 0.02, "tau": 5.0}])
+def test_the_gap_diagnosis_names_the_effect_in_a_virtual_lab_truth(effect):
+    """End to end: a truth with the effect (a 30 ms lag; a 20 mN settling over 5 s), the model
+    without it; the diagnosis names it first (the linear drift, its nearest rival for the
+    warm-up, is not)."""
+    from skinkit.gap import diagnose
+    from skinkit.inverse.coverage import LabSessions
+
+    obs = LabSessions({**GAP_MODEL, "effects": [effect]})(1)
+    rep = diagnose(GAP_MODEL, obs, max_effects=1)
+    assert rep.named == [effect["name"]], rep.to_dict()["rounds"]
+
+
 # -- nulls and inadmissible values ---------------------------------------------------------------------
 @pytest.mark.parametrize("drive", ["tip_position", "tip_force"])
 def test_the_null_leaves_the_model_unchanged(drive):
