@@ -366,6 +366,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
                max_effects=max_effects, error_estimate=error_estimate, state0=state0, current=state0,
                theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1,
                min_share=float(min_share), max_iterations=int(max_iterations))
+    if effects is None:
+        _more_of_the_same(run)     # a repeatable effect the model file already has: one more term
     for rnd in range(max(max_effects, 1)):
         if not _round(run, rnd):
             break
@@ -431,7 +433,8 @@ def _round(run: _Run, rnd: int) -> bool:
         run.loc0 = loc
     values = _values(current["result"])
     spec_r = with_effects(run.spec, run.tables)
-    entry: dict[str, Any] = {"round": rnd + 1, "model_effects": run.present + [t["name"] for t in run.tables],
+    in_model = run.present + [t.get("instance", t["name"]) for t in run.tables]
+    entry: dict[str, Any] = {"round": rnd + 1, "model_effects": in_model,
                              "chi2_per_dof": current["chi2"] / current["dof"],
                              "gap_significant": bool(loc.significant), "candidates": [], "named": None}
     if not run.remaining:
@@ -596,7 +599,8 @@ def _name(run: _Run, winner: EffectScore, st: dict[str, Any], rnd: int) -> bool:
     run.remaining = [e for e in run.remaining if e != winner.effect]
     _more_of_the_same(run)
     if len(run.named) >= run.max_effects:
-        run.rounds.append({"round": rnd + 2, "model_effects": run.present + [t["name"] for t in run.tables],
+        in_model = run.present + [t.get("instance", t["name"]) for t in run.tables]
+        run.rounds.append({"round": rnd + 2, "model_effects": in_model,
                            "chi2_per_dof": st["chi2"] / st["dof"], "candidates": [], "named": None,
                            "note": f"--max-effects {run.max_effects} reached"})
         return False

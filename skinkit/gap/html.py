@@ -236,8 +236,10 @@ def _verdict(report: Mapping[str, Any]) -> tuple[str, list[str]]:
     if not said:
         r = gap.get("chi2_per_dof")
         level = f"χ²/ν = {_num(r)}" if not math.isnan(_f(r)) else "χ²/ν not reported"
-        said = [f"{'Significant gap' if sig else 'No significant gap'} ({level}); the report carries no "
-                "verdict sentences."]
+        said = [f"{'Significant gap' if sig else 'No significant gap'} ({level})."]
+        for n in report.get("named") or []:
+            c = _candidate(report, str(n)) or {}
+            said.append(f"Named: {n} (it removes {_pct(c.get('share', c.get('shrinkage')))} of the excess).")
     return kind, said
 
 

@@ -332,8 +332,6 @@ def test_refitting_with_the_instance_recovers_both_time_scales(two_scales):
     assert r.chi2_per_dof < 1.2 < r0.chi2_per_dof
 
 
-@pytest.mark.skip(reason="needs skinkit.gap.diagnose to offer one more instance of the repeatable "
-                         "effects the model starts with (repeat_candidates of its [[effects]])")
 def test_diagnose_names_the_second_instance(two_scales):
     """The diagnosis names viscoelastic-2 for the second time scale, not force-drift."""
     from skinkit.gap.diagnose import diagnose

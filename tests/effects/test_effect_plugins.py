@@ -364,11 +364,13 @@ def test_inclusion_is_a_field_on_the_skin(goh_qlv):
 
 def test_preconditioning_softens_the_skin_or_the_lumped_element(goh_qlv, lumped):
     out = effect("preconditioning").apply(goh_qlv, {"softening": 0.2})
+    # the default form is driven by the loading cycles: its scale "cycles" goes with it
     assert out["fields"] == [{"name": "preconditioning", "kind": "softening", "layers": ["skin"],
-                              "softening": 0.2}]
+                              "softening": 0.2, "cycles": 1.0}]
     out = effect("preconditioning").apply(lumped, {"softening": 0.2})
-    assert out["lumped"]["preconditioning"] == {"softening": 0.2}
-    assert out["bindings"] == {"preconditioning.softening": "lumped.softening"}
+    assert out["lumped"]["preconditioning"] == {"form": "cycles", "softening": 0.2, "cycles": 1.0}
+    assert out["bindings"] == {"preconditioning.softening": "lumped.softening",
+                               "preconditioning.cycles": "lumped.cycles"}
 
 
 def test_thickness_moves_the_interface_and_keeps_the_total(goh_qlv):

@@ -119,7 +119,7 @@ def test_plain_verdict(files):
     r = CliRunner().invoke(main, ["gap", "diagnose", str(d / "m.toml"), str(d / "s.h5"), "--name", "plain",
                                   "--effects", "viscoelastic,force-drift", "--max-effects", "1"])
     assert r.exit_code == 0, r.output
-    assert "`viscoelastic` named" in r.stdout and "Significant gap" in r.stdout
+    assert "`viscoelastic` is a cause" in r.stdout and "Significant gap" in r.stdout
     assert "calibrating gap-cli" in r.stderr          # progress goes to stderr
 
 
