@@ -169,8 +169,8 @@ def gap_report() -> dict:
                    {"round": 2, "model_effects": ["prestress"], "chi2_per_dof": 1.3, "named": None,
                     "candidates": [], "not_named": {}}],
         "messages": ["Significant gap: χ²/ν 3.2; located in in_plane_030 (60 % of the excess).",
-                     "`prestress` is a cause: it removes 82 % of the excess the noise level cannot account for "
-                     "(ΔAIC -120.0; prestress.p = 2100 ± 250 Pa).",
+                     "`prestress` is a cause: it removes 82 % of the excess the noise level cannot "
+                     "account for (ΔAIC -120.0; prestress.p = 2100 ± 250 Pa).",
                      "prestress and fibres are not separable on these protocols (|cos| 0.970); in_plane_075 "
                      "would separate them best (|cos| 0.410)."],
     }
