@@ -95,9 +95,9 @@ class ForceWarmup(_ForceBias):
 
     Phenomenon: a strain-gauge load cell's bridge warms under its excitation current and its
     amplifier under its own dissipation, so the zero moves until both reach thermal equilibrium,
-    to first order as a single-time-constant transient; manufacturers state a warm-up time for
-    it (tens of minutes for a six-axis transducer) and calibration procedures for
-    force-measuring instruments (ISO 376) take readings only once the instrument is stable.
+    to first order as a single-time-constant transient. Manufacturers of load cells and their
+    amplifiers state a warm-up time for it, and the calibration of force-proving instruments
+    (ISO 376) starts only once the instrument's temperature has stabilised.
     Taring at a protocol's start removes the offset reached so far: what remains within the
     protocol is again A′ (1 − e^{−t/τ}), with A′ = A e^{−t₀/τ} the part still to come. The
     effect takes one A′ for every protocol (exact for a single protocol, or for a transient
