@@ -305,7 +305,7 @@ class FEForwardModel(ForwardModel):
         from skinkit.fem.sensitivity import parameter_names as fe_names
         fe = set(fe_names(probe.problem))
         inst = {str(e.get(k)) for e in spec.get("instrument", []) or []
-                for k in ("parameter", "azimuth_parameter") if e.get(k)}
+                for k in ("parameter", "azimuth_parameter", "tau_parameter") if e.get(k)}
         bind = dict(spec.get("bindings", {}))
         out = {}
         for nm in names:

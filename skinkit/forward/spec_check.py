@@ -25,8 +25,8 @@ from skinkit.errors import EffectError, ForwardError
 #: ``[drive] max_step`` range [s]: positive, at most this (longer than any protocol)
 MAX_DRIVE_STEP_S = 1e4
 #: ``[[instrument]]`` keys
-INSTRUMENT_KEYS = ("kind", "parameter", "value", "channel", "component", "basis", "source", "mode",
-                   "azimuth", "azimuth_parameter")
+INSTRUMENT_KEYS = ("kind", "parameter", "value", "channel", "component", "basis", "tau", "tau_parameter",
+                   "source", "mode", "azimuth", "azimuth_parameter")
 #: ``[[fields]]`` keys besides each kind's parameters
 FIELD_KEYS = ("name", "kind", "layers")
 

@@ -42,8 +42,11 @@ def test_whole_record_solved_and_points_predicted(tmp_path):
     (proto,) = obs.names
     force, pos = obs[proto].channels["tip_force"], obs[proto].channels["tip_position"]
     fp = pred.protocols[proto]["tip_force"]
-    # every force sample predicted, to the last one (8.7 mm of pull)
-    assert np.all(fp.mask(force)[:, 0]) and np.all(np.isfinite(fp.values[:, 0]))
+    # every force sample predicted, to the last one (8.7 mm of pull), but the isolated spikes the
+    # noise model leaves out of every sum
+    spikes = force.outliers[:, 0] if force.outliers is not None else np.zeros(len(force.time_s), bool)
+    assert spikes.sum() < 0.02 * spikes.size      # 9 of 876: jumps of 40-100 mN and back
+    assert np.all(fp.mask(force)[:, 0] | spikes) and np.all(np.isfinite(fp.values[:, 0]))
     assert pos.values[:, 0].max() > 8.5e-3
     # over the tracked range (the toe region, to 3.8 mm) a hyperelastic strip pulled further
     # pulls back harder. (Beyond about 8 mm this hand-chosen model's force peaks and falls, a
