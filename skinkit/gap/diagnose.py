@@ -62,6 +62,7 @@ from skinkit.gap.score import (
 from skinkit.gap.sentences import messages, num
 from skinkit.gap.verdict import (
     MIN_SHARE,
+    SMALL_REMAINDER,
     assign_roles,
     fit_warnings,
     noise_factor,
@@ -701,7 +702,8 @@ def _verdict(run: _Run, cal: Mapping[str, Any], loc_final: Any) -> dict[str, Any
     rem = remaining(loc_final, final, run.state0, kappa)
     warns = fit_warnings(cal["result"], "the calibration", cal["theta"]) + list(run.warnings)
     warns += rest_warnings(run.observations, final["prediction"])
-    if rem["significant"] and run.max_effects and len(added) >= run.max_effects:
+    if rem["significant"] and rem["unexplained_share"] >= SMALL_REMAINDER and run.max_effects \
+            and len(added) >= run.max_effects:
         warns.append({"kind": "max-effects-reached", "where": "diagnosis", "message":
                       f"the diagnosis stopped at --max-effects {run.max_effects} while the remainder is "
                       "still significant: more rounds may find more"})
