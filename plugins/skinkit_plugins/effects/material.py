@@ -23,6 +23,16 @@ class Viscoelastic(BaseEffect):
     """One more Prony term around the skin's elastic response: relative modulus ``g1`` [1] and
     relaxation time ``tau1`` [s]; null g1 = 0.
 
+    Phenomenon: under a held stretch the force of skin falls over seconds to minutes and recovers
+    after unloading (the collagen network and the interstitial fluid rearranging). Form: Fung's
+    quasi-linear viscoelasticity, the elastic response convolved with a reduced relaxation
+    function G(t) = g∞ + Σ gᵢ e^(−t/τᵢ) (Fung, Biomechanics, 1993, ch. 7; Puso & Weiss 1998 for
+    its finite-strain Prony form). A spectrum of times is approached by repeating the effect (one
+    term per instance, the diagnosis offering the next as "more of the same"). Not covered: a
+    relaxing fraction that grows with stretch (non-separable, e.g. Schapery's or Pipkin-Rogers
+    forms), a power-law (fractional) kernel other than through several terms, poroelastic flow
+    whose time scales with the loaded size, and creep under force beyond what the same G gives.
+
     Finite elements: a skin whose law is ``qlv`` gets its next term (``terms`` + 1, parameters
     ``g<n>``, ``tau<n>``); any other law is wrapped, ``law = "qlv"``, ``options = {elastic =
     <law>, terms = 1, elastic_options = <its options>}``. Bindings: ``viscoelastic.g1`` ->
