@@ -2,9 +2,11 @@
 
 Every function here is plain NumPy on arrays: the drive programme, the exponential elastic
 element and, for each effect a lumped model can lack, forms of it that the candidate effects
-do not share (the plugins' forms are a single Prony term by its exact recurrence, a softening
-that follows the running largest stretch, a force drift linear in time and a linear series
-compliance solved with the element). Nothing is imported from the plugins or from the forward
+do not share (the plugins' forms are Prony terms by their exact recurrence, a softening that
+develops along the loading strokes or follows the largest load, a force drift linear in time,
+a one-exponential warm-up, a constant channel delay and a linear series compliance solved with
+the element; ``docs/guide/gap-benchmark.md`` sets each truth against them). Nothing is imported
+from the plugins or from the forward
 model's relaxation, preconditioning or instrument code: a truth made here checks the diagnosis
 against forms it did not make (``tests/gap/test_benchmark_alternative.py`` parses the imports).
 
