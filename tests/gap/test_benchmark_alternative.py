@@ -262,6 +262,7 @@ def test_forms_whose_answer_is_not_installed_are_left_out_with_the_reason() -> N
     assert "preconditioning" not in skipped                                  # not applicable here
 
 
+@pytest.mark.needs_plugins          # the fit's optimiser is a built-in plugin
 def test_every_form_is_clearly_visible_or_a_null() -> None:
     # documented: effect and artefact forms leave ≥ 20 detection thresholds after the model's fit
     for f in alt.FORMS:
