@@ -177,10 +177,12 @@ def local_scale(x: np.ndarray, valid: np.ndarray, n_rest: int, ar: np.ndarray,
         return np.ones(x.size)
     idx = np.flatnonzero(ok)
     xs = np.interp(np.arange(x.size), idx, x[idx])
-    e = lfilter(np.concatenate([[1.0], -np.asarray(ar, float)]), [1.0], xs)
-    e = e - uniform_filter1d(e, HIGH_PASS, mode="nearest")
-    e[: len(ar) + 1] = 0.0
+    # relative to the record's start, so that the filter's first samples carry no level step
+    xs = xs - float(np.median(xs[: min(20, xs.size)]))
     p = len(ar) + 1
+    e = lfilter(np.concatenate([[1.0], -np.asarray(ar, float)]), [1.0], xs)
+    e[:p] = e[p]
+    e = e - uniform_filter1d(e, HIGH_PASS, mode="nearest")
     rest = ok[p:n_rest]
     if rest.sum() < 10:
         return np.ones(x.size)

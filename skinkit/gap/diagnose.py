@@ -9,7 +9,7 @@ held-out protocols stay out of the fit), then in rounds:
    to the model, at its null, from one prediction with sensitivities; the top candidates
    (``candidates``, default 3) whose test survives the Bonferroni correction are refitted with
    the effect added (its parameters free, started a linearised step from the null) and compared
-   by AIC and held-out error. An effect is **named** only when all of these hold:
+   by AIC and held-out error. An effect is **added** to the model only when all of these hold:
 
    * the gap is significant: the residual's family (step 1: the whole residual and every cell,
      Holm) or the score tests' family (the best candidate's p·K) rejects, each at α/2, so that
@@ -23,8 +23,12 @@ held-out protocols stay out of the fit), then in rounds:
    * it does not worsen the held-out χ² by more than 2 per added parameter (under the null a
      useless parameter costs about 1 out of sample: the optimism of a fit).
 
-   Of the candidates that qualify, the one with the lowest AIC is named; the model is augmented
-   with it at its fitted values and the next round looks for another (``max_effects``).
+   Of the candidates that qualify, one whose effect explained at least ``min_share`` of the
+   first model's excess on its own comes first, then the lowest AIC; the model is augmented
+   with it at its fitted values and the next round looks for another (``max_effects``). A
+   repeatable effect in the model offers one more instance as a candidate of its own. Whether
+   an added effect is a **cause** or a **minor** contribution, what remains unexplained, and the
+   warnings are :mod:`skinkit.gap.verdict`'s.
 3. **how far**: χ² before and after, overall and per cell, on fitted and held-out protocols;
    shrinkage = the fraction of the excess residual (χ² − dof) removed; the effect's identified
    magnitude with its standard error (from the refit's covariance).
@@ -47,6 +51,7 @@ import numpy as np
 
 from skinkit import jsonio
 from skinkit.errors import SkinkitError
+from skinkit.gap.checks import GapError, check_channels, check_effects
 from skinkit.gap.score import (
     ScoreTest,
     Sensitivities,
@@ -78,11 +83,6 @@ AIC_MARGIN = 10.0
 HELD_OUT_ALLOWANCE = 2.0
 #: a refit starts at most this many typical magnitudes from the null
 MAX_START = 2.0
-
-
-class GapError(SkinkitError):
-    """A diagnosis that cannot run: no free parameter, an unknown or inapplicable effect, a
-    session without the channels the model predicts."""
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -150,53 +150,6 @@ def _state(model: Any, result: FitResult, observations: Observations, held: Obse
     k = len(result.parameters.free_names)
     return {"prediction": pred, "chi2": c_fit, "n": n_fit, "k": k, "dof": n_fit - k,
             "held_chi2": c_ho, "held_n": n_ho, "result": result}
-
-
-# --------------------------------------------------------------------------------- checks
-def check_effects(kind: str, present: Sequence[str], effects: Sequence[str] | None) -> list[str]:
-    """The candidate effects: ``effects`` checked (installed, applicable to ``kind``, not already
-    in the model), or every applicable installed effect the model does not have."""
-    from skinkit import registry
-    from skinkit.forward.visibility import applicable_effects
-
-    ok = applicable_effects(kind)
-    if effects is None:
-        return [e for e in ok if e not in present]
-    installed = registry.names("skinkit.effects")
-    out = []
-    for e in effects:
-        if e not in installed:
-            raise GapError(f"--effects {e!r}: no such effect is installed "
-                           f"(installed: {', '.join(installed)})")
-        if e not in ok:
-            raise GapError(f"--effects {e!r}: does not apply to a {kind!r} model "
-                           f"(effects for {kind} models: {', '.join(ok)})")
-        if e in present:
-            raise GapError(f"--effects {e!r}: the model already has this effect")
-        if e not in out:
-            out.append(e)
-    if not out:
-        raise GapError("--effects: no effect named")
-    return out
-
-
-def _check_channels(model: Any, observations: Observations) -> None:
-    """Every protocol must hold the channel that drives the model and one it predicts (a lumped
-    model predicts the other tip channel; a finite-element one also the tracked points)."""
-    from skinkit.inverse.design import _model_drive
-
-    drive = _model_drive(model)
-    if drive is None:
-        return
-    other = "tip_force" if drive == "tip_position" else "tip_position"
-    predicted = {other} if getattr(model, "kind", "fe") == "lumped" else {other, "points", "points_2d"}
-    for po in observations:
-        if drive not in po.channels:
-            raise GapError(f"session protocol {po.name!r} has no {drive!r} channel to drive the model "
-                           f"(it has {sorted(po.channels)})")
-        if not predicted & set(po.channels):
-            raise GapError(f"session protocol {po.name!r} has no channel the model predicts "
-                           f"({', '.join(sorted(predicted))}; it has {sorted(po.channels)})")
 
 
 # -------------------------------------------------------------------------------- the rounds
@@ -411,7 +364,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         if not len(observations.fitted()):
             raise GapError("session: every protocol is held out; the calibration needs fitted protocols")
         cands = check_effects(kind, present, list(effects) if effects is not None else None)
-        _check_channels(base, observations)
+        check_channels(base, observations)
         held = observations.held_out()
         say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
         r0 = fit(base, observations, theta, max_iterations=max_iterations)
@@ -560,9 +513,23 @@ def _choose(run: _Run, entry: dict[str, Any], gate: Mapping[str, Any], tests: Se
             good, why = _qualifies(c, states[c.effect], run.current)
             if not good:
                 reasons[c.effect] = why
-            elif winner is None or c.delta_aic < winner.delta_aic:
+            elif winner is None or _priority(run, c) < _priority(run, winner):
                 winner = c
     return winner, reasons
+
+
+def _priority(run: _Run, c: EffectScore) -> tuple[bool, float]:
+    """Which qualifying candidate a round adds: one whose effect explained at least ``min_share``
+    of the first model's excess on its own (a cause, known from the first round's refits; a
+    further instance counts as its effect) before one that did not or is not known to, then
+    the lowest AIC. Adding a minor contribution first would spend a round that a cause needs."""
+    of = effect_of(c.effect)
+    rec = next((x for x in run.first_candidates if x.effect == of and x.refitted), None)
+    cause = False
+    if rec is not None and rec.extra.get("chi2_refit") is not None and run.loc0 is not None:
+        e0 = run.state0["chi2"] - noise_factor(run.loc0) * run.state0["dof"]
+        cause = e0 > 0 and (run.state0["chi2"] - rec.extra["chi2_refit"]) / e0 >= run.min_share
+    return (not cause, float(c.delta_aic))
 
 
 def _gate(loc: Any, tests: Sequence[ScoreTest], alpha: float) -> dict[str, Any]:

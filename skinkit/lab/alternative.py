@@ -35,7 +35,7 @@ import numpy as np
 from skinkit.lab import alt_forms as af
 from skinkit.lab import alt_noise as an
 from skinkit.lab.sensors import SensorModel
-from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
+from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations, RobotRecord
 
 #: the truth's elastic element and force zero: the values of docs/models/extension_relaxation_lumped.toml
 TRUE_A_N = 0.015
@@ -206,9 +206,14 @@ def protocol() -> Protocol:
 
 
 def session(name: str, seed: int | None) -> Observations:
-    """The virtual session of form ``name`` and ``seed`` (None: noiseless): tip position
-    ``(T, 3)`` exact (x the drive), tip force ``(T, 3)`` (x the truth's record, y and z white
-    noise), both at the lab's declared noise."""
+    """The virtual session of form ``name`` and ``seed`` (None: noiseless) as a record a lab
+    would bring: tip position ``(T, 3)`` (x the drive) with the lab's encoder noise, tip force
+    ``(T, 3)`` (x the truth's record, y and z white noise), read as any robot record is
+    (:func:`skinkit.forward.observations.channels_from_record`): the noise level, its colour and
+    the spikes are estimated from the record itself, not declared — the truth's noise is not
+    told to the diagnosis. A noiseless session keeps the declared levels (nothing to estimate)."""
+    from skinkit.forward.observations import channels_from_record
+
     tr = truth(name, seed)
     sens = SensorModel()
     n = tr["t"].size
@@ -216,17 +221,20 @@ def session(name: str, seed: int | None) -> Observations:
     pos[:, 0] = tr["u"]
     force = np.zeros((n, 3))
     force[:, 0] = tr["force"]
-    if seed is not None:
-        rng = np.random.default_rng([int(seed), 7, 4243])
-        force[:, 1:] = tr["sigma"] * rng.standard_normal((n, 2))
-    chans = {"tip_position": Channel("tip_position", tr["t"], pos, noise=sens.sigma("tip_position"),
-                                     noise_source="virtual lab (declared)"),
-             "tip_force": Channel("tip_force", tr["t"], force, noise=sens.sigma("tip_force"),
-                                  noise_source="virtual lab (declared)")}
     label = "noiseless" if seed is None else f"seed {seed}"
+    if seed is None:
+        chans = {"tip_position": Channel("tip_position", tr["t"], pos, noise=sens.sigma("tip_position"),
+                                         noise_source="virtual lab (declared)"),
+                 "tip_force": Channel("tip_force", tr["t"], force, noise=sens.sigma("tip_force"),
+                                      noise_source="virtual lab (declared)")}
+        return Observations({PROTOCOL: ProtocolObservations(protocol(), chans)}, None,
+                            f"alternative truth {name}, {label}")
+    rng = np.random.default_rng([int(seed), 7, 4243])
+    force[:, 1:] = tr["sigma"] * rng.standard_normal((n, 2))
+    pos = pos + sens.sigma("tip_position") * rng.standard_normal((n, 3))
+    # robot frame: z into the skin (the reader flips z; x, the axis here, is unchanged)
+    flip = np.array([1.0, 1.0, -1.0])
+    rec = RobotRecord(time_s=tr["t"], tip_position=pos * flip, tip_force=force * flip, protocol=protocol())
+    chans = channels_from_record(rec, f"alternative truth {name}")
     return Observations({PROTOCOL: ProtocolObservations(protocol(), chans)}, None,
                         f"alternative truth {name}, {label}")
-
-
-__all__ = ["FAMILIES", "FORMS", "PROTOCOL", "SKIPPED_EFFECTS", "TRUE_A_N", "TRUE_B_PER_M", "TRUE_ZERO_N",
-           "Form", "force_sigma", "form", "programme", "protocol", "session", "truth"]
