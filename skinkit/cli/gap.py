@@ -35,7 +35,7 @@ def gap() -> None:
 @click.option("--holdout", default=None, help="protocols kept out of the fit and predicted (comma-separated)")
 @click.option("--max-effects", type=click.IntRange(min=0), default=3, show_default=True,
               help="add at most this many effects, one per round (0: score and locate only)")
-@click.option("--min-share", type=float, default=0.5, show_default=True,
+@click.option("--min-share", type=FiniteFloat(), default=0.5, show_default=True,
               help="the share of the excess residual an added effect must remove to be named a cause; "
                    "smaller significant improvements are reported as minor contributions")
 @click.option("--max-iterations", type=click.IntRange(min=1), default=50, show_default=True,

@@ -46,10 +46,16 @@ def analyse(J: np.ndarray, z: np.ndarray, names: list[str], values: np.ndarray,
     dof = max(m - n, 1)
     chi2 = float(z @ z)
     F = J.T @ J
-    w, V = np.linalg.eigh(F)
+    # inverted in the fit's scaled coordinates (each column in units of the parameter's scale):
+    # in SI the columns may differ by 1e15 (newtons against 1/m), and a relative eigenvalue
+    # cut would call a well-determined parameter flat
+    D0 = np.asarray(dvalue_dscaled, dtype=float) if n else np.ones(0)
+    D0 = np.where(np.isfinite(D0) & (np.abs(D0) > 0), np.abs(D0), 1.0)
+    Fs = F * np.outer(D0, D0)
+    w, V = np.linalg.eigh(Fs)
     tol = max(w.max(), 0.0) * 1e-14 * n if n else 0.0
     inv_w = np.where(w > tol, 1.0 / np.where(w > tol, w, 1.0), 0.0)
-    cov = (V * inv_w) @ V.T
+    cov = ((V * inv_w) @ V.T) * np.outer(D0, D0)
     singular = [i for i in range(n) if w[i] <= tol]
     inflation = max(1.0, chi2 / dof) if noise_weighted else chi2 / dof
     cov = cov * inflation
