@@ -117,7 +117,6 @@ def visible_excess(name: str) -> dict[str, float]:
 
     from skinkit.forward import load
     from skinkit.inverse.fit import fit
-    from skinkit.lab.alternative import session
 
     obs = session(name, None)
     with load(model_spec()) as model:
@@ -130,6 +129,21 @@ def visible_excess(name: str) -> dict[str, float]:
 
 
 _INSTANCE = re.compile(r"^(?P<effect>.+)-(?P<k>\d+)$")
+
+
+def session(name: str, seed: int | None) -> Any:
+    """The virtual session of form ``name`` and ``seed`` (None: noiseless), read as any robot
+    record is (:func:`skinkit.forward.observations.channels_from_record`): the noise level, its
+    colour and the spikes are estimated from the record, not told to the diagnosis."""
+    from skinkit.forward.observations import channels_from_record
+    from skinkit.lab import alternative as alt
+    from skinkit.schemas import Observations, ProtocolObservations
+
+    if seed is None:
+        return alt.noiseless(name)
+    chans = channels_from_record(alt.record(name, seed), f"alternative truth {name}")
+    return Observations({alt.PROTOCOL: ProtocolObservations(alt.protocol(), chans)}, None,
+                        f"alternative truth {name}, seed {seed}")
 
 
 def effect_of(label: str) -> str:
@@ -184,7 +198,6 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
     rec: dict[str, Any] = {k: payload[k] for k in ("id", "family", "form", "effect", "accepted", "seed")}
     rec["name"] = payload["id"]
     try:
-        from skinkit.lab.alternative import session
 
         rec["visible_excess"] = visible_excess(payload["form"])
         rec["truth_info"] = truth(payload["form"], int(payload["seed"]))["info"]

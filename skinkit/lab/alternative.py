@@ -205,15 +205,11 @@ def protocol() -> Protocol:
                     description="extension: ramp 1 mm/s to 9 mm, hold 40 s, return; 4 cycles")
 
 
-def session(name: str, seed: int | None) -> Observations:
-    """The virtual session of form ``name`` and ``seed`` (None: noiseless) as a record a lab
-    would bring: tip position ``(T, 3)`` (x the drive) with the lab's encoder noise, tip force
-    ``(T, 3)`` (x the truth's record, y and z white noise), read as any robot record is
-    (:func:`skinkit.forward.observations.channels_from_record`): the noise level, its colour and
-    the spikes are estimated from the record itself, not declared — the truth's noise is not
-    told to the diagnosis. A noiseless session keeps the declared levels (nothing to estimate)."""
-    from skinkit.forward.observations import channels_from_record
-
+def record(name: str, seed: int) -> RobotRecord:
+    """Form ``name``'s session with noise ``seed`` as a robot record a lab would bring (robot
+    frame): tip position ``(T, 3)`` (x the drive) with the lab's encoder noise, tip force
+    ``(T, 3)`` (x the truth's record, y and z white noise). Nothing about its noise is declared:
+    whoever reads it estimates the noise from the record itself."""
     tr = truth(name, seed)
     sens = SensorModel()
     n = tr["t"].size
@@ -221,20 +217,26 @@ def session(name: str, seed: int | None) -> Observations:
     pos[:, 0] = tr["u"]
     force = np.zeros((n, 3))
     force[:, 0] = tr["force"]
-    label = "noiseless" if seed is None else f"seed {seed}"
-    if seed is None:
-        chans = {"tip_position": Channel("tip_position", tr["t"], pos, noise=sens.sigma("tip_position"),
-                                         noise_source="virtual lab (declared)"),
-                 "tip_force": Channel("tip_force", tr["t"], force, noise=sens.sigma("tip_force"),
-                                      noise_source="virtual lab (declared)")}
-        return Observations({PROTOCOL: ProtocolObservations(protocol(), chans)}, None,
-                            f"alternative truth {name}, {label}")
     rng = np.random.default_rng([int(seed), 7, 4243])
     force[:, 1:] = tr["sigma"] * rng.standard_normal((n, 2))
     pos = pos + sens.sigma("tip_position") * rng.standard_normal((n, 3))
-    # robot frame: z into the skin (the reader flips z; x, the axis here, is unchanged)
+    # robot frame: z into the skin (a reader flips z; x, the axis here, is unchanged)
     flip = np.array([1.0, 1.0, -1.0])
-    rec = RobotRecord(time_s=tr["t"], tip_position=pos * flip, tip_force=force * flip, protocol=protocol())
-    chans = channels_from_record(rec, f"alternative truth {name}")
+    return RobotRecord(time_s=tr["t"], tip_position=pos * flip, tip_force=force * flip, protocol=protocol())
+
+
+def noiseless(name: str) -> Observations:
+    """Form ``name``'s noiseless session at the lab's declared noise levels (nothing to estimate)."""
+    tr = truth(name, None)
+    sens = SensorModel()
+    n = tr["t"].size
+    pos = np.zeros((n, 3))
+    pos[:, 0] = tr["u"]
+    force = np.zeros((n, 3))
+    force[:, 0] = tr["force"]
+    chans = {"tip_position": Channel("tip_position", tr["t"], pos, noise=sens.sigma("tip_position"),
+                                     noise_source="virtual lab (declared)"),
+             "tip_force": Channel("tip_force", tr["t"], force, noise=sens.sigma("tip_force"),
+                                  noise_source="virtual lab (declared)")}
     return Observations({PROTOCOL: ProtocolObservations(protocol(), chans)}, None,
-                        f"alternative truth {name}, {label}")
+                        f"alternative truth {name}, noiseless")

@@ -159,7 +159,7 @@ def test_spikes_counted_isolated_and_sized() -> None:
 
 
 def test_sessions_are_repeatable_and_seeds_differ() -> None:
-    a, b, c = (alt.session("ar1-0.5", s)[alt.PROTOCOL].channels["tip_force"].values for s in (1, 1, 2))
+    a, b, c = (alt.record("ar1-0.5", s).tip_force for s in (1, 1, 2))
     np.testing.assert_array_equal(a, b)
     assert not np.allclose(a, c)
 
