@@ -3,17 +3,18 @@ remains unexplained, and every failure or implausible answer stated.
 
 * **share**: the fraction of the first model's excess an effect removes on its own: added alone
   to the calibrated model and refitted. Overlapping effects (relaxation and preconditioning both
-  lower later peaks) are each judged by what they explain, not by what is left after another
-  took its part. Further instances of a repeatable effect ("more of the same": a second Prony
-  term) count with the first: they add what they removed when they were added. The excess is
-  χ² − κν, κ the residual's χ²/ν in the band where no effect acts (:func:`noise_factor`): on
-  tens of thousands of samples a noise level off by a few per cent would otherwise outweigh
-  every effect. An effect is a **cause** when its family's share reaches
-  ``min_share`` (default :data:`MIN_SHARE`, half) and nothing undermines it (its refit did not
-  converge, or one of its parameters sits on a bound); a **minor** contribution when it was added
-  (significant score test, AIC and held-out rules met) with a smaller share; **rejected**
-  otherwise. On tens of thousands of samples a useless parameter passes any AIC margin; the
-  share is what separates "a cause was found" from "something was improved".
+  lower later peaks) are each judged by what they explain; a cause must also remove at least
+  ``min_share`` of what the effects added before it left, so that an effect whose part another
+  already took is not named beside it. Further instances of a repeatable effect ("more of the
+  same": a second Prony term) count with the first: they add what they removed when they were
+  added. The excess is χ² − κν, κ the residual's χ²/ν in the band where no effect acts
+  (:func:`noise_factor`): on tens of thousands of samples a noise level off by a few per cent
+  would otherwise outweigh every effect. An effect is a **cause** when its family's share
+  reaches ``min_share`` (default :data:`MIN_SHARE`, half) and nothing undermines it (its refit
+  did not converge, or one of its parameters sits on a bound); a **minor** contribution when it
+  was added (significant score test, AIC and held-out rules met) with a smaller share;
+  **rejected** otherwise. On tens of thousands of samples a useless parameter passes any AIC
+  margin; the share is what separates "a cause was found" from "something was improved".
 * **remaining**: the final model's residual located and tested again
   (:func:`skinkit.gap.where.locate`); when it is still significant, the fraction of the first
   model's excess left and the cells where it lies are reported: that part of the gap is not
@@ -152,6 +153,20 @@ def family_shares(
     return {f: (None if e0 <= 0 else float(np.clip(r / e0, 0.0, 1.0))) for f, r in removed.items()}
 
 
+def _left_shares(
+    additions: Sequence[Mapping[str, Any]], known: Sequence[str], kappa: float
+) -> dict[str, float | None]:
+    """Per added family, what its instances removed of the excess left when its first one was
+    added (χ² − κν of that model; None when nothing was left)."""
+    base: dict[str, float] = {}
+    removed: dict[str, float] = {}
+    for a in additions:
+        f = family(a["effect"], known)
+        base.setdefault(f, _excess(a["before"], kappa))
+        removed[f] = removed.get(f, 0.0) + float(a["before"]["chi2"] - a["after"]["chi2"])
+    return {f: (None if base[f] <= 0 else float(np.clip(removed[f] / base[f], 0.0, 1.0))) for f in base}
+
+
 def assign_roles(
     candidates: Sequence[dict[str, Any]],
     additions: Sequence[Mapping[str, Any]],
@@ -172,14 +187,22 @@ def assign_roles(
     shares = family_shares(additions, known, kappa, alone, chi2_first, dof_first)
     e0 = float(chi2_first - kappa * dof_first)
     added = [a["effect"] for a in additions]
+    left = _left_shares(additions, known, kappa)
     causes, minor = [], []
+    why: dict[str, str] = {}
     for lab in added:
         f = family(lab, known)
         bad = [undermined[x] for x in added if family(x, known) == f and x in undermined]
-        if shares[f] is not None and shares[f] >= min_share and not bad:
-            causes.append(lab)
-        else:
-            minor.append(lab)
+        if bad:
+            why[f] = "but " + "; ".join(bad)
+        elif shares[f] is None or shares[f] < min_share:
+            why[f] = f"less than the {_pct(min_share)} a cause needs"
+        elif left[f] is None or left[f] < min_share:
+            why[f] = (
+                f"but of what the effects added before it left, it removes {_pct(left[f])}: "
+                "what it explains was mostly explained already"
+            )
+        (minor if f in why else causes).append(lab)
     for c in candidates:
         lab = c["effect"]
         f = family(lab, known)
@@ -187,10 +210,7 @@ def assign_roles(
             c["share"] = shares[f]
             c["role"] = "cause" if lab in causes else "minor"
             if lab in minor:
-                bad = [undermined[x] for x in added if family(x, known) == f and x in undermined]
-                c["role_reason"] = (
-                    ("but " + "; ".join(bad)) if bad else f"less than the {_pct(min_share)} a cause needs"
-                )
+                c["role_reason"] = why[f]
         else:
             refit = c.get("chi2_refit") if c.get("refitted") else None
             c["share"] = None if refit is None or e0 <= 0 else float(np.clip((chi2_first - refit) / e0, 0, 1))
