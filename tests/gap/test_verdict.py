@@ -146,3 +146,40 @@ def test_real_record_verdict_agrees_in_json_stdout_and_html(tmp_path):
     noise = d["noise"]["tip_force"]
     assert noise["kind"] == "AR" and noise["order"] >= 1 and noise["outliers"]["count"] > 0
     assert set(d["remaining"]) >= {"chi2_per_dof", "significant", "unexplained_share", "cells"}
+
+
+def _st(chi2: float, dof: float = 1000.0) -> dict:
+    return {"chi2": chi2, "dof": dof}
+
+
+def test_roles_from_shares():
+    from skinkit.gap.verdict import assign_roles
+
+    known = ["viscoelastic", "preconditioning", "force-drift", "force-warmup"]
+    # first model: χ² 3000 on ν 1000, κ 1: excess 2000
+    # viscoelastic removes 80 % alone; preconditioning 75 % of the 402 left; force-warmup 19 % of
+    # the 104 left then
+    adds = [{"effect": "viscoelastic", "before": _st(3000), "after": _st(1400, 998)},
+            {"effect": "preconditioning", "before": _st(1400, 998), "after": _st(1100, 996)},
+            {"effect": "force-warmup", "before": _st(1100, 996), "after": _st(1080, 994)},
+            {"effect": "viscoelastic-2", "before": _st(1080, 994), "after": _st(1040, 992)}]
+    alone = {"viscoelastic": 1400.0, "preconditioning": 1900.0, "force-warmup": 1800.0}
+    cands = [{"effect": e, "refitted": True, "chi2_refit": alone.get(e), "shrinkage": 0.1}
+             for e in ("viscoelastic", "preconditioning", "force-warmup", "force-drift", "viscoelastic-2")]
+    cands[3]["chi2_refit"] = 2900.0
+    causes, minor = assign_roles(cands, adds, known, 0.5, {}, alone=alone, chi2_first=3000, dof_first=1000)
+    roles = {c["effect"]: c["role"] for c in cands}
+    # viscoelastic (80 % alone) and preconditioning (55 % alone, 75 % of what was left) are causes;
+    # force-warmup explains 60 % alone, but only 19 % of what the others left: minor beside them
+    assert causes == ["viscoelastic", "preconditioning", "viscoelastic-2"] and minor == ["force-warmup"]
+    assert roles == {"viscoelastic": "cause", "preconditioning": "cause", "force-warmup": "minor",
+                     "force-drift": "rejected", "viscoelastic-2": "cause"}
+    assert "explained already" in cands[2]["role_reason"]
+    shares = {c["effect"]: c["share"] for c in cands}
+    assert shares["viscoelastic"] == pytest.approx((1600 + 40) / 2000)      # its two terms
+    assert shares["force-drift"] == pytest.approx(100 / 2000)
+    # a refit that did not converge keeps a large effect minor, with the reason
+    c2 = [dict(c) for c in cands]
+    causes, minor = assign_roles(c2, adds[:1], known, 0.5, {"viscoelastic": "its refit did not converge"},
+                                 alone=alone, chi2_first=3000, dof_first=1000)
+    assert causes == [] and c2[0]["role"] == "minor" and "did not converge" in c2[0]["role_reason"]
