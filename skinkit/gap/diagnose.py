@@ -523,8 +523,8 @@ def _priority(run: _Run, c: EffectScore) -> tuple[bool, float]:
     of the first model's excess on its own (a cause, known from the first round's refits; a
     further instance counts as its effect) before one that did not or is not known to, then
     the lowest AIC. Adding a minor contribution first would spend a round that a cause needs."""
-    of = effect_of(c.effect)
-    rec = next((x for x in run.first_candidates if x.effect == of and x.refitted), None)
+    refitted = {x.effect: x for x in run.first_candidates if x.refitted}
+    rec = refitted.get(c.effect) or refitted.get(effect_of(c.effect))
     cause = False
     if rec is not None and rec.extra.get("chi2_refit") is not None and run.loc0 is not None:
         e0 = run.state0["chi2"] - noise_factor(run.loc0) * run.state0["dof"]
