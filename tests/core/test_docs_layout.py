@@ -21,7 +21,8 @@ LINK = re.compile(r"(?<!\!)\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)|^\s*\[[^\]]
 # written in pieces so that this file does not match itself
 HISTORY = re.compile(r"iss" r"ue [0-9]+|\(iss" r"ue|sess" r"ions? [0-9]", re.I)
 #: a commit hash: 7 to 40 hexadecimal digits with at least one letter and one digit, as a word
-HASH = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+# a float's mantissa and exponent ("1.3792425291540781e-09") is not a commit
+HASH = re.compile(r"(?<![.\d])\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b(?![-+]\d)")
 
 
 def markdown_files() -> list[Path]:
