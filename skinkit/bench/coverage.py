@@ -118,7 +118,7 @@ def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int 
     if case not in SPECS:
         raise SkinkitError(f"--case: unknown case {case!r}; choose from {', '.join(CASES)} or all")
     spec, free = SPECS[case]()
-    lab = LabSessions(spec, workers=workers)
+    lab = LabSessions(spec, workers=workers, mesh="shared")
     model = load(lab.model_spec, workers=workers)
     try:
         st = perturbed_start(model, free, SPREAD[case]) if start == "perturbed" else "truth"

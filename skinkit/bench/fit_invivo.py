@@ -47,7 +47,7 @@ def run(n_protocols: int = 16, periods: int = 3, workers: int = 2, seed: int = 0
     from skinkit.inverse.coverage import LabSessions
 
     t0 = time.perf_counter()
-    lab = LabSessions(spec(n_protocols, periods), workers=workers)
+    lab = LabSessions(spec(n_protocols, periods), workers=workers, mesh="shared")
     obs = lab(seed)
     t_lab = time.perf_counter() - t0
     model = load(lab.model_spec, workers=workers)

@@ -167,7 +167,7 @@ def _lab(spec: Mapping[str, Any]) -> Any:
     if k not in _LABS:
         if len(_LABS) > 16:          # keep a worker's memory bounded on long runs
             _LABS.clear()
-        _LABS[k] = LabSessions(spec)
+        _LABS[k] = LabSessions(spec, mesh="shared")
     return _LABS[k]
 
 

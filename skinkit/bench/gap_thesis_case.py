@@ -34,7 +34,7 @@ def run(seed: int = 0, workers: int | None = 2, progress: Any = None) -> dict[st
     spec, free = invivo_spec()
     truth = copy.deepcopy(spec)
     truth["effects"] = [dict(TRUTH)]
-    lab = LabSessions(truth, workers=workers)
+    lab = LabSessions(truth, workers=workers, mesh="shared")
     obs = lab(seed)
     model = copy.deepcopy(lab.model_spec)
     model.pop("effects", None)

@@ -85,6 +85,10 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 @click.option("--error-estimate", is_flag=True,
               help="after the fit, solve once on a mesh refined 2x and report the discretisation error "
                    "beside the residual and each parameter's bias from it (finite-element models)")
+@click.option("--model-error/--no-model-error", default=True, show_default=True,
+              help="a finite-element model: estimate its mesh's discretisation error at the fit (a "
+                   "mesh refined 2x), carry it as noise and fit again (the approximation-error "
+                   "approach); the result states it per channel against the noise")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,
@@ -92,7 +96,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
         max_iterations: int, protocols: str | None,
         resume: bool, out_dir: str | None, plots: bool, fit_name: str | None, overwrite: bool,
-        error_estimate: bool, workers: int | None, as_json: bool) -> None:
+        error_estimate: bool, model_error: bool, workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
 
     Every evaluation is kept under --out until the fit ends, so a killed fit run again with
@@ -147,6 +151,16 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         results, done = _run_starts(run_start, sc, x_starts, names, as_json)
         best_result = min(results, key=lambda r: r.objective)
         best_result.starts = done
+        from skinkit.inverse.discretisation import has_mesh
+        if model_error and has_mesh(model):
+            from skinkit.inverse import fit as run_fit
+            from skinkit.inverse.approximation import refit
+            say = None if as_json else (lambda m: click.echo(f"  {m}", err=True))
+            starts_kept = best_result.starts
+            best_result, obs = refit(model, obs, best_result, names, run_fit, progress=say,
+                                     weighting=weighting, optimiser=optimiser, ftol=ftol, xtol=xtol,
+                                     max_iterations=max_iterations, bounds=bounds or None)
+            best_result.starts = starts_kept
         if error_estimate:
             from skinkit.inverse.discretisation import attach, estimate
             say = None if as_json else (lambda m: click.echo(f"  {m}", err=True))
@@ -325,6 +339,10 @@ def _echo_summary(best: dict, model_name: str, session: str, wall_s: float, name
         click.echo(f"  ! {pr['message']}")
     for p, v in best["held_out"].items():
         click.echo(f"  held out {p}: rms {v:.3g} noise levels")
+    if best.get("model_error"):
+        from skinkit.inverse.approximation import describe as describe_error
+        for line in describe_error(best["model_error"]):
+            click.echo(line)
     if "discretisation" in best:
         from skinkit.inverse.discretisation import describe
         for line in describe(best["discretisation"]):

@@ -25,8 +25,12 @@ def lab() -> None:
 @click.option("--noise-scale", "noise_scale", default="1", show_default=True,
               help="multiply every instrument imperfection (noise, resolution, offset) by this (> 0)")
 @click.option("--images", is_flag=True, help="render four-camera images and track them (not available yet)")
+@click.option("--shared-mesh", is_flag=True,
+              help="solve a finite-element truth on its model file's own mesh, the model's (default: on "
+                   "a mesh of its own, 2x finer in-plane, 3x through the thickness, its own node "
+                   "placement; the truth file states both meshes and the truth's error)")
 def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | None, noise_scale: str,
-            images: bool) -> None:
+            images: bool, shared_mesh: bool) -> None:
     """Run the TRUTH model file (effects included) through the protocols and record it as a session."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -47,8 +51,16 @@ def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | No
             bar.update(tasks[stage], completed=fraction)
 
         doc = make_session(truth, out, truth_out, seed, protocols=protocols, noise_scale=scale,
-                           images=images, progress=progress)
+                           images=images, progress=progress, mesh="shared" if shared_mesh else "own")
     names = ", ".join(f"{p['name']} ({p['samples']} samples, {p['frames']} frames)" for p in doc["protocols"])
     click.echo(f"session {out}: {names}")
     click.echo(f"truth {truth_out}: {doc['kind']} model, {len(doc['parameters'])} parameters, "
                f"{len(doc['effects'])} effect(s), seed {doc['seed']}, noise scale {doc['noise_scale']:g}")
+    mesh = doc.get("mesh")
+    if mesh:
+        click.echo(f"truth mesh: {mesh['mode']}, {mesh['truth_unknowns']:,} unknowns "
+                   f"({mesh['truth_elements']:,} elements); the model file's {mesh['model_unknowns']:,} "
+                   f"({mesh['model_elements']:,})")
+        for c, row in (mesh.get("discretisation") or {}).items():
+            click.echo(f"  {c}: truth's own error at most {row['truth_over_noise']:.3g} noise levels RMS; "
+                       f"the model's mesh about {row['model_over_noise']:.3g}")

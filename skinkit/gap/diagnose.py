@@ -75,6 +75,7 @@ from skinkit.gap.verdict import (
     remaining,
     rest_warnings,
 )
+from skinkit.inverse.discretisation import has_mesh
 from skinkit.schemas import EffectScore, FitResult, GapReport, Observations, Prediction
 
 #: an effect is named only if its refit lowers the AIC by more than this (module docstring)
@@ -274,7 +275,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              alpha: float = 0.05, workers: int | None = None, until: float | None = None,
              progress: Callable[[str], None] | None = None,
              protocols: Sequence[str] | None = None, error_estimate: bool = True,
-             min_share: float = MIN_SHARE, noise: str = "auto", max_iterations: int = 50) -> GapReport:
+             min_share: float = MIN_SHARE, noise: str = "auto", max_iterations: int = 50,
+             model_error: bool = True) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -292,7 +294,10 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     ``min_share``: the share of the excess an added effect must remove to be named a cause
     (:mod:`skinkit.gap.verdict`); ``noise``: how a record's noise is modelled (``"auto"``,
     ``"white"``, ``"ar"``: :func:`skinkit.forward.observations.channels_from_record`);
-    ``max_iterations``: evaluations each fit may make (the calibration and every refit).
+    ``max_iterations``: evaluations each fit may make (the calibration and every refit);
+    ``model_error``: a finite-element model's discretisation error is estimated at the
+    calibration and carried as noise by every later step (:mod:`skinkit.inverse.approximation`;
+    it then replaces ``error_estimate``'s projection).
     """
     from skinkit.forward import load, model_kind, read_description
 
@@ -313,7 +318,10 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         return load(s, workers=workers)
 
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
-                     until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations)
+                     until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations,
+                     model_error=model_error)
+    if cal["model_error"] is not None:
+        error_estimate = False     # the mesh's error is in the noise model already
     state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
     run = _Run(spec=spec, base=cal["base"], observations=cal["observations"], held=cal["held"],
                present=cal["present"], loader=loader, say=say, alpha=alpha, candidates=candidates,
@@ -332,7 +340,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
                observations: Observations | str | os.PathLike[str], *, effects: Sequence[str] | None,
                holdout: Sequence[str], free: Sequence[str] | None, until: float | None,
                protocols: Sequence[str] | None, say: Callable[[str], None], noise: str = "auto",
-               max_iterations: int = 50) -> dict[str, Any]:
+               max_iterations: int = 50, model_error: bool = False) -> dict[str, Any]:
     """The session read and checked, the candidate effects, and the model calibrated on it:
     ``name``, ``source``, ``observations``, ``held``, ``present`` (the model's effects),
     ``theta`` (free names), ``candidates``, ``result`` (the fit), ``state0`` (:func:`_state`),
@@ -368,11 +376,18 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         held = observations.held_out()
         say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
         r0 = fit(base, observations, theta, max_iterations=max_iterations)
+        carried = None
+        if model_error and has_mesh(base):
+            from skinkit.inverse.approximation import refit
+            r0, observations = refit(base, observations, r0, theta, fit, progress=say,
+                                     max_iterations=max_iterations)
+            carried, held = r0.extra["model_error"], observations.held_out()
         state0 = _state(base, r0, observations, held)
     finally:
         base.close()
     return {"name": name, "source": source, "observations": observations, "held": held, "present": present,
-            "theta": theta, "candidates": cands, "result": r0, "state0": state0, "base": base}
+            "theta": theta, "candidates": cands, "result": r0, "state0": state0, "base": base,
+            "model_error": carried}
 
 
 def _round(run: _Run, rnd: int) -> bool:
@@ -429,7 +444,6 @@ def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
     significant after correction, explained by the mesh alone, the top ones to refit)``; makes
     the discretisation check (once) when a test is significant."""
     from skinkit.gap.score import score_all
-    from skinkit.inverse.discretisation import has_mesh
 
     sens = collect(spec_r, run.observations, values, run.theta_r, run.remaining, load=run.loader,
                    progress=run.say)
@@ -692,6 +706,7 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
              {k: [num(x) for x in v] for k, v in loc_after.point_map.items()},
              "separation": run.separation, "rounds": run.rounds, "messages": [],
              "discretisation": None if run.disc is None else {k: v for k, v in run.disc.items() if k != "e"},
+             "model_error": cal["model_error"],
              "effects_tested": list(cal["candidates"]), "alpha": run.alpha, "min_share": run.min_share,
              "chi2": {"before": state0["chi2"], "after": final["chi2"], "dof_before": state0["dof"],
                       "dof_after": final["dof"], "held_out_before": state0["held_chi2"],

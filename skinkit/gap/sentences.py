@@ -96,6 +96,27 @@ def _location(loc: Any) -> list[str]:
     return where
 
 
+def model_error_messages(err: Mapping[str, Any] | None) -> list[str]:
+    """The model's mesh error carried as noise (:mod:`skinkit.inverse.approximation`): its size per
+    channel against the noise, what share of the calibration's excess it accounts for, and when
+    it is the largest term, which refinement would bring it below the noise."""
+    if not err:
+        return []
+    parts = [f"{c} {row['rms_over_noise']:.3g}" for c, row in err.get("channels", {}).items()
+             if row.get("rms_over_noise") is not None]
+    share = err.get("accounts_for")
+    text = (f"Model error (mesh of {err.get('unknowns', 0):,} unknowns against one refined "
+            f"{err.get('factor', 2)}x): {', '.join(parts) or 'none'} noise levels RMS, carried as noise")
+    text += "." if share is None else f"; it accounts for {100 * share:.0f} % of the calibration's excess."
+    out = [text]
+    if share is not None and share >= 0.5:
+        ref = err.get("refine_to_noise", {})
+        out.append(f"The mesh, not the physics, is the largest term of the gap: a mesh about "
+                   f"{ref.get('order_2', 1):.2g}x (convergence order 2) to {ref.get('order_1', 1):.2g}x "
+                   "(order 1) finer along each axis would bring its error below the noise.")
+    return out
+
+
 def messages(
     report: Mapping[str, Any],
     loc: Any,
@@ -117,6 +138,7 @@ def messages(
     ns = noise_sentence(report.get("noise") or {})
     if ns:
         out.append(ns)
+    out += model_error_messages(report.get("model_error"))
     if not gap.get("significant", loc.significant):
         out.append(f"No significant gap: χ²/ν {chi2_per_dof:.3g} is at the noise level; no effect named.")
         return out + [f"Warning: {w['message']}." for w in report.get("warnings", [])]

@@ -359,7 +359,18 @@ def samples(observations: Observations, prediction: Prediction, *, weighting: st
     names = _check(observations, prediction, protocols)
     if weighting not in WEIGHTINGS:
         raise SchemaError("weighting", f"must be one of {list(WEIGHTINGS)}, got {weighting!r}")
+    for proto in names:
+        for cname, cp in prediction.protocols[proto].items():
+            ch = observations[proto].channel(cname)
+            if np.shape(cp.values) != ch.values.shape:
+                raise SchemaError(f"prediction[{proto!r}][{cname!r}]",
+                                  f"has shape {np.shape(cp.values)}, the observed channel {ch.values.shape}")
     obj = Objective(None, observations, [], weighting)
+    # the Objective's own residual, so that Σz² is the fit's χ² whatever the weighting, and a
+    # model error the observations carry (mean and covariance) is whitened as in the fit
+    res = obj.residual(Prediction({p: prediction.protocols[p] for p in names}, dict(prediction.methods),
+                                  dict(prediction.inputs), dict(prediction.info)), jacobian=False)
+    zmap = {(p, c): res.z[sl] for p, c, sl in res.blocks}
     out: list[Samples] = []
     for proto in names:
         po = observations[proto]
@@ -368,15 +379,12 @@ def samples(observations: Observations, prediction: Prediction, *, weighting: st
         drive = make_drive(po.channels[dname]) if dname else None
         for cname, cp in chans.items():
             ch = po.channel(cname)
-            if np.shape(cp.values) != ch.values.shape:
-                raise SchemaError(f"prediction[{proto!r}][{cname!r}]",
-                                  f"has shape {np.shape(cp.values)}, the observed channel {ch.values.shape}")
-            # the Objective's own weights, so that Σz² is the fit's χ² whatever the weighting
-            w, keep = obj._weights(proto, cname, ch)
+            _, keep = obj._weights(proto, cname, ch)
             m = cp.mask(ch) & keep
             if not m.any():
                 continue
-            full = ch.whiten(np.where(m, (cp.values - np.where(m, ch.values, 0.0)) * w, 0.0), m)
+            full = np.zeros(ch.values.shape)
+            full[m] = zmap[(proto, cname)]
             idx = np.nonzero(m)
             if ch.is_points:
                 pt, ti, comp = idx

@@ -105,14 +105,16 @@ class LabSessions:
     names (default: the description's ``[session] protocols``, else the lab's default);
     ``reference``: ``"measured"`` or ``"exact"`` (module docstring); ``drive_noise``: add the
     drive sensor's noise to the drive (an errors-in-variables session; default False);
-    ``noise_scale``: the lab's ``--noise-scale``. Calling the object with a seed returns that
+    ``noise_scale``: the lab's ``--noise-scale``; ``mesh``: a finite-element truth on a mesh of
+    its own, ``mesh_factor`` times finer (``"own"``), or the model's (``"shared"``:
+    :func:`skinkit.lab.session.simulate`). Calling the object with a seed returns that
     seed's :class:`~skinkit.schemas.Observations`; :attr:`model_spec` is the description with
     the indenter mode the truth ran in (the model to fit has the truth's structure).
     """
 
     def __init__(self, spec: Mapping[str, Any], protocols: Sequence[str] | None = None,
                  reference: str = "measured", drive_noise: bool = False, noise_scale: float = 1.0,
-                 workers: int | None = 1) -> None:
+                 workers: int | None = 1, mesh: str = "own", mesh_factor: int = 2) -> None:
         from skinkit.forward import model_kind
         from skinkit.lab.session import simulate, top_surface
 
@@ -124,7 +126,7 @@ class LabSessions:
         self.drive_noise = drive_noise
         t0 = time.perf_counter()
         self.truth = simulate(self.spec, seed=0, protocols=protocols, noise_scale=noise_scale,
-                              workers=workers)
+                              workers=workers, mesh=mesh, mesh_factor=mesh_factor)
         self.truth_wall_s = time.perf_counter() - t0
         drives = {p.drive for p in self.truth.planned}
         self.model_spec = copy.deepcopy(self.spec)

@@ -113,27 +113,42 @@ class Objective:
 
     def residual(self, prediction: Prediction, jacobian: bool = True) -> Residual:
         """The stacked weighted residual of ``prediction``."""
-        zs, Js, blocks = [], [], []
+        zs, Js, Vs, blocks = [], [], [], []
         start = 0
+        err = self.observations.model_error
         for proto, cname, cp in prediction.items():
             ch = self.observations[proto].channels[cname]
             w, keep = self._weights(proto, cname, ch)
             m = cp.mask(ch) & keep
             if not m.any():
                 continue
+            values = cp.values
+            if err is not None and (proto, cname) in err.mean:   # the model's mean error added
+                values = values + err.mean[(proto, cname)]
             # a measured reference frame correlates a point's residuals: whiten along frames
-            full = ch.whiten(np.where(m, (cp.values - np.where(m, ch.values, 0.0)) * w, 0.0), m)
+            full = ch.whiten(np.where(m, (values - np.where(m, ch.values, 0.0)) * w, 0.0), m)
             r = full[m]
             zs.append(r)
             if jacobian:
                 cols = [ch.whiten(np.where(m, cp.d[n] * w, 0.0), m)[m] for n in self.names]
                 Js.append(np.stack(cols, axis=1) if cols else np.zeros((r.size, 0)))
+            if err is not None and err.rank:
+                b = err.basis.get((proto, cname))
+                Vs.append(np.zeros((r.size, err.rank)) if b is None else
+                          np.stack([ch.whiten(np.where(m, bj * w, 0.0), m)[m] for bj in b], axis=1))
             blocks.append((proto, cname, slice(start, start + r.size)))
             start += r.size
         if not zs:
             raise SchemaError("session", f"no observed channel is predicted with the {self.weighting!r} "
                               "weighting (does the session have the channels the model predicts?)")
-        return Residual(np.concatenate(zs), np.concatenate(Js) if jacobian else None, blocks)
+        z, J = np.concatenate(zs), (np.concatenate(Js) if jacobian else None)
+        if Vs:   # noise plus the model error's covariance, whitened (approximation.whitening)
+            from skinkit.inverse.approximation import apply, whitening
+
+            Q, shrink = whitening(np.concatenate(Vs))
+            z = apply(Q, shrink, z)
+            J = None if J is None else apply(Q, shrink, J)
+        return Residual(z, J, blocks)
 
     def evaluate(self, params: ParameterSet, jacobian: bool = True) -> tuple[Residual, Prediction]:
         """One forward prediction at ``params`` and its residual."""

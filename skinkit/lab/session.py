@@ -32,6 +32,8 @@ import numpy as np
 from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.lab.sensors import JACOBIAN_HOME, LOG_RATE_HZ, SensorModel
+from skinkit.lab.truth_mesh import DEFAULT_FACTOR as DEFAULT_MESH_FACTOR
+from skinkit.lab.truth_mesh import check_mode, describe_meshes, error_figures, own_mesh
 from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations, SurfaceProfile
 
 #: Table 12 protocols of a finite-element truth when neither --protocols nor the model's
@@ -471,10 +473,15 @@ def _record(planned: Sequence[PlannedProtocol], noiseless: Mapping[str, Mapping[
 def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
              protocols: str | Sequence[str] | None = None, noise_scale: float = 1.0,
              progress: Progress | None = None, workers: int | None = None,
-             points: np.ndarray | None = None) -> VirtualSession:
+             points: np.ndarray | None = None, mesh: str = "own",
+             mesh_factor: int = DEFAULT_MESH_FACTOR) -> VirtualSession:
     """Run ``truth`` through the protocols and record it (see :func:`make_session`); nothing is
     written. ``points`` ``(P, 3)`` [m]: material points of the top surface to follow instead of
-    the tracked grid (e.g. a dense grid from which camera views are rendered)."""
+    the tracked grid (e.g. a dense grid from which camera views are rendered). ``mesh``: a
+    finite-element truth description is solved on a mesh of its own, ``mesh_factor`` times finer
+    with its own node placement (``"own"``, :mod:`skinkit.lab.truth_mesh`), or on the mesh its
+    description gives, the model's (``"shared"``)."""
+    check_mode(mesh, mesh_factor)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise LabError(f"--seed: expected a non-negative integer, got {seed!r}")
     sensors = SensorModel(check_noise_scale(noise_scale))
@@ -494,8 +501,23 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
         names = _default_protocols(spec, kind, truth if is_model else None)
     planned = [plan_protocol(n, _protocol_parameters(spec, kind, n)) for n in names]
     surface = top_surface(spec if not is_model else None, kind)
-    noiseless, model = run_truth(spec if not is_model else truth, planned, sensors, surface, workers,
+    own = kind == "fe" and not is_model and mesh == "own"
+    solved = own_mesh(spec, mesh_factor) if own else spec
+    noiseless, model = run_truth(solved if not is_model else truth, planned, sensors, surface, workers,
                                  progress, points)
+    mesh_doc: dict[str, Any] | None = None
+    if kind == "fe" and not is_model:
+        mesh_doc = describe_meshes(solved, spec, mesh, mesh_factor)
+    if own:   # the same truth on the model's mesh: the truth's own error, bounded
+        try:
+            coarse, other = run_truth(spec, planned, sensors, surface, workers, None, points)
+            other.close()
+        except BaseException:
+            model.close()
+            raise
+        noise = {c: float(np.sqrt(np.mean(np.square(sensors.sigma(c)))))
+                 for c in ("tip_force", "tip_position", "points")}
+        mesh_doc["discretisation"] = error_figures(noiseless, coarse, noise, mesh_factor)
     try:
         description = _description(model, spec, kind)
         parameters = model.parameters().to_list()
@@ -512,6 +534,7 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
         "parameters": _json_ready(parameters),
         "seed": int(seed), "noise_scale": sensors.scale, "sensors": sensors.to_dict(),
         "offsets": _json_ready(offsets),
+        "mesh": mesh_doc,
         "surface": {"curved": surface.curved, "radius_m": SURFACE_RADIUS_M if surface.curved else None,
                     "axis": "x"},
         "protocols": [{"name": p.protocol.name, "kind": p.protocol.kind, "drive": p.drive,
@@ -581,7 +604,7 @@ def check_options(out: str | os.PathLike[str], truth_out: str | os.PathLike[str]
 def make_session(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, out: str | os.PathLike[str],
                  truth_out: str | os.PathLike[str], seed: int, protocols: str | Sequence[str] | None = None,
                  noise_scale: float = 1.0, images: bool = False, progress: Progress | None = None,
-                 workers: int | None = None) -> dict[str, Any]:
+                 workers: int | None = None, mesh: str = "own") -> dict[str, Any]:
     """Generate a virtual session ``out`` (experiment file) and its truth ``truth_out`` (JSON).
 
     ``truth``: a model file, a parsed description, or a built forward model (duck-typed:
@@ -589,12 +612,15 @@ def make_session(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, out: s
     every random draw (noise, offsets) follows from it. ``protocols``: library names
     (``"a,b"`` or a list; default: the model's ``[session] protocols``, else the kind's
     default). ``noise_scale`` (> 0) multiplies every imperfection of the instruments.
-    ``progress(stage, fraction)``; ``workers``: the FE truth's worker processes. Options are
+    ``progress(stage, fraction)``; ``workers``: the FE truth's worker processes; ``mesh``: a
+    finite-element truth on a mesh of its own (``"own"``) or the model's (``"shared"``; see
+    :func:`simulate`). Options are
     checked before any model runs; nothing is left at ``out`` or ``truth_out`` on failure.
     Returns the truth document.
     """
     check_options(out, truth_out, protocols, noise_scale, images)
-    vs = simulate(truth, seed, protocols, noise_scale, progress, workers)
+    check_mode(mesh, DEFAULT_MESH_FACTOR)
+    vs = simulate(truth, seed, protocols, noise_scale, progress, workers, mesh=mesh)
     return write_session(vs, out, truth_out, progress)
 
 

@@ -287,6 +287,9 @@ class Observations:
     protocols: dict[str, ProtocolObservations]
     profile: SurfaceProfile | None = None
     source: str = ""
+    #: the model's discretisation error carried as noise (an
+    #: :class:`skinkit.inverse.approximation.ModelError`), or None
+    model_error: Any = None
 
     def __post_init__(self) -> None:
         for k, p in self.protocols.items():
@@ -317,18 +320,21 @@ class Observations:
         for n in names:
             self[n]
         keep = set(names)
-        return Observations({k: v for k, v in self.protocols.items() if k in keep}, self.profile, self.source)
+        return Observations({k: v for k, v in self.protocols.items() if k in keep}, self.profile, self.source,
+                            self.model_error)
 
     def with_held_out(self, names: Sequence[str]) -> Observations:
         """A copy with exactly ``names`` marked held out."""
         for n in names:
             self[n]
         return Observations({k: ProtocolObservations(v.protocol, v.channels, k in set(names))
-                             for k, v in self.protocols.items()}, self.profile, self.source)
+                             for k, v in self.protocols.items()}, self.profile, self.source,
+                            self.model_error)
 
     def until(self, t_s: float) -> Observations:
         """Every channel cut to its samples at times ≤ ``t_s`` [s] (a record's first part)."""
         out = {}
+        cuts: dict[tuple[str, str], tuple[slice, ...]] = {}
         for p in self:
             chans = {}
             for c in p.channels.values():
@@ -336,23 +342,33 @@ class Observations:
                 if k < 2:
                     continue
                 sl = (slice(None), slice(0, k)) if c.is_points else (slice(0, k),)
+                cuts[(p.name, c.name)] = sl
                 chans[c.name] = Channel(c.name, c.time_s[:k], c.values[sl], c.valid[sl], c.noise,
                                         c.noise_source, c.reference, c.reference_frame, c.window_m,
                                         c.noise_ar, c.noise_innovation,
                                         None if c.outliers is None else c.outliers[sl],
                                         None if c.noise_scale is None else c.noise_scale[sl])
             out[p.name] = ProtocolObservations(p.protocol, chans, p.held_out)
-        return Observations(out, self.profile, self.source)
+        err = None
+        if self.model_error is not None:
+            keep = {(p, c): cuts[(p, c)] for p in out for c in out[p].channels if (p, c) in cuts}
+            err = self.model_error.cut(keep)
+        return Observations(out, self.profile, self.source, err)
 
     def fitted(self) -> Observations:
         """The protocols that are fitted (not held out)."""
         return Observations({k: v for k, v in self.protocols.items() if not v.held_out},
-                            self.profile, self.source)
+                            self.profile, self.source, self.model_error)
 
     def held_out(self) -> Observations:
         """The held-out protocols."""
         return Observations({k: v for k, v in self.protocols.items() if v.held_out},
-                            self.profile, self.source)
+                            self.profile, self.source, self.model_error)
+
+    def with_model_error(self, error: Any) -> Observations:
+        """A copy whose residuals carry ``error`` (the model's discretisation error, mean and
+        covariance: :mod:`skinkit.inverse.approximation`; None: none)."""
+        return Observations(dict(self.protocols), self.profile, self.source, error)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready overview: per protocol, its channels with shapes and noise."""

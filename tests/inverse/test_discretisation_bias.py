@@ -89,7 +89,7 @@ def test_residual_check_separates_what_the_parameters_absorb():
 def test_fine_mesh_truth_coarse_fit_bias_within_reported_error():
     spec = _spec()
     truth = refined_spec(spec, 3)
-    lab = LabSessions(truth, workers=1)
+    lab = LabSessions(truth, workers=1, mesh="shared")
     model_spec = dict(lab.model_spec)
     model_spec["geometry"] = spec["geometry"]
     model_spec["layers"] = spec["layers"]

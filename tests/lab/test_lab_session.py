@@ -382,3 +382,68 @@ def test_fe_same_seed_same_file_other_seed_other_noise(fe, tmp_path):
     assert not _same_content(d / "s.h5", tmp_path / "b.h5")
     with open_experiment(tmp_path / "a.h5") as ea, open_experiment(tmp_path / "b.h5") as eb:
         assert not np.array_equal(ea.read_track("in_plane_090").points, eb.read_track("in_plane_090").points)
+
+
+@pytest.mark.needs_plugins
+def test_fe_truth_on_a_mesh_of_its_own(fe):
+    """The truth file states both meshes: the truth's >= 8x the model's unknowns, its own gradings,
+    and its own error, bounded from the same truth on the model's mesh, per channel against the
+    noise (the model's mesh error is f/(f − 1) = 2 times the truth's bound at factor 2)."""
+    from skinkit.lab.truth_mesh import mesh_figures
+
+    _, doc, _ = fe
+    mesh = doc["mesh"]
+    assert mesh["mode"] == "own" and mesh["factor"] == 2
+    assert mesh["truth_unknowns"] >= 8 * mesh["model_unknowns"]
+    assert mesh["model_unknowns"] == mesh_figures(FE_SPEC)["unknowns"]
+    model_g = FE_SPEC["geometry"]
+    for key, value in mesh["gradings"].items():
+        assert value != model_g.get(key, 1.6 if key == "grading" else 1.0), key
+    disc = mesh["discretisation"]
+    assert {"tip_force", "points"} <= set(disc)
+    for row in disc.values():
+        assert row["model_rms"] == pytest.approx(2 * row["truth_rms"])
+        assert row["truth_over_noise"] == pytest.approx(row["truth_rms"] / row["noise"])
+
+
+@pytest.mark.needs_plugins
+def test_shared_mesh_keeps_the_models_mesh(tmp_path):
+    """``--shared-mesh``: the truth on its model file's own mesh, said on the command line."""
+    from skinkit.cli import cli
+
+    model = tmp_path / "m.toml"
+    model.write_text('''[model]
+name = "tiny-truth"
+[geometry]
+kind = "disc"
+diameter = "20 mm"
+indenter_diameter = "4 mm"
+n_inner = 2
+n_ring = 2
+[[layers]]
+name = "skin"
+thickness = "1.5 mm"
+elements = 1
+law = "neo-hookean-ni"
+parameters = { mu = "13.7 kPa", K = "517 kPa" }
+[[layers]]
+name = "subdermal"
+thickness = "3.5 mm"
+elements = 1
+law = "neo-hookean-enu"
+parameters = { E = "9.3 kPa", nu = 0.4321 }
+[boundary]
+fixed = ["outer", "bottom"]
+[indenter]
+mode = "force"
+[drive]
+max_step = "2.5 s"
+''')
+    r = CliRunner().invoke(cli, ["lab", "session", str(model), "--out", str(tmp_path / "s.h5"),
+                                 "--truth-out", str(tmp_path / "t.json"), "--seed", "0",
+                                 "--protocols", "normal_indentation", "--shared-mesh"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "t.json").read_text())
+    assert doc["mesh"]["mode"] == "shared"
+    assert doc["mesh"]["truth_unknowns"] == doc["mesh"]["model_unknowns"]
+    assert "truth mesh: shared" in r.output

@@ -1,0 +1,318 @@
+"""The model's discretisation error carried as noise: the approximation-error approach.
+
+A finite-element model solved on a mesh of size h predicts y_h(θ); the skin (or a truth solved on
+a finer, different mesh) behaves like the exact solution y(θ). Their difference ε(θ) = y − y_h is
+not noise, but the data cannot tell it from a physical effect: a fit that ignores it biases its
+parameters and a diagnosis names it as an effect. Following Kaipio & Somersalo (J Comput Appl
+Math 198, 2007) and Arridge et al. (Inverse Problems 22, 2006), ε is modelled as a Gaussian
+independent of the noise, with a mean and a covariance estimated where the model is used:
+
+    y = y_h(θ) + ε + n,    ε ~ N(m, Γ),    n ~ N(0, Σ)
+    χ²(θ) = (y − y_h(θ) − m)ᵀ (Σ + Γ)⁻¹ (y − y_h(θ) − m)
+
+**Estimate.** At the calibrated θ̂ and ``draws`` further points θ_k around it (each positive
+parameter scaled by exp(s ξ), ξ standard normal, s = :data:`SPREAD`; a seeded draw), the model is
+solved on its own mesh and on one refined ``factor`` times; d_k = y_{h/f}(θ_k) − y_h(θ_k). With a
+convergence order p the exact minus coarse prediction is R(p) d_k (Richardson, R = fᵖ/(fᵖ − 1)).
+The order is not known (quadratic elements converge at 2–3 in smooth regions and near 1.3 at a
+bonded punch's edge), so R is taken uniform between R(:data:`ORDER_HIGH`) and
+R(:data:`ORDER_LOW`), independently for each component of each channel of each protocol, and
+for tracked points in each of :data:`BANDS` radial bands (a force at a bonded edge converges
+near order 1, a displacement field far from the indenter near 2): m = R̄ · mean_k d_k, and
+Γ = B Bᵀ with B's columns the draws' spread (R̄ d_k − m)/√K and, per group, the order's,
+σ_R · mean_k d_k on that group alone (σ_R = (R_hi − R_lo)/√12). Γ has rank ≤ K + the number
+of groups (3 per tip channel, 9 per point channel and protocol).
+
+**Whiten.** In the objective's noise-whitened coordinates (z = W(y_h + m − y), V = W B), (I +
+V Vᵀ)^(−1/2) = I − Q diag(1 − 1/√(1 + s²)) Qᵀ with V = Q S Rᵀ (thin SVD): a rank-r
+correction of z and of its Jacobian (r = rank of Γ), applied by
+:class:`skinkit.inverse.objective.Objective` to every residual of observations that carry the
+estimate (:meth:`Observations.with_model_error`). A direction whose variance is thousands of
+noise variances is in effect projected out; the projection of one refined-mesh direction the
+diagnosis made before is its special case.
+
+**Cost.** ``(draws + 1)`` solves on the model's mesh and as many on the refined one (each
+``factor³`` times the unknowns): with the default one draw and factor 2, about 2 + 2 × 10
+coarse-solve equivalents, once per calibration; the estimate is reused by every refit and
+candidate of a diagnosis (the mean and basis are stored with the observations).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skinkit.inverse.discretisation import DEFAULT_FACTOR, DiscretisationError, has_mesh, richardson_factor
+from skinkit.schemas import Observations, ParameterSet, Prediction
+from skinkit.schemas.observations import CHANNELS
+
+#: convergence orders bracketing the model's (the bonded punch's singular edge, smooth regions)
+ORDER_LOW, ORDER_HIGH = 1.0, 2.0
+#: log-spread of each positive parameter in the draws around the calibration (10 %)
+SPREAD = 0.1
+#: draws besides the calibration point
+DEFAULT_DRAWS = 1
+#: radial bands of tracked points with an error amplitude of their own
+BANDS = 3
+#: estimate-and-refit passes (:func:`refit`)
+DEFAULT_PASSES = 2
+
+
+@dataclass
+class ModelError:
+    """The model's discretisation error as a Gaussian: per ``(protocol, channel)`` its ``mean``
+    (the channel's shape [unit], exact minus model) and ``basis`` ``(r, *shape)`` [unit] with
+    covariance Σ_j basis_j basis_jᵀ; ``summary``: JSON-ready figures (:func:`estimate`)."""
+
+    mean: dict[tuple[str, str], np.ndarray]
+    basis: dict[tuple[str, str], np.ndarray]
+    rank: int
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def cut(self, keep: Mapping[tuple[str, str], tuple[slice, ...]]) -> ModelError:
+        """The same error on sliced channels (``keep``: key -> the slice of its values)."""
+        mean = {k: v[keep[k]] for k, v in self.mean.items() if k in keep}
+        basis = {k: v[(slice(None), *keep[k])] for k, v in self.basis.items() if k in keep}
+        return ModelError(mean, basis, self.rank, self.summary)
+
+
+def whitening(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(Q, shrink)`` with (I + V Vᵀ)^(−1/2) = I − Q diag(shrink) Qᵀ for ``V`` ``(m, r)`` (thin SVD;
+    directions with no weight dropped)."""
+    if V.size == 0:
+        return np.zeros((V.shape[0], 0)), np.zeros(0)
+    Q, s, _ = np.linalg.svd(V, full_matrices=False)
+    keep = s > 1e-12 * max(float(s.max(initial=0.0)), 1e-300)
+    Q, s = Q[:, keep], s[keep]
+    return Q, 1.0 - 1.0 / np.sqrt(1.0 + s ** 2)
+
+
+def apply(Q: np.ndarray, shrink: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """``(I − Q diag(shrink) Qᵀ) a`` for ``a`` ``(m,)`` or ``(m, n)``."""
+    if not shrink.size:
+        return a
+    if a.ndim == 1:
+        return a - Q @ (shrink * (Q.T @ a))
+    return a - Q @ (shrink[:, None] * (Q.T @ a))
+
+
+def _draws(params: ParameterSet, free: Sequence[str], n: int, seed: int) -> list[dict[str, float]]:
+    """The calibration's values and ``n`` draws around it (positive parameters scaled by
+    exp(SPREAD ξ), others shifted by SPREAD ξ |θ|; clipped to the bounds)."""
+    rng = np.random.default_rng(seed)
+    base = dict(params.values())
+    out = [dict(base)]
+    for _ in range(n):
+        v = dict(base)
+        for name in free:
+            p = params.param(name)
+            xi = float(rng.standard_normal())
+            x = base[name] * math.exp(SPREAD * xi) if base[name] > 0 and p.lower >= 0 else \
+                base[name] + SPREAD * xi * max(abs(base[name]), 1e-12)
+            v[name] = float(min(max(x, p.lower), p.upper))
+        out.append(v)
+    return out
+
+
+def _differences(coarse: Prediction, fine: Prediction, observations: Observations
+                 ) -> dict[tuple[str, str], np.ndarray]:
+    """fine − coarse per observed, predicted entry (0 where either is missing)."""
+    out = {}
+    for proto, cname, cp in coarse.items():
+        if proto not in observations.names or cname not in observations[proto].channels:
+            continue
+        fp = fine.protocols.get(proto, {}).get(cname)
+        ch = observations[proto].channels[cname]
+        m = cp.mask(ch)
+        if fp is None or np.shape(fp.values) != np.shape(cp.values):
+            continue
+        if fp.predicted is not None:
+            m = m & np.asarray(fp.predicted, bool)
+        d = np.where(m, np.asarray(fp.values, float) - np.asarray(cp.values, float), 0.0)
+        out[(proto, cname)] = np.nan_to_num(d)
+    return out
+
+
+def _groups(ch: Any) -> list[np.ndarray]:
+    """Boolean masks (the channel's shape) over which the error's amplitude is one unknown: each
+    component of a tip channel; each component of a point channel in each of :data:`BANDS`
+    bands of the points' distance from their centroid (equal counts)."""
+    shape = ch.values.shape
+    out = []
+    if not ch.is_points:
+        for j in range(shape[-1]):
+            m = np.zeros(shape, bool)
+            m[..., j] = True
+            out.append(m)
+        return out
+    ref = ch.reference if ch.reference is not None else np.nan_to_num(ch.values[:, 0])
+    xy = np.asarray(ref, float)[:, :2]
+    r = np.hypot(*(xy - xy.mean(axis=0)).T)
+    edges = np.quantile(r, np.linspace(0, 1, BANDS + 1)[1:-1]) if r.size else []
+    band = np.searchsorted(edges, r, side="right")
+    for k in range(BANDS):
+        for j in range(shape[-1]):
+            m = np.zeros(shape, bool)
+            m[band == k, :, j] = True
+            if m.any():
+                out.append(m)
+    return out
+
+
+def _channel_figures(mean: Mapping[tuple[str, str], np.ndarray], observations: Observations
+                     ) -> dict[str, dict[str, Any]]:
+    """Per channel name: RMS and largest |mean| [unit], the noise level, and their ratio."""
+    acc: dict[str, list[np.ndarray]] = {}
+    noise: dict[str, float] = {}
+    for (proto, cname), m in mean.items():
+        ch = observations[proto].channels[cname]
+        sel = ch.fit_mask()
+        acc.setdefault(cname, []).append(m[sel])
+        noise[cname] = float(np.sqrt(np.mean(np.square(ch.noise))))
+    out = {}
+    for cname, parts in acc.items():
+        d = np.concatenate(parts)
+        rms = float(np.sqrt(np.mean(d ** 2))) if d.size else 0.0
+        out[cname] = {"rms": rms, "max": float(np.max(np.abs(d))) if d.size else 0.0,
+                      "noise": noise[cname], "rms_over_noise": rms / noise[cname] if noise[cname] else None,
+                      "unit": CHANNELS[cname][0]}
+    return out
+
+
+def estimate(model: Any, observations: Observations, params: ParameterSet, free: Sequence[str], *,
+             draws: int = DEFAULT_DRAWS, factor: int = DEFAULT_FACTOR, seed: int = 0,
+             progress: Callable[[str], None] | None = None) -> ModelError:
+    """The model's discretisation error on the fitted protocols of ``observations`` (see the
+    module): ``model`` a finite-element forward model, ``params`` the calibration, ``free`` the
+    parameters drawn around it, ``draws`` further points, ``factor`` the refinement.
+
+    ``summary``: ``factor``, ``orders``, ``draws``, ``unknowns``, ``unknowns_refined``, ``solves``
+    (on each mesh), ``channels`` (name -> ``rms``, ``max`` of the mean error [unit], ``noise``,
+    ``rms_over_noise``), ``wall_s``.
+    """
+    if not has_mesh(model):
+        raise DiscretisationError(f"model {getattr(model, 'name', '?')!r} has no mesh: the approximation "
+                                  "error needs a finite-element model")
+    if isinstance(draws, bool) or not isinstance(draws, int) or draws < 0:
+        raise DiscretisationError(f"draws must be a whole number >= 0, got {draws!r}")
+    if isinstance(factor, bool) or not isinstance(factor, int) or factor < 2:
+        raise DiscretisationError(f"refinement factor must be a whole number >= 2, got {factor!r}")
+    t0 = time.perf_counter()
+    say = progress or (lambda _m: None)
+    fitted = observations.fitted()
+    points = _draws(params, free, draws, seed)
+    diffs: list[dict[tuple[str, str], np.ndarray]] = []
+    fine_model = model.refined(factor)
+    info: dict[str, int] = {}
+    try:
+        for i, v in enumerate(points):
+            say(f"model error: point {i + 1}/{len(points)} on the model's mesh and one refined {factor}x")
+            coarse = model.predict(params.with_values(v), fitted, sensitivities=False)
+            fine = fine_model.predict(fine_model.parameters().with_values(v), fitted, sensitivities=False)
+            info = {"unknowns": int(coarse.info.get("n_dof", 0)),
+                    "unknowns_refined": int(fine.info.get("n_dof", 0))}
+            diffs.append(_differences(coarse, fine, fitted))
+    finally:
+        fine_model.close()
+    r_lo, r_hi = richardson_factor(factor, ORDER_HIGH), richardson_factor(factor, ORDER_LOW)
+    r_mid, r_sd = 0.5 * (r_lo + r_hi), (r_hi - r_lo) / math.sqrt(12.0)
+    K = len(diffs)
+    keys = list(diffs[0])
+    groups = {key: _groups(fitted[key[0]].channels[key[1]]) for key in keys}
+    n_amp = sum(len(g) for g in groups.values())
+    rank = n_amp + (K if K > 1 else 0)
+    mean, basis = {}, {}
+    col = 0
+    for key in keys:
+        ds = np.stack([d[key] for d in diffs])
+        dbar = ds.mean(axis=0)
+        mean[key] = r_mid * dbar
+        b = np.zeros((rank, *dbar.shape))
+        # the order differs from place to place (a force at a bonded edge near 1, a displacement
+        # field far from the indenter near 2): one amplitude per component and radial band
+        for sel in groups[key]:
+            b[col][sel] = r_sd * dbar[sel]
+            col += 1
+        if K > 1:
+            b[n_amp:] = np.stack([r_mid * (d - dbar) / math.sqrt(K) for d in ds])
+        basis[key] = b
+    figures = _channel_figures(mean, fitted)
+    worst = max((row["rms_over_noise"] or 0.0 for row in figures.values()), default=0.0)
+    summary = {"method": "approximation error (mean and covariance of the refined-minus-model prediction)",
+               "largest_over_noise": worst,
+               # error ∝ hᵖ: the refinement that brings the largest channel's error to the noise
+               "refine_to_noise": {"order_1": max(worst, 1.0), "order_2": max(math.sqrt(worst), 1.0)},
+               "factor": factor, "orders": [ORDER_LOW, ORDER_HIGH], "draws": draws, "spread": SPREAD,
+               **info, "solves": {"model_mesh": K, "refined_mesh": K},
+               "channels": figures, "wall_s": time.perf_counter() - t0}
+    return ModelError(mean, basis, rank, summary)
+
+
+def refit(model: Any, observations: Observations, result: Any, free: Sequence[str], fit: Callable[..., Any],
+          *, draws: int = DEFAULT_DRAWS, factor: int = DEFAULT_FACTOR, passes: int = DEFAULT_PASSES,
+          seed: int = 0, progress: Callable[[str], None] | None = None, **options: Any
+          ) -> tuple[Any, Observations]:
+    """Estimate the model's error at ``result`` (a calibration of ``free``) and fit again, from
+    there, with the error carried as noise; ``passes`` times, each estimate made at the previous
+    pass's parameters (the error of a mesh too stiff grows with the modulus the first
+    calibration underestimated: two passes move the parameters, a third no more than their
+    standard error). Returns ``(the last result, the observations carrying the last estimate)``.
+    ``fit(model, observations, free, start=..., **options)`` is the fit to run
+    (:func:`skinkit.inverse.fit`). The result's ``extra["model_error"]`` holds the last
+    estimate's summary plus ``passes``, ``chi2_without`` (the first calibration's χ²),
+    ``chi2_with``, ``dof`` and ``accounts_for`` (:func:`accounts_for`)."""
+    if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
+        raise DiscretisationError(f"passes must be a whole number >= 1, got {passes!r}")
+    first, new, carried = result, result, observations
+    err = None
+    for k in range(passes):
+        err = estimate(model, observations, new.parameters, free, draws=draws, factor=factor, seed=seed + k,
+                       progress=progress)
+        carried = observations.with_model_error(err)
+        values = new.parameters.values()
+        if progress is not None:
+            progress("model error: calibrating again with the mesh's error carried as noise "
+                     f"(pass {k + 1}/{passes})")
+        new = fit(model, carried, list(free), start={n: float(values[n]) for n in free}, **options)
+    c0, c1 = sum(first.residual_by_protocol.values()), sum(new.residual_by_protocol.values())
+    dof = c0 / float(first.chi2_per_dof) if first.chi2_per_dof else float("nan")
+    err.summary.update(passes=passes, chi2_without=c0, chi2_with=c1, dof=dof,
+                       accounts_for=accounts_for(c0, c1, dof))
+    new.extra["model_error"] = err.summary
+    return new, carried
+
+
+def accounts_for(chi2_without: float, chi2_with: float, dof: float) -> float | None:
+    """The share of the residual's excess over ν that the model error accounts for (None
+    without an excess)."""
+    excess = chi2_without - dof
+    if excess <= 0:
+        return None
+    return float(min(max((chi2_without - max(chi2_with, dof)) / excess, 0.0), 1.0))
+
+
+def describe(summary: Mapping[str, Any]) -> list[str]:
+    """Lines for a terminal: per channel the model's mesh error against the noise."""
+    lines = [f"model error (mesh refined {summary['factor']}x, {summary.get('unknowns', 0):,} -> "
+             f"{summary.get('unknowns_refined', 0):,} unknowns; carried as noise):"]
+    for cname, row in summary.get("channels", {}).items():
+        unit, k = row.get("unit") or "", 1.0
+        if unit == "m":
+            unit, k = "µm", 1e6
+        ratio = row.get("rms_over_noise")
+        times = "?" if ratio is None else f"{ratio:.3g}"
+        lines.append(f"  {cname}: {k * row['rms']:.3g} {unit} RMS ({times} "
+                     f"noise levels), {k * row['max']:.3g} {unit} largest")
+    share = summary.get("accounts_for")
+    if share is not None:
+        lines.append(f"  accounts for {100 * share:.0f} % of the residual's excess over the noise")
+    return lines
+
+
+__all__ = ["DEFAULT_DRAWS", "DEFAULT_PASSES", "ModelError", "ORDER_HIGH", "ORDER_LOW", "SPREAD",
+           "accounts_for", "apply", "describe", "estimate", "refit", "whitening"]
