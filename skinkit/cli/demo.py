@@ -22,14 +22,15 @@ def _fmt(v: Any, unit: str) -> str:
 
 def closing_table(summary: dict[str, Any]) -> list[str]:
     """The closing table's lines: step, result, found, truth, error, time."""
-    lines = [f"{'step':<9} {'result':<34} {'found':>14} {'truth':>14} {'error':>11} {'time':>6}"]
+    lines = [f"{'step':<9} {'result':<34} {'found':>14} {'truth':>14} {'error':>11} {'95 %':>5} {'time':>6}"]
     shown: set[str] = set()
     for r in summary["table"]:
         err = "-" if r["error"] is None else f"{r['error']:+.3g}{unit_suffix(r['error_unit'])}"
         t = "" if r["step"] in shown or r["time_s"] is None else f"{r['time_s']:.0f} s"
         shown.add(r["step"])
+        inside = {True: "in", False: "out"}.get(r.get("within_95"), "")   # truth in the 95 % interval
         lines.append(f"{r['step']:<9} {r['result'][:34]:<34} {_fmt(r['found'], r['unit']):>14} "
-                     f"{_fmt(r['truth'], r['unit']):>14} {err:>11} {t:>6}")
+                     f"{_fmt(r['truth'], r['unit']):>14} {err:>11} {inside:>5} {t:>6}")
     return lines
 
 

@@ -57,13 +57,16 @@ def gap() -> None:
 @click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="diagnose only the session's first seconds [s] (e.g. the imaged part of a record)")
 @click.option("--no-error-estimate", "no_error_estimate", is_flag=True,
-              help="skip the discretisation check of a finite-element model (one solve on a mesh refined "
-                   "2x); without it a mesh error can be named as an effect")
+              help="with --no-model-error: skip the discretisation check of a finite-element model (one "
+                   "solve on a mesh refined 2x); without either a mesh error can be named as an effect")
+@click.option("--model-error/--no-model-error", default=True, show_default=True,
+              help="a finite-element model: estimate its mesh's discretisation error at the calibration "
+                   "(a mesh refined 2x) and carry it as noise through every later step")
 @click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,
                  candidates: int, free: str | None, out_dir: str | None, gap_name: str | None,
                  overwrite: bool, workers: int | None, until_s: float | None, no_error_estimate: bool,
-                 as_json: bool, protocols: str | None, min_share: float, noise: str,
+                 model_error: bool, as_json: bool, protocols: str | None, min_share: float, noise: str,
                  max_iterations: int) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
@@ -110,7 +113,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
                       free=None if free is None else split_names(free), max_effects=max_effects,
                       candidates=candidates, workers=workers, until=until_s, progress=progress,
                       error_estimate=not no_error_estimate, min_share=min_share, noise=noise,
-                      max_iterations=max_iterations)
+                      max_iterations=max_iterations, model_error=model_error)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:

@@ -712,6 +712,7 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
                       "dof_after": final["dof"], "held_out_before": state0["held_chi2"],
                       "held_out_after": final["held_chi2"], "held_out_samples": state0["held_n"]},
              "final_parameters": {n: float(final["result"].parameters[n]) for n in run.theta_r},
+             "final_se": {n: num(final["result"].se.get(n)) for n in run.theta_r},
              "effects_model": [dict(t) for t in run.tables], "minor": v["minor"],
              "noise": v["noise"], "remaining": v["remaining"], "warnings": v["warnings"],
              "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0}

@@ -84,12 +84,14 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
 
     def row(step: str, what: str, found: float | str | None, true: float | str | None, unit: str = "",
-            rel: bool = True) -> None:
+            rel: bool = True, se: float | None = None) -> None:
         err = None
         if isinstance(found, (int, float)) and isinstance(true, (int, float)) and (true != 0 or not rel):
             err = 100.0 * (found / true - 1.0) if rel else found - true
+        inside = None if se is None or err is None else bool(abs(found - true) <= 1.96 * se)
         rows.append({"step": step, "result": what, "found": found, "truth": true, "unit": unit,
-                     "error": err, "error_unit": "%" if rel else unit, "time_s": None})
+                     "error": err, "error_unit": "%" if rel else unit, "time_s": None,
+                     "se": se, "within_95": inside})
 
     lt, lin, wie = truth["lumped"], summary["lumped"]["linear"], summary["lumped"]["wiener"]
     row("lumped", "K", lin["K_N_per_m"], lt["K_N_per_m"], "N/m")
@@ -105,6 +107,10 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
     for windowed, what in ((False, "point motion"), (True, "subset mean")):
         e = _track_error(out, windowed)
         row("cameras", f"track RMS error vs {what}", None if e is None else um * e, 0.0, "µm", rel=False)
+    mesh = truth.get("mesh") or {}
+    if mesh:   # the truth's mesh is its own: the model's discretisation error is in the data
+        row("acquire", f"truth mesh ({mesh['mode']}) unknowns", mesh["truth_unknowns"], None)
+        row("acquire", "model mesh unknowns", mesh["model_unknowns"], None)
     tp = {p["name"]: p["value"] for p in truth["parameters"]}
     fe = summary["identify"]
     for name, par in fe["parameters"].items():
@@ -124,9 +130,10 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
         row("diagnose", "prestress λ2", l2, t2, "1")
         row("diagnose", "prestress angle", math.degrees(a), math.degrees(ta), "deg", rel=False)
     row("diagnose", "shrinkage of the excess", gap["shrinkage"]["overall"], None, "1")
-    final = gap.get("final_parameters") or {}
+    final, final_se = gap.get("final_parameters") or {}, gap.get("final_se") or {}
     if named:   # the model with the named effect: its parameters against the truth
         for name, par in fe["parameters"].items():
             if name in tp and par.get("free") and name in final:
-                row("diagnose", f"{name} (with {named[0]})", final[name], tp[name], par.get("unit", ""))
+                row("diagnose", f"{name} (with {named[0]})", final[name], tp[name], par.get("unit", ""),
+                    se=final_se.get(name))
     return rows
