@@ -447,9 +447,10 @@ def _diagnose(spec: Mapping[str, Any], obs: Any, free: Sequence[str] | None,
               workers: int | None, options: Mapping[str, Any]) -> dict[str, Any]:
     from skinkit.gap.diagnose import diagnose
 
-    # truth and model share one mesh by construction: the discretisation check would find
-    # nothing and cost a refined solve per case (it has its own test, test_discretisation_gap)
-    opts = {"error_estimate": False, **dict(options)}
+    # truth and model share one mesh by construction: the discretisation check and the carried
+    # model error would find nothing and cost refined solves per case (their own tests:
+    # test_discretisation_gap, test_no_inverse_crime)
+    opts = {"error_estimate": False, "model_error": False, **dict(options)}
     return diagnose(spec, obs, free=None if free is None else list(free), workers=workers, **opts).to_dict()
 
 
