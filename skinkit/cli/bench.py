@@ -24,6 +24,7 @@ BENCHES: dict[str, str] = {
     "fit": "skinkit.cli.bench_ident:bench_fit",
     "fit-invivo": "skinkit.cli.bench_ident:bench_fit_invivo",
     "coverage": "skinkit.cli.bench_ident:bench_coverage",
+    "mesh-nulls": "skinkit.cli.bench_ident:bench_mesh_nulls",
 }
 
 

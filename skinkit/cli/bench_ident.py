@@ -1,4 +1,4 @@
-"""``skinkit bench forward | fit | fit-invivo | coverage``: the cost and the honesty of
+"""``skinkit bench forward | fit | fit-invivo | coverage | mesh-nulls``: the cost and the honesty of
 identification, beside the ways peers do it.
 
 Each command runs :mod:`skinkit.bench`'s plain functions and prints their figures (JSON with
@@ -88,3 +88,23 @@ def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: 
     lines = coverage.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Coverage of the reported 95 % intervals", res, lines)
+
+
+@click.command("mesh-nulls")
+@click.option("--case", "cases", type=click.Choice(["disc-two-layers", "disc-gel", "all"]), default="all",
+              show_default=True, help="which model")
+@click.option("--seeds", type=click.IntRange(1), default=10, show_default=True, help="sessions per case")
+@click.option("--first-seed", type=click.IntRange(0), default=0, show_default=True,
+              help="seeds are first-seed, first-seed + 1, ...")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+@page_option
+def bench_mesh_nulls(cases: str, seeds: int, first_seed: int, as_json: bool, page: Path | None) -> None:
+    """Nulls with the mesh gap only: truths on meshes of their own, no effect; how often a cause is
+    named with the model's discretisation error carried as noise, and without."""
+    from skinkit.bench import mesh_nulls
+
+    names = list(mesh_nulls.CASES) if cases == "all" else [cases]
+    res = mesh_nulls.run(names, seeds, first_seed, say=lambda s: click.echo(s, err=True))
+    lines = mesh_nulls.summary_lines(res)
+    emit(res, as_json, lines, indent=1)
+    write_page(page, "Nulls with the mesh gap only", res, lines)
