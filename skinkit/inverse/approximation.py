@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from skinkit.inverse.discretisation import DEFAULT_FACTOR, DiscretisationError, has_mesh, richardson_factor
+from skinkit.inverse.lowrank import apply, whitening
 from skinkit.schemas import Observations, ParameterSet, Prediction
 from skinkit.schemas.observations import CHANNELS
 
@@ -79,26 +80,6 @@ class ModelError:
         mean = {k: v[keep[k]] for k, v in self.mean.items() if k in keep}
         basis = {k: v[(slice(None), *keep[k])] for k, v in self.basis.items() if k in keep}
         return ModelError(mean, basis, self.rank, self.summary)
-
-
-def whitening(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(Q, shrink)`` with (I + V Vᵀ)^(−1/2) = I − Q diag(shrink) Qᵀ for ``V`` ``(m, r)`` (thin SVD;
-    directions with no weight dropped)."""
-    if V.size == 0:
-        return np.zeros((V.shape[0], 0)), np.zeros(0)
-    Q, s, _ = np.linalg.svd(V, full_matrices=False)
-    keep = s > 1e-12 * max(float(s.max(initial=0.0)), 1e-300)
-    Q, s = Q[:, keep], s[keep]
-    return Q, 1.0 - 1.0 / np.sqrt(1.0 + s ** 2)
-
-
-def apply(Q: np.ndarray, shrink: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """``(I − Q diag(shrink) Qᵀ) a`` for ``a`` ``(m,)`` or ``(m, n)``."""
-    if not shrink.size:
-        return a
-    if a.ndim == 1:
-        return a - Q @ (shrink * (Q.T @ a))
-    return a - Q @ (shrink[:, None] * (Q.T @ a))
 
 
 def _draws(params: ParameterSet, free: Sequence[str], n: int, seed: int) -> list[dict[str, float]]:

@@ -143,7 +143,7 @@ class Objective:
                               "weighting (does the session have the channels the model predicts?)")
         z, J = np.concatenate(zs), (np.concatenate(Js) if jacobian else None)
         if Vs:   # noise plus the model error's covariance, whitened (approximation.whitening)
-            from skinkit.inverse.approximation import apply, whitening
+            from skinkit.inverse.lowrank import apply, whitening
 
             Q, shrink = whitening(np.concatenate(Vs))
             z = apply(Q, shrink, z)

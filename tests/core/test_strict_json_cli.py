@@ -32,6 +32,7 @@ EXPENSIVE: dict[str, str] = {
     "bench fem": "needs sfepy, solves a 10,000-unknown block twice",
     "bench fit": "three fits of a finite-element model (minutes)",
     "bench fit-invivo": "fits at in vivo scale (hours)",
+    "bench mesh-nulls": "diagnoses 40 finite-element sessions, truths on their own meshes (tens of minutes)",
     "bench forward": "starts a Dask cluster and solves finite-element sessions (minutes)",
     "bench robot": "streams six link configurations in real time through emulators",
     "convergence": "solves a finite-element model on several meshes (minutes)",
