@@ -84,8 +84,10 @@ def _render(jobs: list[tuple[Any, ...]], workers: int, progress: Callable[[float
     return out
 
 
-def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress = _quiet) -> dict[str, Any]:
-    """Step 1: write ``out/session.h5`` (records, images) and ``out/truth.json``; the truth document."""
+def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress = _quiet,
+            mesh: str = "own") -> dict[str, Any]:
+    """Step 1: write ``out/session.h5`` (records, images) and ``out/truth.json``; the truth document.
+    ``mesh``: the truth on a mesh of its own (``"own"``) or the model's (``"shared"``)."""
     from skinkit.lab import forearm
     from skinkit.lab.imaging import followed_grid
     from skinkit.lab.lumped import LumpedTruth, stochastic_session
@@ -97,7 +99,7 @@ def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress 
         p.unlink(missing_ok=True)
     spec = forearm.truth_spec(quick)
     grid, points = followed_grid(forearm.disc_radius_m(spec), lambda xy: surface_height(xy, True))
-    vs = simulate(spec, seed, points=points, workers=workers,
+    vs = simulate(spec, seed, points=points, workers=workers, mesh=mesh,
                   progress=lambda s, f: progress("acquire: truth model", f))
     write_records(vs, session, operator="skinkit demo")
     lumped = LumpedTruth()
@@ -208,8 +210,9 @@ def identify_fe(session: Path, quick: bool, workers: int, progress: Progress = _
 
 
 def diagnose_gap(session: Path, out: Path, description: dict[str, Any], quick: bool, workers: int,
-                 progress: Progress = _quiet) -> dict[str, Any]:
-    """Step 5: the gap diagnosis of the calibrated model (started at its optimum)."""
+                 progress: Progress = _quiet, model_error: bool = True) -> dict[str, Any]:
+    """Step 5: the gap diagnosis of the calibrated model (started at its optimum); ``model_error``:
+    its mesh's discretisation error carried as noise."""
     from skinkit.gap import diagnose
     from skinkit.gap.diagnose import write_report
     from skinkit.lab import forearm
@@ -224,7 +227,8 @@ def diagnose_gap(session: Path, out: Path, description: dict[str, Any], quick: b
     # the quick variant (the test suite's) refits only the best candidate and makes no
     # discretisation check (a refined solve; tests/gap/test_discretisation_gap.py has its own)
     report = diagnose(description, obs, free=list(forearm.FREE), max_effects=1, candidates=1 if quick else 2,
-                      workers=workers, progress=say, error_estimate=not quick)
+                      workers=workers, progress=say, error_estimate=not quick and not model_error,
+                      model_error=model_error)
     name = "gap-" + str(description.get("model", {}).get("name", "model"))
     with open_experiment(session, "a") as exp:
         exp.write_gap(name, report)
@@ -238,15 +242,18 @@ def diagnose_gap(session: Path, out: Path, description: dict[str, Any], quick: b
 
 
 def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: int = 2,
-              progress: Progress = _quiet) -> dict[str, Any]:
-    """Run steps 1–7 into ``out_dir``; the JSON-ready summary (also ``out_dir/summary.json``)."""
+              progress: Progress = _quiet, mesh: str = "own") -> dict[str, Any]:
+    """Run steps 1–7 into ``out_dir``; the JSON-ready summary (also ``out_dir/summary.json``).
+    ``mesh``: the truth on a mesh of its own, the model's discretisation error then carried as
+    noise by the diagnosis (``"own"``), or on the model's mesh without it (``"shared"``: the
+    inverse crime, for comparison)."""
     from skinkit.report import write_report
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     session = out / SESSION
     summary: dict[str, Any] = {"experiment_file": str(session), "truth_file": str(out / TRUTH),
-                               "quick": quick, "seed": seed, "times_s": {}}
+                               "quick": quick, "seed": seed, "mesh": mesh, "times_s": {}}
 
     def timed(key: str, fn: Callable[[], Any]) -> Any:
         t0 = time.perf_counter()
@@ -254,13 +261,14 @@ def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: 
         summary["times_s"][key] = time.perf_counter() - t0
         return res
 
-    summary["acquire"] = timed("acquire", lambda: acquire(out, seed, quick, workers, progress))
+    summary["acquire"] = timed("acquire", lambda: acquire(out, seed, quick, workers, progress, mesh))
     summary["lumped"] = timed("lumped", lambda: identify_lumped(session, progress))
     summary["cameras"] = timed("cameras", lambda: measure_cameras(session, progress))
     fe, desc = timed("identify", lambda: identify_fe(session, quick, workers, progress))
     summary["identify"] = fe
     summary["diagnose"] = timed("diagnose",
-                                lambda: diagnose_gap(session, out, desc, quick, workers, progress))
+                                lambda: diagnose_gap(session, out, desc, quick, workers, progress,
+                                                     model_error=mesh == "own"))
     report = timed("report", lambda: write_report(session, out / "report.html", overwrite=True))
     summary["report"] = str(report)
     progress("compare with the truth", 0.0)
