@@ -304,7 +304,7 @@ def run(quick: bool, *, seeds: int | None = None, forms_: Sequence[str] | None =
                  for f in selected}
     settings = {"benchmark": "alternative", "definitions": DEFINITIONS, "model": spec, "free": list(FREE),
                 "diagnose": opts, "alpha": ALPHA, "forms": described}
-    jr = _open_journal(journal, settings, say)
+    jr = _open_journal(journal, settings, say, read_only=recorded_only)
     cases = plan(selected, seeds)
     payloads = [dict(c, diagnose=opts) for c in cases]
     known = {} if jr is None else jr.cases

@@ -125,12 +125,12 @@ class _Pool:
 
 
 def _open_journal(journal: str | os.PathLike[str] | None, settings: Mapping[str, Any],
-                  say: Callable[[str], None]) -> Any:
+                  say: Callable[[str], None], read_only: bool = False) -> Any:
     if journal is None:
         return None
     from skinkit.bench.gap_journal import Journal
 
-    jr = Journal(journal, settings)
+    jr = Journal(journal, settings, read_only=read_only)
     if jr.cases or jr.calibrations:
         say(f"journal {journal}: {len(jr.calibrations)} calibrations and {len(jr.cases)} cases recorded")
     return jr
@@ -245,7 +245,8 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     if recorded_only and not Path(journal).is_file():
         raise BenchmarkError(f"--recorded-only: journal {journal} does not exist")
     jr = _open_journal(journal, {"model": spec, "free": free, "magnitudes": {m: MAGNITUDES[m] for m in mags},
-                                 "diagnose": opts, "alpha": ALPHA, "definitions": DEFINITIONS}, say)
+                                 "diagnose": opts, "alpha": ALPHA, "definitions": DEFINITIONS}, say,
+                      read_only=recorded_only)
     pool = _Pool(1, None) if recorded_only else _Pool(parallel, scheduler)
     try:
         cals = _calibrations(pool, [{"spec": spec, "free": free, "effect": n, "workers": workers,

@@ -39,29 +39,44 @@ class Journal:
     """An append-only record of a benchmark's finished tasks at ``path`` (created if absent).
 
     ``settings``: JSON-ready; must equal the recorded header's when the file exists.
+    ``read_only``: only read what ``path`` holds (a run that runs nothing): the file is never
+    written, not even the header of an empty one or the cut of a line cut short.
     """
 
-    def __init__(self, path: str | os.PathLike[str], settings: Mapping[str, Any]) -> None:
+    def __init__(self, path: str | os.PathLike[str], settings: Mapping[str, Any], *,
+                 read_only: bool = False) -> None:
         self.path = Path(path)
         self.settings = _canonical(dict(settings))
+        self.read_only = read_only
         self.calibrations: dict[str, dict[str, Any]] = {}
         self.cases: dict[str, dict[str, Any]] = {}
-        if self.path.exists() and self.path.stat().st_size > 0:
-            self._read()
-        else:
+        head = self._line({"journal": MAGIC, "version": VERSION, "settings": self.settings})
+        raw = self.path.read_bytes() if self.path.exists() else b""
+        # this run's own header cut short by a crash (no task recorded yet) is written again
+        cut_header = not raw.endswith(b"\n") and head.encode().startswith(raw)
+        if raw and not cut_header:
+            self._read(raw)
+        elif not read_only:
             if self.path.parent and not self.path.parent.exists():
                 raise JournalError(f"journal {self.path}: folder {self.path.parent} does not exist")
-            self._append({"journal": MAGIC, "version": VERSION, "settings": self.settings})
+            with open(self.path, "w", encoding="utf-8") as f:
+                f.write(head)
+                f.flush()
+                os.fsync(f.fileno())
 
-    def _read(self) -> None:
-        raw = self.path.read_bytes()
-        if not raw.endswith(b"\n"):
-            # a line cut short by a crash while it was written: drop it, keep the rest
-            cut = raw.rfind(b"\n") + 1
-            with open(self.path, "r+b") as f:
-                f.truncate(cut)
-            raw = raw[:cut]
-        lines = raw.decode("utf-8").splitlines()
+    @staticmethod
+    def _line(item: Mapping[str, Any]) -> str:
+        return jsonio.dumps(item, default=float, allow_nan=True) + "\n"
+
+    def _read(self, raw: bytes) -> None:
+        # a line cut short by a crash while it was written is dropped; the file is cut only once
+        # it is known to be this run's journal (any other file is left as it is)
+        cut = raw.rfind(b"\n") + 1
+        try:
+            lines = raw[:cut].decode("utf-8").splitlines()
+        except UnicodeDecodeError:
+            raise JournalError(f"journal {self.path}: not a skinkit gap benchmark journal (not UTF-8 "
+                               "text)") from None
         try:
             head = json.loads(lines[0]) if lines else None
         except json.JSONDecodeError:
@@ -87,9 +102,14 @@ class Journal:
                 self.cases[item["case"]["id"]] = item["case"]
             else:
                 raise JournalError(f"journal {self.path}, line {no}: neither a calibration nor a case")
+        if cut < len(raw) and not self.read_only:
+            with open(self.path, "r+b") as f:
+                f.truncate(cut)
 
     def _append(self, item: Mapping[str, Any]) -> None:
-        line = jsonio.dumps(item, default=float, allow_nan=True) + "\n"
+        if self.read_only:
+            raise JournalError(f"journal {self.path}: opened read-only, nothing may be recorded in it")
+        line = self._line(item)
         with open(self.path, "a", encoding="utf-8") as f:
             f.write(line)
             f.flush()

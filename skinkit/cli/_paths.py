@@ -89,10 +89,13 @@ def check_result_files(folder: str | os.PathLike, names: Sequence[str], option: 
     return p
 
 
-def check_name(name: str, option: str) -> str:
-    """A record, protocol or image-set name: non-empty, no path separator, no ``..``."""
+def check_name(name: str, option: str, what: str = "name") -> str:
+    """A record, protocol or image-set name: non-empty, no path separator, no ``..``; ``what``
+    says in a refusal what ``option`` expects (e.g. ``"protocol name"``)."""
     if not name or not name.strip():
-        raise SkinkitError(f"{option}: must not be empty")
+        got = "an empty string" if not name else f"only blanks ({name!r})"
+        article = "an" if what[:1] in "aeiou" else "a"
+        raise SkinkitError(f"{option}: expected {article} {what}, got {got}")
     if "/" in name or "\\" in name or "\0" in name or ".." in name:
         raise SkinkitError(f"{option} {name!r}: a name must not contain '/', '\\', '..' or NUL")
     return name

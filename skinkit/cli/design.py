@@ -64,7 +64,7 @@ def design(model_file: str, session: str, free: str | None, at: str | None, cand
         if unknown:
             raise SkinkitError(f"--at {at}: parameters {', '.join(unknown)} are not the model's "
                                f"(a fit of another model?)")
-        names = split_names(free) or fit_free or None
+        names = split_names(free) if free is not None else fit_free or None
         obs = read_session(model, session, holdout)
 
         def progress(msg: str) -> None:

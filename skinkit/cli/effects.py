@@ -65,6 +65,30 @@ def _forces_from_trajectories(spec, obs, workers):
     return Observations(out, None, obs.source)
 
 
+def _requested_effects(text: str, kind: str) -> list[str]:
+    """The effects --effects names, each installed; refused when none applies to a ``kind`` model
+    (some may not: each is then reported as not applying)."""
+    from skinkit import registry
+    from skinkit.errors import SkinkitError
+    from skinkit.forward.session import split_names
+    from skinkit.forward.visibility import applicable_effects
+
+    wanted = list(dict.fromkeys(split_names(text)))
+    if not wanted:
+        raise SkinkitError("--effects: no effect named")
+    installed = registry.names("skinkit.effects")
+    for e in wanted:
+        if e not in installed:
+            raise SkinkitError(f"--effects {e!r}: no such effect is installed "
+                               f"(installed: {', '.join(installed)})")
+    ok = applicable_effects(kind)
+    if not set(wanted) & set(ok):
+        which = f"{wanted[0]!r} does not apply" if len(wanted) == 1 else f"{', '.join(wanted)}: none applies"
+        raise SkinkitError(f"--effects {which} to a {kind!r} model "
+                           f"(effects for {kind} models: {', '.join(ok)})")
+    return wanted
+
+
 @effects.command("visibility")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.option("--session", type=click.Path(dir_okay=False), default=None,
@@ -80,10 +104,13 @@ def visibility(model_file: str, session: str | None, names: str | None, threshol
     """Each effect at its null (exact?) and typical magnitude: which protocols and channels see it."""
     from skinkit.bench.forward import trajectory_observations
     from skinkit.errors import SkinkitError
-    from skinkit.forward import load, read_description, read_observations
+    from skinkit.forward import load, model_kind, read_description, read_observations
     from skinkit.forward.visibility import DEFAULT_NOISE, effect_visibility
 
     spec = read_description(model_file)
+    kind = model_kind(spec)
+    # checked before any prediction: an effect that cannot apply would only be reported after them
+    wanted = None if names is None else _requested_effects(names, kind)
     noise = None
     if session:
         obs = read_observations(session)
@@ -98,9 +125,13 @@ def visibility(model_file: str, session: str | None, names: str | None, threshol
             # the protocols' programmes give tip trajectories: the model driven by them gives the
             # tip forces that then drive it as the model file says (by the recorded force)
             obs = _forces_from_trajectories(spec, obs, workers)
-    res = effect_visibility(spec, obs, [s.strip() for s in names.split(",")] if names else None, noise,
-                            threshold, load=lambda s: load(s, workers=workers),
+    res = effect_visibility(spec, obs, wanted, noise, threshold, load=lambda s: load(s, workers=workers),
                             progress=None if as_json else (lambda n: click.echo(f"  {n} ...", err=True)))
+    if wanted and not any(e["applicable"] for e in res["effects"].values()):
+        # e.g. an effect the model's own law already holds: the model refuses it when loaded
+        first = next(iter(res["effects"].items()))
+        raise SkinkitError(f"--effects {', '.join(wanted)}: none applies to this {kind} model "
+                           f"({first[0]}: {first[1]['reason']})")
     if as_json:
         click.echo(jsonio.dumps(res, indent=2))
         return

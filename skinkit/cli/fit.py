@@ -211,7 +211,8 @@ def _fit_parameters(model, free: str | None, bound_items: tuple[str, ...], start
     (name -> (lower, upper) [SI]), the given starts (name -> SI))``, each option checked."""
     from skinkit.inverse.fit import free_set, with_bounds
 
-    params = free_set(model.parameters(), split_names(free) or None)
+    # an empty --free is refused (by free_set), not read as "the model's own free parameters"
+    params = free_set(model.parameters(), None if free is None else split_names(free))
     bounds = {}
     for item in bound_items:
         name, lo, hi = _bound(item, params)

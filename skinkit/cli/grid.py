@@ -214,8 +214,9 @@ def profile(model_file: str, session: str, name: str, free: str | None, n: int, 
         out = Path(out_dir) if out_dir else Path.cwd() / f"profile-{model.name}-{name}"
         # before it runs
         check_result_files(out, ("profile.json", "profile.png"), "--out", overwrite=overwrite)
-        pr = profile_likelihood(model, obs, name, split_names(free) or None, values=vals, n=n,
-                                weighting=weighting, progress=_say)
+        others = None if free is None else split_names(free)
+        pr = profile_likelihood(model, obs, name, others, values=vals, n=n, weighting=weighting,
+                                progress=_say)
         pr = _clean({**pr, "session": str(session)})
         out.mkdir(parents=True, exist_ok=True)
         (out / "profile.json").write_text(jsonio.dumps(pr, indent=1))

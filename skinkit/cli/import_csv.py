@@ -26,7 +26,7 @@ def import_csv(experiment: Path, csv_file: Path, protocol: str | None, axis: str
     The old order CSV_FILE EXPERIMENT is still read, with a warning, when it is evident (the
     first is not HDF5, the second is)."""
     experiment, csv_file = experiment_first(experiment, csv_file, "skinkit import-csv")
-    check_name(protocol if protocol is not None else csv_file.stem, "--protocol")
+    check_name(protocol if protocol is not None else csv_file.stem, "--protocol", "protocol name")
     check_out_file(experiment, "EXPERIMENT")
     record = read_robot_csv(csv_file, protocol, axis)
     if experiment.exists():

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from skinkit.cli._order import experiment_first
+from skinkit.cli._paths import check_name
 from skinkit.cli._types import FiniteFloat
 from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_extensometer
 
@@ -33,6 +34,8 @@ def import_extensometer_cmd(experiment: Path, folder: Path, protocol: str, overw
 
     The old order FOLDER EXPERIMENT is still read, with a warning, when it is evident (the
     first is a folder, the second an HDF5 file or a new .h5 name)."""
+    # before the folder is read: the schema's own refusal would not name the option
+    check_name(protocol, "--protocol", "protocol name")
     experiment, folder = experiment_first(experiment, folder, "skinkit import-extensometer")
     imp = import_extensometer(folder, experiment, protocol, overwrite, rate_hz, mark_spacing_mm * 1e-3,
                               int(moving_pad))

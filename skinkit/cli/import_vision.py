@@ -32,9 +32,10 @@ def import_images(experiment: Path, cameras: tuple[tuple[str, str], ...], name: 
     from skinkit.vision.image_import import import_images as run
     from skinkit.vision.image_import import plan_frames
 
-    check_name(name, "--name")  # before the progress bar: the error is then its only line
+    # before the progress bar: the error is then its only line
+    check_name(name, "--name", "image sequence name")
     for cam, _ in cameras:
-        check_name(cam, "--camera")
+        check_name(cam, "--camera", "camera name")
     plan = plan_frames(cameras, match)
     with Progress(TextColumn(f"importing {name}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=Console(stderr=True), transient=True) as prog:
@@ -81,8 +82,11 @@ def import_tracks(experiment: Path, csv_file: Path, name: str | None, unit: str 
                   m_per_px: float | None, fps: float, ignore: tuple[str, ...], overwrite: bool) -> None:
     """Import 2D/3D point tracks from another DIC tool (CSV: frame, point, x_mm, y_mm[, z_mm],
     or one row per frame) as a track in EXPERIMENT (created if it does not exist)."""
+    from skinkit.cli._paths import check_name
     from skinkit.store.track_import import import_tracks as run
 
+    if name is not None:   # an empty --name is refused, not read as "the CSV file's stem"
+        check_name(name, "--name", "track name")
     imp = run(experiment, csv_file, name, unit, m_per_px, fps, ignore, overwrite)
     t = imp.track
     click.echo(f"imported {t.n_points} points x {t.n_frames} frames ({imp.attrs['dimensions']}D, "

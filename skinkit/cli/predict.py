@@ -71,6 +71,9 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
         params = params.with_values(values) if values else params
         pred = model.predict(params, obs, sensitivities=sensitivities)
         summary = summarise(pred, obs)
+        if not summary["samples"]:
+            # a residual over no sample (chi2 nan) would read as a prediction that ran
+            raise SkinkitError(_nothing_predicted(model, session, axis))
         summary["model"] = model.name
         summary["session"] = str(session)
         summary["inputs"] = pred.inputs
@@ -93,6 +96,15 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
             click.echo(f"  {proto:24s} {cname:13s} chi2/n {c['chi2_per_sample']:9.3g}  "
                        f"rms [{rms}]{unit_suffix(c['unit'])}"
                        f"{'  (held out)' if c['held_out'] else ''}")
+
+
+def _nothing_predicted(model, session: str, axis: str | None) -> str:
+    """Why a prediction covers no recorded sample, as one line naming --axis when it was given."""
+    own = getattr(model, "axis", None)
+    predicts = f"; model {model.name!r} predicts the {own} axis" if own in ("x", "y", "z") else ""
+    if axis is not None:
+        return f"--axis {axis}: no sample of {session} is predicted on that axis{predicts}"
+    return f"{session}: no recorded sample is predicted by model {model.name!r}{predicts}"
 
 
 def _is_number(text: str) -> bool:

@@ -7,6 +7,7 @@ names are case-insensitive):
 * wide form, one row per frame: ``frame, x_<point>_<unit>, y_<point>_<unit>[, z_<point>_<unit>]``
   for every point (e.g. ``x_1_mm, y_1_mm, z_1_mm, x_2_mm, ...``).
 
+``frame`` is a non-negative whole number (the frame's index).
 ``<unit>`` is ``m``, ``mm``, ``cm``, ``um`` or ``px`` (pixels need a scale); a bare ``x`` takes
 the unit given by the caller. Optional columns: ``time_s`` or ``time_ms`` (else frame ``k``
 is at ``k / fps``), ``valid`` (0/1; else a point is valid where its coordinates are
@@ -184,9 +185,7 @@ def _rows(p: Path, rows: list[list[str]], h: _Header
         where = f"{p}:line {lineno}"
         if len(row) < len(h.names):
             raise StoreError(where, "", f"has {len(row)} fields, the header {len(h.names)}")
-        frame = _number(row[ci["frame"]], where, "frame")
-        if not np.isfinite(frame):
-            raise StoreError(where, "", "column 'frame' is empty")
+        frame = _frame(row[ci["frame"]], where)
         if "time_s" in ci or "time_ms" in ci:
             key = "time_s" if "time_s" in ci else "time_ms"
             t = _number(row[ci[key]], where, key) * (1.0 if key == "time_s" else 1e-3)
@@ -204,6 +203,18 @@ def _rows(p: Path, rows: list[list[str]], h: _Header
     return data, times
 
 
+def _frame(text: str, where: str) -> float:
+    """The frame index of one data line: a non-negative whole number (a time column, when the
+    file has one, says when it was taken; the index only orders and matches the frames)."""
+    frame = _number(text, where, "frame")
+    if np.isnan(frame):
+        raise StoreError(where, "", "column 'frame' is empty")
+    if not (np.isfinite(frame) and frame >= 0 and frame == np.floor(frame)):
+        raise StoreError(where, "", f"column 'frame': {text.strip()!r} is not a frame index "
+                                    "(expected a non-negative whole number)")
+    return frame
+
+
 def _point(row: list[str], where: str, h: _Header, label: str) -> tuple[np.ndarray, bool]:
     """One point's position (3,) [m] on one data line (reference plus displacement when the
     file gives u, v, w) and whether it is valid."""
@@ -216,7 +227,12 @@ def _point(row: list[str], where: str, h: _Header, label: str) -> tuple[np.ndarr
         (pos if axis in "xyz" else ref)[_AXES[axis]] += v
     ok = bool(np.all(np.isfinite(pos + ref)))
     if "valid" in h.special:
-        ok = ok and _number(row[h.special["valid"]], where, "valid") != 0
+        flag = row[h.special["valid"]]
+        v = _number(flag, where, "valid")
+        # anything but 0/1 (2, -1, an empty cell) is a mistake in the export, not a validity
+        if v not in (0.0, 1.0):
+            raise StoreError(where, "", f"column 'valid': {flag.strip()!r} is not 0 or 1")
+        ok = ok and v == 1.0
     return (pos + ref if h.displacements else pos), ok
 
 
@@ -263,7 +279,7 @@ def import_tracks(experiment: str | os.PathLike[str], path: str | os.PathLike[st
     from skinkit.store.experiment import create_experiment, open_experiment
 
     imp = read_tracks_csv(path, unit, m_per_px, fps, ignore)
-    name = name or Path(path).stem
+    name = Path(path).stem if name is None else name
     if not name or "/" in name:
         raise StoreError(str(experiment), "", f"track name {name!r} is empty or contains '/'")
     out = Path(experiment)
