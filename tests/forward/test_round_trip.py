@@ -42,7 +42,8 @@ def trip(tmp_path_factory):
     from skinkit.lab.session import make_session
 
     d = tmp_path_factory.mktemp("trip")
-    truth = make_session(copy.deepcopy(MODEL), d / "s.h5", d / "t.json", seed=3, workers=2)
+    truth = make_session(copy.deepcopy(MODEL), d / "s.h5", d / "t.json", seed=3, workers=2,
+                         mesh="shared")
     model = load(copy.deepcopy(MODEL), workers=2)
     obs = read_observations(d / "s.h5")
     pred = model.predict(model.parameters(), obs)
@@ -147,7 +148,8 @@ def test_twopad_round_trip(tmp_path):
     force and tracked points within the noise's range, as for the indentation model."""
     from skinkit.forward import load, read_observations
     from skinkit.lab.session import make_session
-    truth = make_session(copy.deepcopy(TWOPAD), tmp_path / "s.h5", tmp_path / "t.json", seed=7, workers=1)
+    truth = make_session(copy.deepcopy(TWOPAD), tmp_path / "s.h5", tmp_path / "t.json", seed=7, workers=1,
+                         mesh="shared")
     m = load(copy.deepcopy(TWOPAD), workers=1)
     obs = read_observations(tmp_path / "s.h5")
     pred = m.predict(m.parameters(), obs)

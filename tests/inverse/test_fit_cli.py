@@ -76,7 +76,7 @@ outside = "nearest"
 max_step = "1 s"
 """
 FIT_ARGS = ["--free", "skin.E,subdermal.E", "--start", "skin.E=15 kPa", "--start", "subdermal.E=20 kPa",
-            "--workers", "1", "--overwrite"]
+            "--workers", "1", "--overwrite", "--no-model-error"]
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +84,7 @@ def disc_session(tmp_path_factory):
     d = tmp_path_factory.mktemp("disc")
     (d / "m.toml").write_text(DISC)
     r = CliRunner().invoke(main, ["lab", "session", str(d / "m.toml"), "--out", str(d / "s.h5"),
-                                  "--truth-out", str(d / "t.json"), "--seed", "1"])
+                                  "--truth-out", str(d / "t.json"), "--seed", "1", "--shared-mesh"])
     assert r.exit_code == 0, r.output
     return d
 
