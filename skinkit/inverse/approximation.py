@@ -47,7 +47,13 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.inverse.discretisation import DEFAULT_FACTOR, DiscretisationError, has_mesh, richardson_factor
+from skinkit.inverse.discretisation import (
+    DEFAULT_FACTOR,
+    DiscretisationError,
+    explained_share,
+    has_mesh,
+    richardson_factor,
+)
 from skinkit.inverse.lowrank import apply, whitening
 from skinkit.schemas import Observations, ParameterSet, Prediction
 from skinkit.schemas.observations import CHANNELS
@@ -246,7 +252,8 @@ def refit(model: Any, observations: Observations, result: Any, free: Sequence[st
     ``fit(model, observations, free, start=..., **options)`` is the fit to run
     (:func:`skinkit.inverse.fit`). The result's ``extra["model_error"]`` holds the last
     estimate's summary plus ``passes``, ``chi2_without`` (the first calibration's χ²),
-    ``chi2_with``, ``dof`` and ``accounts_for`` (:func:`accounts_for`)."""
+    ``chi2_with``, ``dof`` and ``accounts_for`` (the share of the excess it removed:
+    :func:`skinkit.inverse.discretisation.explained_share`)."""
     if isinstance(passes, bool) or not isinstance(passes, int) or passes < 1:
         raise DiscretisationError(f"passes must be a whole number >= 1, got {passes!r}")
     first, new, carried = result, result, observations
@@ -263,18 +270,9 @@ def refit(model: Any, observations: Observations, result: Any, free: Sequence[st
     c0, c1 = sum(first.residual_by_protocol.values()), sum(new.residual_by_protocol.values())
     dof = c0 / float(first.chi2_per_dof) if first.chi2_per_dof else float("nan")
     err.summary.update(passes=passes, chi2_without=c0, chi2_with=c1, dof=dof,
-                       accounts_for=accounts_for(c0, c1, dof))
+                       accounts_for=explained_share(c0, c1, dof))
     new.extra["model_error"] = err.summary
     return new, carried
-
-
-def accounts_for(chi2_without: float, chi2_with: float, dof: float) -> float | None:
-    """The share of the residual's excess over ν that the model error accounts for (None
-    without an excess)."""
-    excess = chi2_without - dof
-    if excess <= 0:
-        return None
-    return float(min(max((chi2_without - max(chi2_with, dof)) / excess, 0.0), 1.0))
 
 
 def describe(summary: Mapping[str, Any]) -> list[str]:
@@ -296,4 +294,4 @@ def describe(summary: Mapping[str, Any]) -> list[str]:
 
 
 __all__ = ["DEFAULT_DRAWS", "DEFAULT_PASSES", "ModelError", "ORDER_HIGH", "ORDER_LOW", "SPREAD",
-           "accounts_for", "apply", "describe", "estimate", "refit", "whitening"]
+           "apply", "describe", "estimate", "refit", "whitening"]

@@ -136,14 +136,18 @@ def residual_check(z: np.ndarray, J: np.ndarray, e: np.ndarray, values: np.ndarr
     A = np.column_stack([J, e]) if np.any(e) else J
     r_sig = z - A @ np.linalg.lstsq(A, z, rcond=None)[0] if A.shape[1] else z
     chi2, chi2_x, chi2_s = float(z @ z), float(r_exact @ r_exact), float(r_sig @ r_sig)
-    excess = chi2 - nu
-
-    def share(left: float) -> float | None:
-        return None if excess <= 0 else float(min(max((chi2 - max(left, nu)) / excess, 0.0), 1.0))
-
     return {"chi2": chi2, "dof": nu, "chi2_discretisation": float(e @ e), "chi2_exact": chi2_x,
-            "explained_fraction": share(chi2_x), "chi2_signature": chi2_s,
-            "explained_by_signature": share(chi2_s), "bias": bias}
+            "explained_fraction": explained_share(chi2, chi2_x, nu), "chi2_signature": chi2_s,
+            "explained_by_signature": explained_share(chi2, chi2_s, nu), "bias": bias}
+
+
+def explained_share(chi2: float, left: float, dof: float) -> float | None:
+    """The share of the excess χ² − ν that a residual of χ² ``left`` no longer has (in [0, 1];
+    None without an excess): what an error model or a re-adjustment accounts for."""
+    excess = chi2 - dof
+    if excess <= 0:
+        return None
+    return float(min(max((chi2 - max(left, dof)) / excess, 0.0), 1.0))
 
 
 def error_in_residual(model: Any, observations: Observations, params: ParameterSet | dict[str, float],
@@ -252,4 +256,5 @@ def describe(est: dict[str, Any]) -> list[str]:
 
 
 __all__ = ["DEFAULT_FACTOR", "DEFAULT_ORDER", "DiscretisationError", "attach", "describe", "estimate",
-           "error_in_residual", "extrapolated", "has_mesh", "residual_check", "richardson_factor"]
+           "error_in_residual", "explained_share", "extrapolated", "has_mesh", "residual_check",
+           "richardson_factor"]

@@ -19,9 +19,9 @@ import copy
 
 import pytest
 
+from skinkit.bench.mesh_nulls import CASES
 from skinkit.fem.discretisation import refined_spec
 from skinkit.gap.diagnose import diagnose
-from tests.inverse.test_discretisation_bias import _spec
 
 pytestmark = pytest.mark.needs_plugins
 
@@ -29,9 +29,7 @@ pytestmark = pytest.mark.needs_plugins
 def test_discretisation_error_is_not_named_as_an_effect():
     from skinkit.inverse.coverage import LabSessions
 
-    spec = _spec()
-    spec["layers"] = [{"name": "gel", "thickness": "5 mm", "elements": 2, "law": "neo-hookean-enu",
-                       "parameters": {"E": "10 kPa", "nu": 0.45}}]
+    spec, _ = CASES["disc-gel"]()
     lab = LabSessions(refined_spec(spec, 2), workers=1, mesh="shared")
     model = copy.deepcopy(lab.model_spec)
     model["geometry"], model["layers"] = spec["geometry"], spec["layers"]

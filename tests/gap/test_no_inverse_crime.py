@@ -17,13 +17,11 @@ pytestmark = pytest.mark.needs_plugins
 
 
 def test_a_mesh_gap_alone_is_attributed_to_the_mesh_and_nothing_is_named():
+    from skinkit.bench.mesh_nulls import CASES
     from skinkit.gap.diagnose import diagnose
     from skinkit.inverse.coverage import LabSessions
-    from tests.inverse.test_discretisation_bias import _spec
 
-    spec = _spec()
-    spec["layers"] = [{"name": "gel", "thickness": "5 mm", "elements": 2, "law": "neo-hookean-enu",
-                       "parameters": {"E": "10 kPa", "nu": 0.45}}]
+    spec, _ = CASES["disc-gel"]()
     lab = LabSessions(spec, workers=1)
     assert lab.truth.truth["mesh"]["mode"] == "own"
     rep = diagnose(copy.deepcopy(lab.model_spec), lab(0), effects=["support-compliance", "inclusion"],

@@ -38,25 +38,10 @@ pytestmark = pytest.mark.needs_plugins
 
 def _spec() -> dict:
     """A small layered disc (neo-Hookean skin over subdermal tissue, 735 unknowns), a 4 mm bonded
-    indenter, one normal-indentation period."""
-    return {
-        "model": {"name": "disc-discretisation"},
-        "geometry": {"kind": "disc", "diameter": "30 mm", "indenter_diameter": "4 mm",
-                     "n_inner": 1, "n_ring": 1, "grading": 1.6},
-        "layers": [
-            {"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "neo-hookean-enu",
-             "parameters": {"E": "60 kPa", "nu": 0.45}},
-            {"name": "subdermal", "thickness": "3.5 mm", "elements": 1, "law": "neo-hookean-enu",
-             "parameters": {"E": "10 kPa", "nu": 0.45}},
-        ],
-        "boundary": {"fixed": ["outer", "bottom"]},
-        "indenter": {"mode": "displacement"},
-        "drive": {"max_step": "1 s"},
-        "surface": {"fit": False},
-        "solver": {"rtol": 1e-8, "intorder": 4},
-        "session": {"protocols": ["normal_indentation"],
-                    "parameters": {"normal_indentation": {"periods": 1}}},
-    }
+    indenter, one normal-indentation period: the mesh-null benchmark's two-layer case."""
+    from skinkit.bench.mesh_nulls import CASES
+
+    return CASES["disc-two-layers"]()[0]
 
 
 def test_richardson_factor_and_extrapolation_are_exact_on_a_power_law():
