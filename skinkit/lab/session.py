@@ -619,7 +619,6 @@ def make_session(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, out: s
     Returns the truth document.
     """
     check_options(out, truth_out, protocols, noise_scale, images)
-    check_mode(mesh, DEFAULT_MESH_FACTOR)
     vs = simulate(truth, seed, protocols, noise_scale, progress, workers, mesh=mesh)
     return write_session(vs, out, truth_out, progress)
 

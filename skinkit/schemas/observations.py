@@ -349,10 +349,7 @@ class Observations:
                                         None if c.outliers is None else c.outliers[sl],
                                         None if c.noise_scale is None else c.noise_scale[sl])
             out[p.name] = ProtocolObservations(p.protocol, chans, p.held_out)
-        err = None
-        if self.model_error is not None:
-            keep = {(p, c): cuts[(p, c)] for p in out for c in out[p].channels if (p, c) in cuts}
-            err = self.model_error.cut(keep)
+        err = None if self.model_error is None else self.model_error.cut(cuts)
         return Observations(out, self.profile, self.source, err)
 
     def fitted(self) -> Observations:
