@@ -9,6 +9,7 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._bench_out import page_option, write_page
+from skinkit.cli._scheduler import scheduler_callback
 
 
 def _names(text: str | None, option: str = "--effects") -> list[str] | None:
@@ -25,7 +26,8 @@ def _names(text: str | None, option: str = "--effects") -> list[str] | None:
 @click.command("benchmark")
 @click.option("--quick", is_flag=True, help="the quick run (a handful of effects at moderate magnitude, "
               "two null sessions; measured time in docs/guide/gap-benchmark.md)")
-@click.option("--scheduler", default=None, metavar="ADDRESS", help="run the cases on this Dask scheduler")
+@click.option("--scheduler", default=None, metavar="ADDRESS", callback=scheduler_callback,
+              help="run the cases on this Dask scheduler (reached before any work starts)")
 @click.option("--json", "as_json", is_flag=True, help="print JSON (progress lines go to stderr)")
 @click.option("--seeds", type=click.IntRange(1), default=None, help="seeds per effect and magnitude "
               "(default 1 quick, 3 full)")

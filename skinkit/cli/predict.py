@@ -8,6 +8,7 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._paths import check_out_file
+from skinkit.cli._scheduler import scheduler_callback
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session
@@ -29,7 +30,8 @@ from skinkit.units import unit_suffix
 @click.option("--sensitivities", is_flag=True, help="also compute every parameter's sensitivities")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="worker processes for the protocols (default: one per core)")
-@click.option("--scheduler", default=None, help="a Dask scheduler address to solve the protocols on")
+@click.option("--scheduler", default=None, metavar="ADDRESS", callback=scheduler_callback,
+              help="a Dask scheduler address to solve the protocols on (reached before any work starts)")
 @click.option("--axis", type=click.Choice(["x", "y", "z"]), default=None,
               help="tip axis of a one-axis CSV record (default: the model's, else z)")
 @click.option("--out", "out_file", type=click.Path(dir_okay=False), default=None,

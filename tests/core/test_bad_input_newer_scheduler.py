@@ -1,0 +1,87 @@
+"""``--scheduler ADDRESS`` is checked before any work starts by every command that has it: an
+address that does not parse, or whose port does not answer, is refused in one line naming the
+option and the address, even when the model would not have used the cluster. Only loopback
+addresses are used."""
+
+from __future__ import annotations
+
+import socket
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from skinkit.cli import cli
+from skinkit.examples import example_model
+from tests.core._cli import one_error
+
+pytestmark = pytest.mark.needs_plugins
+
+LUMPED = "extension_relaxation_lumped"
+
+
+def _run(*args: str):
+    return CliRunner().invoke(cli, list(args))
+
+
+def _unused_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def model() -> str:
+    return str(example_model(LUMPED))
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory) -> str:
+    """Two seconds of a one-axis extension record (ramp to 2 mm) the lumped model predicts."""
+    t = np.arange(200) / 100.0
+    d_mm = np.clip(t, 0.0, 2.0)
+    f = 0.015 * np.expm1(0.32 * d_mm) - 0.077 + 1e-3 * np.sin(7.0 * t)
+    path = tmp_path_factory.mktemp("record") / "rec.csv"
+    path.write_text("time_s,displacement_mm,force_N\n"
+                    + "".join(f"{a:.4f},{b:.5f},{c:.6f}\n" for a, b, c in zip(t, d_mm, f, strict=True)))
+    return str(path)
+
+
+@pytest.mark.parametrize("extra", [[], ["--protocols", "rec,rec", "--workers", "2"]])
+def test_predict_refuses_an_address_that_does_not_parse(model, record, extra):
+    one_error(_run("predict", model, record, "--scheduler", "garbage", *extra),
+              "--scheduler 'garbage'", "not a Dask scheduler address", "port")
+
+
+@pytest.mark.parametrize("extra", [[], ["--workers", "2"]])
+def test_predict_refuses_an_unreachable_scheduler(model, record, tmp_path, extra):
+    address = f"tcp://127.0.0.1:{_unused_port()}"
+    out = tmp_path / "p.h5"
+    one_error(_run("predict", model, record, "--scheduler", address, "--out", str(out), *extra),
+              f"--scheduler '{address}'", "cannot reach the Dask scheduler")
+    assert not out.exists()
+
+
+def test_predict_refuses_an_empty_address(model, record):
+    one_error(_run("predict", model, record, "--scheduler", " "), "--scheduler ' '",
+              "expected a Dask scheduler")
+
+
+def test_predict_takes_an_address_that_answers(model, record):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        r = _run("predict", model, record, "--scheduler", f"tcp://127.0.0.1:{s.getsockname()[1]}")
+    assert r.exit_code == 0, r.output
+    assert "over 200 samples" in r.output
+
+
+@pytest.mark.parametrize("alternative", [[], ["--alternative"]])
+def test_gap_benchmark_refuses_a_bad_scheduler_before_any_case(tmp_path, alternative):
+    journal = tmp_path / "run.jsonl"
+    one_error(_run("gap", "benchmark", "--quick", *alternative, "--scheduler", "garbage",
+                   "--journal", str(journal)), "--scheduler 'garbage'", "not a Dask scheduler address")
+    address = f"tcp://127.0.0.1:{_unused_port()}"
+    one_error(_run("gap", "benchmark", "--quick", *alternative, "--scheduler", address,
+                   "--journal", str(journal)), f"--scheduler '{address}'", "cannot reach")
+    assert not journal.exists()
