@@ -331,8 +331,10 @@ class Observations:
                              for k, v in self.protocols.items()}, self.profile, self.source,
                             self.model_error)
 
-    def until(self, t_s: float) -> Observations:
-        """Every channel cut to its samples at times ≤ ``t_s`` [s] (a record's first part)."""
+    def until(self, t_s: float, option: str = "--until") -> Observations:
+        """Every channel cut to its samples at times ≤ ``t_s`` [s] (a record's first part). A cut
+        that leaves a protocol no channel of 2 samples or more is refused naming ``option``, the
+        value and the protocol's time span: the session is not to blame for it."""
         out = {}
         cuts: dict[tuple[str, str], tuple[slice, ...]] = {}
         for p in self:
@@ -348,6 +350,12 @@ class Observations:
                                         c.noise_ar, c.noise_innovation,
                                         None if c.outliers is None else c.outliers[sl],
                                         None if c.noise_scale is None else c.noise_scale[sl])
+            if p.channels and not chans:
+                t0 = min(float(c.time_s[0]) for c in p.channels.values() if c.time_s.size)
+                t1 = max(float(c.time_s[-1]) for c in p.channels.values() if c.time_s.size)
+                raise SchemaError(f"{option} {t_s:g} s", f"leaves no samples of protocol {p.name!r} "
+                                  f"(its record spans {t0:g} to {t1:g} s; the cut keeps a channel "
+                                  "only with 2 samples or more)")
             out[p.name] = ProtocolObservations(p.protocol, chans, p.held_out)
         err = None if self.model_error is None else self.model_error.cut(cuts)
         return Observations(out, self.profile, self.source, err)
