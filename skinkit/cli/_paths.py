@@ -9,8 +9,9 @@ import fnmatch
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from skinkit.errors import SkinkitError
 
@@ -99,6 +100,15 @@ def check_name(name: str, option: str, what: str = "name") -> str:
     if "/" in name or "\\" in name or "\0" in name or ".." in name:
         raise SkinkitError(f"{option} {name!r}: a name must not contain '/', '\\', '..' or NUL")
     return name
+
+
+def name_callback(what: str) -> Callable[[Any, Any, str | None], str | None]:
+    """Click callback of a name option whose default (None) is made later: a value given is
+    :func:`check_name`-ed as ``what`` (e.g. ``"fit name"``), so an empty one is refused rather
+    than taken as the default."""
+    def callback(ctx: Any, param: Any, value: str | None) -> str | None:
+        return None if value is None else check_name(value, param.opts[0], what)
+    return callback
 
 
 @contextlib.contextmanager

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from skinkit import jsonio
-from skinkit.cli._paths import check_name, check_result_files
+from skinkit.cli._paths import check_name, check_result_files, name_callback
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session, split_names
@@ -78,7 +78,7 @@ def _bound(item: str, params) -> tuple[str, float, float]:
               help="directory for fit.json, plots and the checkpoint (default: the fit's --name, in "
                    "the current directory)")
 @click.option("--plots", is_flag=True, help="write plots of the fit to --out")
-@click.option("--name", "fit_name", default=None,
+@click.option("--name", "fit_name", default=None, callback=name_callback("fit name"),
               help="name of the fit stored in an experiment-file SESSION (default: fit-<model name>)")
 @click.option("--overwrite", is_flag=True,
               help="replace a fit of that name already stored in SESSION, and fit.json in --out")
@@ -118,7 +118,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         obs = read_session(model, session, holdout, segments, protocols=protocols)
         if until_s is not None:
             obs = obs.until(until_s)
-        fit_name = fit_name or f"fit-{model.name}"
+        fit_name = fit_name if fit_name is not None else f"fit-{model.name}"
         stores = str(session).lower().endswith((".h5", ".hdf5"))
         # default: named after the fit (fit-<model name> unless --name), in the current directory
         out = Path(out_dir) if out_dir else Path.cwd() / check_name(fit_name, "--name")

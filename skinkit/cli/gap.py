@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from skinkit import jsonio
-from skinkit.cli._paths import check_result_files
+from skinkit.cli._paths import check_result_files, name_callback
 from skinkit.cli._types import FiniteFloat
 from skinkit.cli.registry import LazyGroup
 from skinkit.errors import SkinkitError
@@ -49,7 +49,7 @@ def gap() -> None:
 @click.option("--free", default=None, help="parameters to calibrate (comma-separated; default: the model's)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="write gap.json (and gap.html) to this directory")
-@click.option("--name", "gap_name", default=None,
+@click.option("--name", "gap_name", default=None, callback=name_callback("report name"),
               help="name of the report stored in an experiment-file SESSION (default: gap-<model name>)")
 @click.option("--overwrite", is_flag=True,
               help="replace a report of that name already stored in SESSION, and gap.json/gap.html in --out")
@@ -92,7 +92,8 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     if not Path(session).is_file():
         raise SkinkitError(f"session {session}: not found")
     spec = read_description(model_file)
-    name = gap_name or f"gap-{dict(spec.get('model', {}) or {}).get('name', Path(model_file).stem)}"
+    model_name = dict(spec.get('model', {}) or {}).get('name', Path(model_file).stem)
+    name = gap_name if gap_name is not None else f"gap-{model_name}"
     if stores and not overwrite:   # before the diagnosis runs, not after it
         from skinkit.store import open_experiment
         with open_experiment(session) as exp:

@@ -11,6 +11,7 @@ import click
 from click.core import ParameterSource
 
 from skinkit import jsonio
+from skinkit.cli._paths import name_callback
 from skinkit.cli._types import FiniteFloat
 from skinkit.cli.registry import LazyGroup
 from skinkit.errors import SkinkitError
@@ -271,7 +272,8 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
 @click.option("--tracker", "tracker_name", default="gn", show_default=True)
 @click.option("--subset", "subset_px", default=41, show_default=True, type=click.IntRange(8, 4096),
               help="subset side [px]")
-@click.option("--name", "out_name", default=None, help="name of the stored track (default: the images')")
+@click.option("--name", "out_name", default=None, callback=name_callback("track name"),
+              help="name of the stored track (default: the images')")
 @click.option("--overwrite", is_flag=True, help="replace a track of that name already stored")
 def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tracker_name: str,
                 subset_px: int, out_name: str | None, overwrite: bool) -> None:
@@ -287,7 +289,7 @@ def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tra
             raise SkinkitError(f"no profile {profile_name!r} in {experiment}; "
                                "run `skinkit vision profile` first")
         sp = exp.read_profile(profile_name)
-        name = out_name or seq.name  # type: ignore[attr-defined]
+        name = out_name if out_name is not None else seq.name  # type: ignore[attr-defined]
         if name in exp.track_names() and not overwrite:  # refused before tracking, not after
             raise SkinkitError(f"{experiment} already holds a track named {name!r}; give another "
                                "--name, or --overwrite to replace it")
