@@ -183,7 +183,34 @@ class LumpedForwardModel(ForwardModel):
     # -- prediction ----------------------------------------------------------------------------
     def predict(self, params: ParameterSet, observations: Observations,
                 sensitivities: bool | Sequence[str] = False) -> Prediction:
-        """Predictions of the channel the model does not take as its drive, every protocol."""
+        """Predictions of the channel the model does not take as its drive, every protocol. A
+        prediction or sensitivity that is not a finite number (the element overflowing at the
+        record's drive) is refused naming the model's values, not returned as inf or nan."""
+        # an overflow is reported once, below, naming the values, not as numpy warnings
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            pred = self._predict(params, observations, sensitivities)
+        for proto, cname, cp in pred.items():
+            ch = observations[proto].channels[cname]
+            shown = cp.mask(ch)
+            bad = [f"its prediction of {cname}"] if not np.isfinite(cp.values[shown]).all() else []
+            bad += [f"the sensitivity of {cname} to {nm}" for nm, a in cp.d.items()
+                    if not np.isfinite(a[shown]).all()]
+            with np.errstate(over="ignore", invalid="ignore"):
+                # the residual's sum of squares, bounded: a finite but huge prediction overflows it
+                worst = np.max(np.abs(cp.values - ch.values)[shown] / np.min(ch.noise), initial=0.0)
+                if not bad and not np.isfinite(worst * worst * max(int(shown.sum()), 1)):
+                    bad = [f"the sum of squares of its residual of {cname} (up to {worst:.3g} noise levels)"]
+            if bad:
+                ls, v, _ = self.values(params)
+                given = ", ".join(f"{nm} = {x:g}" for nm, x in v.items() if nm.startswith("lumped."))
+                law = f"its {ls.elastic} element" if ls.elastic else f"its {ls.family} model"
+                raise ForwardError(f"model {self.name!r}", f"{bad[0]} in protocol {proto!r} is not a finite "
+                                   f"number at {given}: a value outside what {law} can evaluate over "
+                                   "the record's drive")
+        return pred
+
+    def _predict(self, params: ParameterSet, observations: Observations,
+                 sensitivities: bool | Sequence[str]) -> Prediction:
         if not isinstance(observations, Observations):
             raise SchemaError("observations", f"expected Observations, got {type(observations).__name__}")
         names = self._pset.names if sensitivities is True else \

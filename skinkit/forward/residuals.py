@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit.errors import ForwardError
 from skinkit.schemas import Observations, Prediction
 
 
@@ -38,7 +39,12 @@ def summarise(prediction: Prediction, observations: Observations) -> dict[str, A
         r = np.where(m, cp.values - np.where(m, ch.values, 0.0), 0.0)
         z = ch.normalised(cp.values, m)
         n = int(m.sum())
-        c2 = float(np.sum(z[m] ** 2))
+        with np.errstate(over="ignore", invalid="ignore"):
+            c2 = float(np.sum(z[m] ** 2))
+        if not np.isfinite(c2):   # an inf chi2 would read as a prediction that ran
+            raise ForwardError(f"protocol {proto!r} {cname}", "the residual's sum of squares is not a finite "
+                               "number: the prediction is not finite, or too far from the record to be "
+                               "compared with it (a parameter value far outside the record's range?)")
         lead = tuple(range(r.ndim - 1))
         rms = np.sqrt(np.sum(r ** 2, axis=lead) / np.maximum(m.sum(axis=lead), 1))
         out["protocols"].setdefault(proto, {})[cname] = {
