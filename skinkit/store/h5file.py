@@ -106,8 +106,10 @@ def reading(method: _F) -> _F:
     return wrapper  # type: ignore[return-value]
 
 
-def _open_h5(path: Path, mode: str) -> tuple[h5py.File, bool]:
-    """Open ``path``; returns the file and whether it was closed cleanly by its last writer."""
+def open_h5(path: Path, mode: str) -> tuple[h5py.File, bool]:
+    """Open ``path``; returns the file and whether it was closed cleanly by its last writer. Every
+    open of an experiment file goes through here, so that a file a writer left open (SWMR) is
+    refused for appending in the same words whichever command appends to it."""
     if not path.exists():
         raise StoreError(str(path), "", "no such file")
     if path.is_dir():
@@ -157,7 +159,7 @@ class ExperimentFile:
             self._f.flush()
             self.closed_cleanly = True
         else:
-            self._f, self.closed_cleanly = _open_h5(self.path, mode)
+            self._f, self.closed_cleanly = open_h5(self.path, mode)
             self._validate_root()
 
     # -- lifecycle -------------------------------------------------------------------------

@@ -249,7 +249,10 @@ def _finish(path: Path, tmp: str, name: str, ok: bool, created: bool, plan: Fram
         return
     if not path.exists() or not h5py.is_hdf5(path):
         return
-    with h5py.File(path, "a") as f:
+    from skinkit.store.h5file import open_h5
+
+    f, _ = open_h5(path, "a")   # a file its writer left open is refused as every append refuses it
+    with f:
         src = f"{L.IMAGES}/{tmp}"
         if src not in f:
             return
