@@ -15,6 +15,8 @@ from __future__ import annotations
 import contextlib
 import io
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -113,32 +115,53 @@ def _run_sfepy(mesh) -> dict:
             "time_stats": {k: float(v) for k, v in dict(stats).items()}}
 
 
-def run(n: int = 7, linear: str = "auto") -> dict:
-    """Both solvers; the JSON-ready summary."""
+#: the extra that installs the peer
+PEER_EXTRA = "bench"
+
+
+def peer_failure(exc: BaseException) -> str:
+    """Why the peer gave no figures, in one line: not installed (naming the extra that installs
+    it) or failed (its own error, e.g. sfepy's "warp violation" of an inverted element)."""
+    if isinstance(exc, ImportError) and (exc.name or "").split(".")[0] == "sfepy":
+        return f"sfepy is not installed (pip install 'skinkit[{PEER_EXTRA}]')"
+    return f"sfepy failed: {type(exc).__name__}: {' '.join(str(exc).split())}"
+
+
+def run(n: int = 7, linear: str = "auto", peer: Callable[[Any], dict] | None = None) -> dict:
+    """Both solvers; the JSON-ready summary. ``peer`` solves the mesh (default: :func:`run_sfepy`).
+    A peer that is not installed or fails leaves skinkit's figures, its own set to None and
+    ``peer_error`` saying why."""
     sk = run_skinkit(n, linear)
-    sf = run_sfepy(sk["mesh"])
+    res = {"dof": sk["dof"], "elements": sk["mesh"].n_elements, "linear_solver": sk["linear"],
+           "skinkit_s_per_newton": sk["s_per_newton"], "assembly_s": sk["assembly_s"],
+           "solve_s": sk["solve_s"], "tangent_assembly_s": sk["tangent_assembly_s"],
+           "skinkit_factorisations": sk["factorisations"], "skinkit_wall_s": sk["wall"],
+           "peer_error": None, "sfepy_s_per_newton": None, "speedup": None, "max_rel_disp_diff": None,
+           "sfepy_iterations": None, "sfepy_wall_s": None, "sfepy_time_stats": None}
+    try:
+        sf = (peer or run_sfepy)(sk["mesh"])
+    except Exception as exc:   # the peer's own failure is a figure of the comparison, not skinkit's
+        res["peer_error"] = peer_failure(exc)
+        return res
     nv = sf["u"].shape[0]
     # vertices are the first nodes of a MeshHex2 in both numberings
     du = np.abs(sk["u"][:nv] - sf["u"])
     scale = float(np.abs(sf["u"]).max())
-    return {"dof": sk["dof"], "elements": sk["mesh"].n_elements, "linear_solver": sk["linear"],
-            "skinkit_s_per_newton": sk["s_per_newton"], "sfepy_s_per_newton": sf["s_per_newton"],
-            "speedup": sf["s_per_newton"] / sk["s_per_newton"],
-            "max_rel_disp_diff": float(du.max() / scale),
-            "assembly_s": sk["assembly_s"], "solve_s": sk["solve_s"],
-            "tangent_assembly_s": sk["tangent_assembly_s"],
-            "skinkit_factorisations": sk["factorisations"], "sfepy_iterations": sf["iterations"],
-            "skinkit_wall_s": sk["wall"], "sfepy_wall_s": sf["wall"],
-            "sfepy_time_stats": sf["time_stats"]}
+    res.update({"sfepy_s_per_newton": sf["s_per_newton"], "speedup": sf["s_per_newton"] / sk["s_per_newton"],
+                "max_rel_disp_diff": float(du.max() / scale), "sfepy_iterations": sf["iterations"],
+                "sfepy_wall_s": sf["wall"], "sfepy_time_stats": sf["time_stats"]})
+    return res
 
 
 def summary_lines(res: dict) -> list[str]:
     """The figures of :func:`run` as lines of text."""
-    return [f"{res['dof']} dofs, {res['elements']} 27-node hexahedra, "
-            f"linear solver {res['linear_solver']}",
-            f"skinkit {res['skinkit_s_per_newton']:.3f} s/iteration "
-            f"(assembly {res['assembly_s']:.3f} s of which tangent {res['tangent_assembly_s']:.3f} s, "
-            f"solve {res['solve_s']:.3f} s)",
-            f"sfepy   {res['sfepy_s_per_newton']:.3f} s/iteration",
+    out = [f"{res['dof']} dofs, {res['elements']} 27-node hexahedra, "
+           f"linear solver {res['linear_solver']}",
+           f"skinkit {res['skinkit_s_per_newton']:.3f} s/iteration "
+           f"(assembly {res['assembly_s']:.3f} s of which tangent {res['tangent_assembly_s']:.3f} s, "
+           f"solve {res['solve_s']:.3f} s)"]
+    if res.get("peer_error"):
+        return [*out, f"sfepy   no figures: {res['peer_error']}"]
+    return [*out, f"sfepy   {res['sfepy_s_per_newton']:.3f} s/iteration",
             f"speedup {res['speedup']:.2f}x; max relative displacement difference "
             f"{res['max_rel_disp_diff']:.2e}"]

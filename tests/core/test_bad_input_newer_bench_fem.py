@@ -1,0 +1,51 @@
+"""``skinkit bench fem`` without its peer (sfepy not installed) or with a peer that fails (sfepy
+inverting an element: "warp violation") reports skinkit's figures and says why the peer has
+none, naming the extra that installs it, instead of ending in an internal error."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from click.testing import CliRunner
+
+from skinkit.bench import fem
+from skinkit.cli import cli
+
+# the smallest block (one element): the figures are not the point, the report is
+_NO_SFEPY = ("import sys; sys.modules['sfepy'] = None\n"   # every import of sfepy now fails
+             "from skinkit.cli import main; main(sys.argv[1:])")
+
+
+def test_without_the_peer_skinkit_is_measured_and_the_extra_named():
+    for as_json in ([], ["--json"]):
+        r = subprocess.run([sys.executable, "-c", _NO_SFEPY, "bench", "fem", "--n", "1", *as_json],
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        assert "internal error" not in r.stderr and "Traceback" not in r.stderr
+        if as_json:
+            res = json.loads(r.stdout)
+            assert res["skinkit_s_per_newton"] > 0 and res["sfepy_s_per_newton"] is None
+            assert res["peer_error"] == "sfepy is not installed (pip install 'skinkit[bench]')"
+        else:
+            assert "skinkit " in r.stdout and "s/iteration" in r.stdout
+            assert "sfepy   no figures: sfepy is not installed (pip install 'skinkit[bench]')" in r.stdout
+
+
+def test_a_failing_peer_is_reported_with_skinkits_figures(monkeypatch, tmp_path):
+    def warp(mesh):
+        raise ValueError("warp violation!")
+
+    monkeypatch.setattr(fem, "run_sfepy", warp)
+    page = tmp_path / "fem.md"
+    r = CliRunner().invoke(cli, ["bench", "fem", "--n", "1", "--page", str(page)])
+    assert r.exit_code == 0, r.output
+    lines = r.stdout.splitlines()
+    assert lines[1].startswith("skinkit ") and "s/iteration" in lines[1]
+    assert lines[-1] == "sfepy   no figures: sfepy failed: ValueError: warp violation!"
+    assert "warp violation" in page.read_text()
+    r = CliRunner().invoke(cli, ["bench", "fem", "--n", "1", "--json"])
+    assert r.exit_code == 0, r.output
+    res = json.loads(r.stdout)
+    assert res["peer_error"] == "sfepy failed: ValueError: warp violation!" and res["speedup"] is None
