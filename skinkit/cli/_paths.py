@@ -23,7 +23,20 @@ def _existing_ancestor_problem(path: Path) -> str | None:
                 return f"{parent} is not a directory"
             if not os.access(parent, os.W_OK | os.X_OK):
                 return f"{parent} is not writable"
-            return None
+            return _cannot_write_in(parent)
+    return None
+
+
+def _cannot_write_in(folder: Path) -> str | None:
+    """Why no file can be created in ``folder``, or None. A file is created and removed: the
+    permission bits alone do not tell (a read-only mount, a pseudo-filesystem, or a user such as
+    root whom the bits do not stop)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".skinkit-probe-", dir=folder)
+    except OSError as exc:
+        return f"{folder} is not writable: {exc.strerror or exc}"
+    os.close(fd)
+    os.unlink(probe)
     return None
 
 

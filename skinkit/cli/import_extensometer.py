@@ -26,8 +26,11 @@ from skinkit.store.dic_import import MARK_SPACING_M, NOMINAL_RATE_HZ, import_ext
               help="Distance between the two marks on one pad [mm]; sets the pixel scale.")
 @click.option("--moving-pad", type=click.Choice(["1", "2"]), default="1", show_default=True,
               help="Which pad's marks (x0_ref_N) are on the moving pad.")
+@click.option("--frames", type=click.IntRange(min=2), default=None,
+              help="Keep only the first N images (the reference image counted), e.g. those the force "
+                   "record covers when the camera went on after it ended.  [default: all]")
 def import_extensometer_cmd(experiment: Path, folder: Path, protocol: str, overwrite: bool, rate_hz: float,
-                            mark_spacing_mm: float, moving_pad: str) -> None:
+                            mark_spacing_mm: float, moving_pad: str, frames: int | None) -> None:
     """Import FOLDER (u_moving_pad.dat, f_moving_pad.dat and the tracked points x0/y0/xt/yt
     in pixels; see docs/guide/real-records.md) as a new session EXPERIMENT: one record (pad
     displacement and force along x) and its 2D track in metres in the skin frame.
@@ -38,7 +41,7 @@ def import_extensometer_cmd(experiment: Path, folder: Path, protocol: str, overw
     check_name(protocol, "--protocol", "protocol name")
     experiment, folder = experiment_first(experiment, folder, "skinkit import-extensometer")
     imp = import_extensometer(folder, experiment, protocol, overwrite, rate_hz, mark_spacing_mm * 1e-3,
-                              int(moving_pad))
+                              int(moving_pad), frames)
     a = imp.track_attrs
     click.echo(f"imported {imp.record.n_samples} force samples (nominal {rate_hz:g} Hz) and "
                f"{imp.track.n_points} points x {imp.track.n_frames} frames as {protocol!r} "

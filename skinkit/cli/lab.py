@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from skinkit.cli._paths import check_out_file
 from skinkit.cli.registry import LazyGroup
 
 
@@ -40,6 +41,10 @@ def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | No
 
     scale = check_noise_scale(noise_scale)
     check_options(out, truth_out, protocols, scale, images)
+    # the session is written beside --out under a hidden name: a folder that takes no file is
+    # refused here, naming the path given, before the truth runs
+    check_out_file(out, "--out")
+    check_out_file(truth_out, "--truth-out")
     read_description(truth)  # a missing or malformed model file: one line, before any progress bar
     with Progress(TextColumn("{task.description:<16}"), BarColumn(), TimeElapsedColumn(),
                   console=Console(stderr=True), transient=True) as bar:

@@ -97,6 +97,21 @@ def _load(path: Path, ndim: int) -> np.ndarray:
     return a
 
 
+def _not_finite_at(path: Path, a: np.ndarray) -> None:
+    """Refuse the first value of ``a`` (as :func:`_load` read ``path``) that is not finite,
+    naming the file, its line (blank and comment lines counted as the file has them) and the
+    column of a table."""
+    bad = np.argwhere(~np.isfinite(a))
+    if not bad.size:
+        return
+    row, col = (int(bad[0][0]), 0) if a.ndim == 1 else (int(bad[0][0]), int(bad[0][1]))
+    lines = [i for i, ln in enumerate(path.read_text().splitlines(), 1)
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    where = f"line {lines[row]}" if row < len(lines) else f"value {row + 1}"
+    where += f", column {col + 1}" if a.ndim == 2 and a.shape[1] > 1 else ""
+    raise StoreError(str(path), where, f"{float(a[tuple(bad[0])])} is not a finite number")
+
+
 def _root(folder: Path) -> Path:
     if not folder.is_dir():
         raise StoreError(str(folder), "", "no such folder")
@@ -113,10 +128,10 @@ def _read_pad(d: Path, k: int, n_frames: int) -> np.ndarray:
         if a.shape != shape:
             raise StoreError(str(d / name), "", f"expected shape {shape} (2 marks x {n_frames} frames as in "
                              f"xt.dat), got {a.shape}")
-    xy = np.stack([np.column_stack([x0, xt]), np.column_stack([y0, yt])], axis=2)
-    if not np.all(np.isfinite(xy)):
-        raise StoreError(str(d), f"pad {k}", "a pad mark is not finite in some frame")
-    return xy
+    for name, a in ((f"x0_ref_{k}.dat", x0), (f"y0_ref_{k}.dat", y0), (f"xt_ref_{k}.dat", xt),
+                    (f"yt_ref_{k}.dat", yt)):
+        _not_finite_at(d / name, a)     # a pad mark must be seen in every frame
+    return np.stack([np.column_stack([x0, xt]), np.column_stack([y0, yt])], axis=2)
 
 
 def _poly_scatter(pos: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -174,8 +189,8 @@ def _read_device(rf: Path) -> tuple[np.ndarray, np.ndarray]:
     if u_mm.size != f_n.size:
         raise StoreError(str(rf / "f_moving_pad.dat"), "",
                          f"has {f_n.size} values but u_moving_pad.dat has {u_mm.size}")
-    if not (np.all(np.isfinite(u_mm)) and np.all(np.isfinite(f_n))):
-        raise StoreError(str(rf), "", "a displacement or force value is not finite")
+    _not_finite_at(rf / "u_moving_pad.dat", u_mm)
+    _not_finite_at(rf / "f_moving_pad.dat", f_n)
     return u_mm, f_n
 
 
@@ -242,6 +257,13 @@ class _FrameTimes:
     mismatch_m: np.ndarray
 
 
+def _frames_covered(u: np.ndarray, d: np.ndarray) -> int:
+    """How many of the first images show the moving pad no further out than the device went."""
+    i_rest = int(np.argmin(u[: max(2, int(np.argmax(u)))]))
+    beyond = np.flatnonzero(d > float(np.max(u[i_rest:])) - float(u[i_rest]))
+    return int(beyond[0]) if beyond.size else int(d.size)
+
+
 def _frame_times(u: np.ndarray, d: np.ndarray, scale: float, rate_hz: float, rf: Path,
                  dd: Path) -> _FrameTimes:
     """Match each image's moving-pad displacement ``d`` [m] to the device's displacement
@@ -255,9 +277,12 @@ def _frame_times(u: np.ndarray, d: np.ndarray, scale: float, rate_hz: float, rf:
         raise StoreError(str(dd), f"frame {k}", "the moving pad moves back in the images; "
                          "not a monotonic extension")
     if target.max() > mono[-1]:
+        n = _frames_covered(u, d)
+        keep = (f"the force record covers the first {n} of the {d.size} frames: import those with "
+                f"--frames {n}" if n >= 2 else "the force record covers none of the later frames")
         raise StoreError(str(rf / "u_moving_pad.dat"), "",
                          f"the images show the pad {d.max() * 1e3:.3g} mm out, beyond the device's "
-                         f"{(mono[-1] - u_rest) * 1e3:.3g} mm: they cannot be matched")
+                         f"{(mono[-1] - u_rest) * 1e3:.3g} mm: they cannot be matched; {keep}")
     # the first sample at which the device reaches each target, linear between samples
     j = np.searchsorted(mono, target, side="left")
     jm = np.maximum(j - 1, 0)
@@ -345,7 +370,7 @@ def _track_attrs(frame: _SkinFrame, mark_spacing_m: float, d: np.ndarray, times:
 
 def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension",
                       rate_hz: float = NOMINAL_RATE_HZ, mark_spacing_m: float = MARK_SPACING_M,
-                      moving_pad: int = 1) -> ExtensometerImport:
+                      moving_pad: int = 1, frames: int | None = None) -> ExtensometerImport:
     """Read a two-pad extensometer + 2D tracking record (module docstring) into skinkit's types.
 
     Args:
@@ -355,6 +380,8 @@ def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension
             so it only sets the time axis.
         mark_spacing_m: distance between the two marks of one pad [m].
         moving_pad: which pad's marks (``1`` or ``2``) are on the moving pad.
+        frames: keep only the first ``frames`` images (the reference image counted), e.g. when
+            the camera went on after the force record ended; None: all.
 
     Raises:
         StoreError: a file is missing, not numeric, of the wrong shape, or the record is not a
@@ -366,6 +393,12 @@ def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension
     u_mm, f_n = _read_device(rf)
     pts_px = _read_points(dd)
     pads = {k: _read_pad(dd, k, pts_px.shape[1] - 1) for k in (1, 2)}
+    if frames is not None:
+        if not 2 <= frames <= pts_px.shape[1]:
+            raise StoreError(str(dd / "xt.dat"), "", f"--frames {frames}: expected 2 to the "
+                             f"{pts_px.shape[1]} frames the images have (the reference image counted)")
+        pts_px = pts_px[:, :frames]
+        pads = {k: p[:, :frames] for k, p in pads.items()}
     frame = _skin_frame(pads[moving_pad], pads[3 - moving_pad], mark_spacing_m, dd)       # 1., 2.
     pts = frame.to_skin(pts_px)
     pad_mov = frame.to_skin(frame.c_mov)
@@ -381,9 +414,9 @@ def read_extensometer(folder: str | os.PathLike[str], protocol: str = "extension
 def import_extensometer(folder: str | os.PathLike[str], experiment: str | os.PathLike[str],
                         protocol: str = "extension", overwrite: bool = False,
                         rate_hz: float = NOMINAL_RATE_HZ, mark_spacing_m: float = MARK_SPACING_M,
-                        moving_pad: int = 1) -> ExtensometerImport:
-    """Read ``folder`` (:func:`read_extensometer`) and write a new experiment file ``experiment``:
-    the record and the track named ``protocol``, with their facts as attributes.
+                        moving_pad: int = 1, frames: int | None = None) -> ExtensometerImport:
+    """Read ``folder`` (:func:`read_extensometer`, ``frames`` included) and write a new experiment
+    file ``experiment``: the record and the track named ``protocol``, with their facts as attributes.
 
     The file is written under a temporary name and renamed on success, so a failure leaves
     nothing behind; an existing ``experiment`` is refused unless ``overwrite``.
@@ -397,10 +430,13 @@ def import_extensometer(folder: str | os.PathLike[str], experiment: str | os.Pat
         raise StoreError(str(out), "", "is a directory")
     if not out.parent.is_dir():
         raise StoreError(str(out), "", "its folder does not exist")
-    imp = read_extensometer(folder, protocol, rate_hz, mark_spacing_m, moving_pad)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+    except OSError as exc:    # before the folder is read; named as given, not the hidden file
+        raise StoreError(str(out), "", f"cannot be written in {out.parent} ({exc.strerror or exc})") from None
     os.close(fd)
     try:
+        imp = read_extensometer(folder, protocol, rate_hz, mark_spacing_m, moving_pad, frames)
         with create_experiment(tmp, overwrite=True) as exp:
             exp.set_metadata(operator="external (skinkit import-extensometer)",
                              source=str(imp.record_attrs["source"]))
