@@ -133,6 +133,14 @@ class LumpedForwardModel(ForwardModel):
         self._pset = self._parameters(eff)
 
     @property
+    def record_components(self) -> str:
+        """The tip components of a record the model reads (``"x"``, ``"xyz"`` with a tilt entry,
+        which turns the recorded drive): the noise of the others need not be estimable."""
+        if any(e.kind == "tilt" for e in self.spec.entries):
+            return "xyz"
+        return self.axis
+
+    @property
     def default_protocols(self) -> tuple[str, ...]:
         """Table 12 protocols a virtual-lab session of this model holds by default."""
         if self.spec.family != "quasi-static":

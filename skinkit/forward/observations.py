@@ -99,26 +99,39 @@ def sample_noise(x: np.ndarray) -> tuple[float, str]:
     return float(est), src
 
 
-def _channel_noise(values: np.ndarray, name: str, where: str) -> tuple[np.ndarray, str]:
-    """Per-component noise of a ``(T, k)`` channel; NaN components get a nominal 1 (they are invalid)."""
-    out, srcs = [], set()
+def _channel_noise(values: np.ndarray, name: str, where: str,
+                   components: str | None = None) -> tuple[np.ndarray, str, set[int]]:
+    """Per-component noise of a ``(T, k)`` channel, its source, and the components given a nominal
+    1: NaN components (they are invalid), and those outside ``components`` (e.g. ``"x"``; None:
+    all) whose noise cannot be estimated -- an unmeasured axis stored as zeros, which no model
+    reading ``components`` compares with anything. A used component that is constant is refused."""
+    out, srcs, nominal = [], set(), set()
     for j in range(values.shape[1]):
         col = values[:, j]
         if not np.isfinite(col).any():
             out.append(1.0)
+            nominal.add(j)
             continue
         s, src = sample_noise(col)
         if not (np.isfinite(s) and s > 0):
+            if components is not None and "xyz"[j] not in components:
+                out.append(1.0)
+                nominal.add(j)
+                continue
             raise SchemaError(where, f"cannot estimate the noise of {name} component {'xyz'[j]} ({src}); "
                               "give the record more samples or a rest segment")
         out.append(s)
         srcs.add(src.split(" (")[0])
-    return np.array(out), ", ".join(sorted(srcs)) or "none"
+    return np.array(out), ", ".join(sorted(srcs)) or "none", nominal
 
 
 def channels_from_record(record: RobotRecord, where: str = "record",
-                         noise: str = "auto") -> dict[str, Channel]:
+                         noise: str = "auto", components: str | None = None) -> dict[str, Channel]:
     """``tip_force`` and ``tip_position`` channels (skin frame) of a robot record.
+
+    ``components``: the tip components a model reads (e.g. ``"x"``; None: all): the noise of
+    another component is estimated when it can be, else nominal (an unmeasured axis stored as
+    zeros, say); a constant component that is read is refused.
 
     ``noise``: ``"auto"`` (spikes flagged; an autoregressive model of each component's colour
     from the rest segment where it has one and BIC prefers it: :mod:`skinkit.forward.noise_model`),
@@ -131,20 +144,23 @@ def channels_from_record(record: RobotRecord, where: str = "record",
         v = getattr(record, name)
         if v is not None and np.isfinite(v).any():
             raw[name] = np.asarray(v, dtype=float) * _FLIP
-    n_rest = _record_rest(raw.get("tip_position"), f"{where}.tip_position")
+    n_rest = _record_rest(raw.get("tip_position"), f"{where}.tip_position", components)
     t = record.time_s - record.time_s[0]
-    return {name: _noise_channel(name, t, v, n_rest, noise, f"{where}.{name}") for name, v in raw.items()}
+    return {name: _noise_channel(name, t, v, n_rest, noise, f"{where}.{name}", components)
+            for name, v in raw.items()}
 
 
-def _record_rest(position: np.ndarray | None, where: str) -> int:
+def _record_rest(position: np.ndarray | None, where: str, components: str | None = None) -> int:
     """Samples before the recorded position first moves (0 without a position channel)."""
     from skinkit.forward.noise_model import rest_length
 
     if position is None:
         return 0
-    lev, _ = _channel_noise(position, "tip_position", where)
+    lev, _, nominal = _channel_noise(position, "tip_position", where, components)
     res = np.array([_resolution(position[:, j]) for j in range(position.shape[1])])
-    return rest_length(position, lev, res)
+    # a component with a nominal level (unmeasured, or constant and unread) does not move
+    moving = np.where([j in nominal for j in range(position.shape[1])], np.nan, position)
+    return rest_length(moving, lev, res)
 
 
 def _component_ar(seg: np.ndarray, mode: str, axis: str, where: str) -> tuple[np.ndarray, float, float]:
@@ -165,7 +181,8 @@ def _component_ar(seg: np.ndarray, mode: str, axis: str, where: str) -> tuple[np
     return nm.fit_ar(seg)
 
 
-def _noise_channel(name: str, t: np.ndarray, v: np.ndarray, n_rest: int, mode: str, where: str) -> Channel:
+def _noise_channel(name: str, t: np.ndarray, v: np.ndarray, n_rest: int, mode: str, where: str,
+                   components: str | None = None) -> Channel:
     """A tip channel with its spikes flagged and its noise model (see :func:`channels_from_record`)."""
     from skinkit.forward import noise_model as nm
 
@@ -173,12 +190,12 @@ def _noise_channel(name: str, t: np.ndarray, v: np.ndarray, n_rest: int, mode: s
     for j in range(v.shape[1]):
         outliers[nm.spikes(v[:, j]), j] = True
     clean = np.where(outliers, np.nan, v)
-    level, src = _channel_noise(clean, name, where)
+    level, src, nominal = _channel_noise(clean, name, where, components)
     ars, innov, srcs = [], level.copy(), set()
     scale = np.ones(v.shape)
     for j in range(v.shape[1]):
         ars.append(np.zeros(0))
-        if mode == "white" or not np.isfinite(clean[:, j]).any():
+        if mode == "white" or j in nominal:
             continue
         seg = clean[:n_rest, j]
         phi, se, sigma = _component_ar(seg[np.isfinite(seg)], mode, "xyz"[j], where)
@@ -189,7 +206,7 @@ def _noise_channel(name: str, t: np.ndarray, v: np.ndarray, n_rest: int, mode: s
             scale[:, j] = nm.local_scale(v[:, j], ~outliers[:, j], n_rest, phi)
             srcs.add(nm.describe(phi.size, int(np.isfinite(seg).sum())))
     if srcs:
-        white = sum(1 for j, a in enumerate(ars) if not a.size and np.isfinite(clean[:, j]).any())
+        white = sum(1 for j, a in enumerate(ars) if not a.size and j not in nominal)
         src = ", ".join(sorted(srcs) + ([src] if white else []))
     n_out = int(outliers.sum())
     if n_out:
@@ -243,7 +260,7 @@ def channel_from_track(track: SurfaceTrack, attrs: dict[str, Any], where: str) -
 
 
 def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | None = None,
-                     noise: str = "auto") -> Observations:
+                     noise: str = "auto", components: str | None = None) -> Observations:
     from skinkit.store import open_experiment
 
     protocols: dict[str, ProtocolObservations] = {}
@@ -262,7 +279,7 @@ def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | 
             order.append((info.get("extra", {}).get("session_index", len(order)), n, info))
         for _, name, info in sorted(order):
             rec = exp.read_record(name)
-            chans = channels_from_record(rec, f"{path}:{name}", noise)
+            chans = channels_from_record(rec, f"{path}:{name}", noise, components)
             if name in tracks:
                 tr = exp.read_track(name)
                 attrs = exp.track_attrs(name) if hasattr(exp, "track_attrs") else {}
@@ -281,7 +298,7 @@ def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | 
 
 def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = (), axis: str = "z",
                       segments: str | None = None, protocols: Sequence[str] | None = None,
-                      noise: str = "auto") -> Observations:
+                      noise: str = "auto", components: str | None = None) -> Observations:
     """The observations of a session file: an experiment file or a CSV record.
 
     ``held_out``: protocol names to mark held out (in addition to those the file marks).
@@ -289,7 +306,8 @@ def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = ()
     ``segments``: split every record into protocols first (:func:`skinkit.forward.segments.split`;
     ``"cycles"``: one protocol per loading cycle, named ``<protocol>-cycle-<k>``), so that
     ``held_out`` can name a segment (fit cycles 1-2, predict 3-4). ``noise``: how each robot
-    record's noise is modelled (:func:`channels_from_record`).
+    record's noise is modelled (:func:`channels_from_record`); ``components``: the tip components
+    a model reads (e.g. ``"x"``; None: all), the only ones whose noise must be estimable.
     Raises :class:`StoreError` / :class:`SchemaError` naming the file and what is wrong.
     """
     p = Path(path)
@@ -303,9 +321,9 @@ def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = ()
             raise SchemaError("protocols", f"no record(s) {sorted(set(protocols))} in {p} (it has "
                                            f"{[rec.protocol.name]})")
         obs = Observations({rec.protocol.name: ProtocolObservations(
-            rec.protocol, channels_from_record(rec, str(p), noise), False)}, None, str(p))
+            rec.protocol, channels_from_record(rec, str(p), noise, components), False)}, None, str(p))
     else:
-        obs = _read_experiment(p, (), protocols, noise)
+        obs = _read_experiment(p, (), protocols, noise, components)
     if segments is not None:
         from skinkit.forward.segments import split
 

@@ -20,11 +20,13 @@ def read_session(model: Any, session: str | os.PathLike[str], holdout: str | Non
     ``holdout`` (comma-separated protocols) marked held out, records split into ``segments``
     first, a one-axis CSV read along ``axis`` (default: the model's own axis when it is x, y or
     z, else z); ``noise``: how each record's noise is modelled (``"auto"``, ``"white"``, ``"ar"``:
-    :func:`skinkit.forward.observations.channels_from_record`)."""
+    :func:`skinkit.forward.observations.channels_from_record`). Only the tip components the
+    model reads (its ``record_components``, when it has them) need an estimable noise."""
     from skinkit.forward.observations import read_observations
 
     if axis is None:
         axis = str(getattr(model, "axis", "z"))
         axis = axis if axis in ("x", "y", "z") else "z"
     return read_observations(session, held_out=split_names(holdout), axis=axis, segments=segments,
-                             protocols=split_names(protocols) or None, noise=noise)
+                             protocols=split_names(protocols) or None, noise=noise,
+                             components=getattr(model, "record_components", None))
