@@ -50,8 +50,8 @@ def test_a_value_the_law_cannot_evaluate_is_refused(record, tmp_path, b, shown):
         r = _run("predict", model, record)
     one_error(r, "model 'extension-relaxation-lumped'", "in protocol 'rec'", "not a finite number", shown)
     out = tmp_path / "fit"
-    one_error(_run("fit", model, record, "--out", str(out)), "cannot be solved at the start of the fit", shown,
-              warnings_ok=True)
+    one_error(_run("fit", model, record, "--out", str(out)), "cannot be solved at the start of the fit",
+              shown, warnings_ok=True)
     r = _run("gap", "diagnose", model, record, "--max-effects", "0")   # progress lines come first
     assert r.exit_code == 2 and "Traceback" not in r.output, r.output
     last = r.stderr.strip().splitlines()[-1]
