@@ -73,6 +73,7 @@ def displacement_field(grid: np.ndarray, points: np.ndarray, displacement: np.nd
         full = np.zeros((n, n))
         full[idx[:, 0], idx[:, 1]] = displacement[:, c]
         table[:, :, c] = RectBivariateSpline(grid, grid, full, kx=3, ky=3)(fine, fine)
+    flat = table.reshape(m * m, 3)
 
     def u(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
         X = np.ravel(X)
@@ -85,8 +86,9 @@ def displacement_field(grid: np.ndarray, points: np.ndarray, displacement: np.nd
         j = np.minimum(fy.astype(int), m - 2)
         a = (fx - i)[:, None]
         b = (fy - j)[:, None]
-        out[inside] = ((1 - a) * (1 - b) * table[i, j] + a * (1 - b) * table[i + 1, j]
-                       + (1 - a) * b * table[i, j + 1] + a * b * table[i + 1, j + 1])
+        k = i * m + j                  # flat gathers: a view samples the table ~10^6 times
+        out[inside] = ((1 - a) * ((1 - b) * flat.take(k, axis=0) + b * flat.take(k + 1, axis=0))
+                       + a * ((1 - b) * flat.take(k + m, axis=0) + b * flat.take(k + m + 1, axis=0)))
         return out
 
     return u

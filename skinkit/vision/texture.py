@@ -9,6 +9,7 @@ image is then exactly consistent with the material points it shows.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,23 +54,43 @@ class SpeckleTexture:
         """Intensity [0..1] at material coordinates ``X``, ``Y`` (same shape, any shape)."""
         X = np.asarray(X, dtype=float)
         Y = np.asarray(Y, dtype=float)
-        u = X / self.cell
-        v = Y / self.cell
+        shape = np.broadcast(X, Y).shape
+        u = np.broadcast_to(X / self.cell, shape).ravel()
+        v = np.broadcast_to(Y / self.cell, shape).ravel()
         i0 = np.floor(u).astype(np.int64)
         j0 = np.floor(v).astype(np.int64)
+        fu, fv = u - i0, v - j0          # where in its cell each point is
         s2 = 2.0 * self.sigma_frac**2
-        acc = np.zeros(np.broadcast(u, v).shape)
+        acc = np.zeros(u.shape)
+        dots = self._neighbours(i0, j0)
         # Dots beyond two cells contribute < exp(-1.5**2 / s2) ~ 1e-5 of a dot at sigma 0.3.
         for di in (-2, -1, 0, 1, 2):
             for dj in (-2, -1, 0, 1, 2):
-                i = i0 + di
-                j = j0 + dj
-                on = _hash(i, j, self.seed, 3) < self.fill
-                a = (0.6 + 0.4 * _hash(i, j, self.seed, 4)) * on
-                cx = i + 0.15 + 0.7 * _hash(i, j, self.seed, 1)
-                cy = j + 0.15 + 0.7 * _hash(i, j, self.seed, 2)
-                acc += a * np.exp(-((u - cx) ** 2 + (v - cy) ** 2) / s2)
-        return self.background + self.contrast * (1.0 - np.exp(-1.5 * acc))
+                a, ox, oy = dots(di, dj)
+                acc += a * np.exp(-((fu - di - ox) ** 2 + (fv - dj - oy) ** 2) / s2)
+        return (self.background + self.contrast * (1.0 - np.exp(-1.5 * acc))).reshape(shape)
+
+    def _dots(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Amplitude and centre offsets in their cells [cells] of the dots of cells ``(i, j)``."""
+        on = _hash(i, j, self.seed, 3) < self.fill
+        a = (0.6 + 0.4 * _hash(i, j, self.seed, 4)) * on
+        return a, 0.15 + 0.7 * _hash(i, j, self.seed, 1), 0.15 + 0.7 * _hash(i, j, self.seed, 2)
+
+    def _neighbours(self, i0: np.ndarray, j0: np.ndarray
+                    ) -> Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``dots(di, dj)``: the dots of the cells ``(i0 + di, j0 + dj)``, hashed once per cell into
+        a table when the cells are fewer than the points (a rendered view samples each cell
+        hundreds of times), else hashed per point. Either way the same numbers."""
+        if i0.size == 0:
+            return lambda di, dj: self._dots(i0 + di, j0 + dj)
+        ilo, jlo = int(i0.min()) - 2, int(j0.min()) - 2
+        ni, nj = int(i0.max()) + 3 - ilo, int(j0.max()) + 3 - jlo
+        if ni * nj > i0.size:
+            return lambda di, dj: self._dots(i0 + di, j0 + dj)
+        I, J = np.meshgrid(np.arange(ilo, ilo + ni), np.arange(jlo, jlo + nj), indexing="ij")
+        table = [t.ravel() for t in self._dots(I, J)]
+        base = (i0 - ilo) * nj + (j0 - jlo)
+        return lambda di, dj: tuple(t.take(base + (di * nj + dj)) for t in table)  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)

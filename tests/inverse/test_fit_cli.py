@@ -137,7 +137,7 @@ def test_stored_fit_is_not_overwritten_silently(disc_session, tmp_path):
     from skinkit.store import open_experiment
     d = disc_session
     args = ["fit", str(d / "m.toml"), str(d / "s.h5"), "--free", "skin.E", "--out", str(tmp_path),
-            "--workers", "1", "--name", "first"]
+            "--workers", "1", "--no-model-error", "--name", "first"]
     r = CliRunner().invoke(main, [*args, "--overwrite"])
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(main, args)

@@ -316,6 +316,10 @@ def test_cli_bad_options_exit_2_with_one_line(tmp_path):
 
 
 # -- a tiny finite-element truth ----------------------------------------------------------------
+#: one worker runs every test of the module's finite-element truth (its fixture is a minute of solves)
+_FE_GROUP = pytest.mark.xdist_group("lab_fe")
+
+
 @pytest.fixture(scope="module")
 def fe(tmp_path_factory):
     pytest.importorskip("skinkit_plugins")
@@ -326,6 +330,7 @@ def fe(tmp_path_factory):
 
 
 @pytest.mark.needs_plugins
+@_FE_GROUP
 def test_fe_session_layout(fe):
     vs, doc, d = fe
     from skinkit.forward import read_observations
@@ -354,12 +359,14 @@ def test_fe_session_layout(fe):
 
 
 @pytest.mark.needs_plugins
+@_FE_GROUP
 def test_fe_session_holds_no_truth(fe):
     _, doc, d = fe
     _assert_no_truth(d / "s.h5", doc)
 
 
 @pytest.mark.needs_plugins
+@_FE_GROUP
 def test_fe_noise_matches_declared_levels(fe):
     vs, doc, _ = fe
     for name, rec in vs.recorded.items():
@@ -374,6 +381,7 @@ def test_fe_noise_matches_declared_levels(fe):
 
 
 @pytest.mark.needs_plugins
+@_FE_GROUP
 def test_fe_same_seed_same_file_other_seed_other_noise(fe, tmp_path):
     vs, _, d = fe
     write_session(resample(vs, 1), tmp_path / "a.h5", tmp_path / "a.json")
@@ -385,6 +393,7 @@ def test_fe_same_seed_same_file_other_seed_other_noise(fe, tmp_path):
 
 
 @pytest.mark.needs_plugins
+@_FE_GROUP
 def test_fe_truth_on_a_mesh_of_its_own(fe):
     """The truth file states both meshes: the truth's >= 8x the model's unknowns, its own gradings,
     and its own error, bounded from the same truth on the model's mesh, per channel against the
