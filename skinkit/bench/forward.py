@@ -17,6 +17,7 @@ steps): wall time, Newton iterations per step, assembly against linear-solve tim
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -71,6 +72,21 @@ PARALLEL_MESH = ((1, 1), {"n_inner": 2, "n_ring": 2, "grading": 1.6})
 INVIVO_MESH = ((2, 2), {"n_inner": 3, "n_ring": 3, "grading": 1.6})
 
 
+#: each way of running is timed this many times and its best kept: a shared machine's other
+#: work lengthens some runs, never shortens one
+REPEATS = 2
+
+
+def _timed(model: Any, obs: Any) -> tuple[float, Any]:
+    """The best wall time [s] of :data:`REPEATS` predictions with every sensitivity, and the last one."""
+    best, pred = math.inf, None
+    for _ in range(REPEATS):
+        t0 = time.perf_counter()
+        pred = model.predict(model.parameters(), obs, sensitivities=True)
+        best = min(best, time.perf_counter() - t0)
+    return best, pred
+
+
 def run_parallel(model_path: Path | None = None,
                  mesh: tuple | None = PARALLEL_MESH) -> dict[str, Any]:
     """Part 1 of the module docstring (``mesh``: see :func:`_displacement_driven`); the model
@@ -88,9 +104,7 @@ def run_parallel(model_path: Path | None = None,
         m = load(spec, **kw)
         if label == "2_workers":   # start the pool outside the timing, as a fit would
             m.predict(m.parameters(), obs.select(PROTOCOLS[:2]))
-        t0 = time.perf_counter()
-        pred = m.predict(m.parameters(), obs, sensitivities=True)
-        out[f"wall_s_{label}"] = time.perf_counter() - t0
+        out[f"wall_s_{label}"], pred = _timed(m, obs)
         results[label] = _flat(pred)
         out["newton_per_step"] = pred.info["newton_per_step"]
         out["n_parameters"] = len(pred.methods)
@@ -99,15 +113,14 @@ def run_parallel(model_path: Path | None = None,
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         m = load(spec, scheduler=cluster.scheduler_address)
         m.predict(m.parameters(), obs.select(PROTOCOLS[:2]))
-        t0 = time.perf_counter()
-        pred = m.predict(m.parameters(), obs, sensitivities=True)
-        out["wall_s_dask"] = time.perf_counter() - t0
+        out["wall_s_dask"], pred = _timed(m, obs)
         results["dask"] = _flat(pred)
     a = results["serial"]
     out["identical"] = bool(all(np.array_equal(a, results[k]) for k in ("2_workers", "dask")))
     out["max_abs_difference"] = float(max(np.max(np.abs(a - results[k])) for k in ("2_workers", "dask")))
     out["speedup_2_workers"] = out["wall_s_serial"] / out["wall_s_2_workers"]
     out["speedup_dask"] = out["wall_s_serial"] / out["wall_s_dask"]
+    out["dask_over_2_workers"] = out["wall_s_dask"] / out["wall_s_2_workers"]
     return out
 
 
@@ -163,7 +176,8 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
            f"{res['n_parameters']} sensitivities)",
            f"  serial     {res['wall_s_serial']:8.2f} s",
            f"  2 workers  {res['wall_s_2_workers']:8.2f} s   speed-up {res['speedup_2_workers']:.2f}x",
-           f"  Dask       {res['wall_s_dask']:8.2f} s   speed-up {res['speedup_dask']:.2f}x",
+           f"  Dask       {res['wall_s_dask']:8.2f} s   speed-up {res['speedup_dask']:.2f}x"
+           f"   ({res['dask_over_2_workers']:.2f}x the 2-process time)",
            f"  identical numbers: {res['identical']} (max |difference| {res['max_abs_difference']:.3g})",
            f"  Newton iterations per step: {res['newton_per_step']:.2f}"]
     if "invivo" in res:

@@ -78,7 +78,9 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
     from skinkit.fem import linsolve
     from skinkit.fem.model import build_model
     from skinkit.fem.solver import NewtonSolver
+    from skinkit.forward.allocator import keep_large_blocks
 
+    keep_large_blocks()     # a Dask worker's environment maps every large array afresh
     # load the sparse solver's libraries (MKL) first: a thread limit set before a library is
     # loaded does not reach it, and a solve with two threads differs in the last bits
     linsolve.make(str(dict(job.spec.get("solver", {}) or {}).get("linear", "auto")))
