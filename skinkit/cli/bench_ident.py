@@ -1,5 +1,5 @@
-"""``skinkit bench forward | fit | fit-invivo | coverage | mesh-nulls``: the cost and the honesty of
-identification, beside the ways peers do it.
+"""``skinkit bench forward | fit | fit-invivo | coverage | mesh-nulls | diagnose``: the cost and the
+honesty of identification, beside the ways peers do it.
 
 Each command runs :mod:`skinkit.bench`'s plain functions and prints their figures (JSON with
 ``--json``; a Markdown results page with ``--page``; progress on stderr); the benchmark modules
@@ -108,3 +108,24 @@ def bench_mesh_nulls(cases: str, seeds: int, first_seed: int, as_json: bool, pag
     lines = mesh_nulls.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Nulls with the mesh gap only", res, lines)
+
+
+@click.command("diagnose")
+@click.option("--case", "cases", type=click.Choice(["forearm", "quick-case", "all"]), default="all",
+              show_default=True, help="which virtual session")
+@click.option("--shared-mesh", is_flag=True,
+              help="the truth on the model's mesh and no model error carried (faster; the inverse crime)")
+@click.option("--workers", type=click.IntRange(1), default=2, show_default=True, help="worker processes")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+@page_option
+def bench_diagnose(cases: str, shared_mesh: bool, workers: int, as_json: bool, page: Path | None) -> None:
+    """Where a finite-element gap diagnosis spends its time: per stage its seconds, its forward
+    equivalents (whole-session predictions) and how each parameter's derivative was computed."""
+    from skinkit.bench import diagnose_profile
+
+    names = list(diagnose_profile.CASES) if cases == "all" else [cases]
+    res = diagnose_profile.run(names, "shared" if shared_mesh else "own", workers,
+                               say=lambda s: click.echo(s, err=True))
+    lines = diagnose_profile.summary_lines(res)
+    emit(res, as_json, lines, indent=1)
+    write_page(page, "Where a gap diagnosis spends its time", res, lines)

@@ -32,6 +32,7 @@ import numpy as np
 
 from skinkit.errors import ForwardError, SchemaError
 from skinkit.forward import drive as drive_mod
+from skinkit.forward import stages
 from skinkit.forward.effects import AppliedEffect, apply_all
 from skinkit.interfaces import ForwardModel
 from skinkit.schemas import ChannelPrediction, Observations, Parameter, ParameterSet, Prediction
@@ -344,6 +345,7 @@ class FEForwardModel(ForwardModel):
             self._central_differences(params, observations, pred, fd)
         for nm, (m, _) in cls.items():
             pred.methods[nm] = {"fe": "analytic", "instrument": "analytic", "fd": "central-difference"}[m]
+        stages.count(len(results), len(names), pred.methods)
         infos = [r["info"] for r in results.values()]
         steps = sum(i["increments"] for i in infos)
         pred.info = {"wall_s": time.perf_counter() - t0,

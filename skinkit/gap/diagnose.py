@@ -51,6 +51,7 @@ import numpy as np
 
 from skinkit import jsonio
 from skinkit.errors import SkinkitError
+from skinkit.forward.stages import stage
 from skinkit.gap.checks import GapError, check_channels, check_effects
 from skinkit.gap.score import (
     ScoreTest,
@@ -333,7 +334,10 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     for rnd in range(max(max_effects, 1)):
         if not _round(run, rnd):
             break
-    return _assemble_report(run, cal, _how_far(run), t0)
+    with stage("how far"):
+        far = _how_far(run)
+    with stage("reporting"):
+        return _assemble_report(run, cal, far, t0)
 
 
 def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
@@ -375,14 +379,17 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         check_channels(base, observations)
         held = observations.held_out()
         say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
-        r0 = fit(base, observations, theta, max_iterations=max_iterations)
+        with stage("calibration"):
+            r0 = fit(base, observations, theta, max_iterations=max_iterations)
         carried = None
         if model_error and has_mesh(base):
             from skinkit.inverse.approximation import refit
-            r0, observations = refit(base, observations, r0, theta, fit, progress=say,
-                                     max_iterations=max_iterations)
+            with stage("model error"):
+                r0, observations = refit(base, observations, r0, theta, fit, progress=say,
+                                         max_iterations=max_iterations)
             carried, held = r0.extra["model_error"], observations.held_out()
-        state0 = _state(base, r0, observations, held)
+        with stage("calibration"):
+            state0 = _state(base, r0, observations, held)
     finally:
         base.close()
     return {"name": name, "source": source, "observations": observations, "held": held, "present": present,
@@ -416,7 +423,8 @@ def _round(run: _Run, rnd: int) -> bool:
     seps = separability(sens, tests, run.alpha, [t.effect for t in top])
     states = _refit_top(run, top, values, sens, entry)
     records = [_candidate(t, ok[t.effect], states.get(t.effect), current) for t in tests]
-    _separate(run, seps, records, spec_r, values, sens, tests, rnd)
+    with stage("separation"):
+        _separate(run, seps, records, spec_r, values, sens, tests, rnd)
     if rnd == 0:
         run.first_candidates = records
         run.first_scores = (sens, {t.effect: t for t in tests})
@@ -445,14 +453,16 @@ def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
     the discretisation check (once) when a test is significant."""
     from skinkit.gap.score import score_all
 
-    sens = collect(spec_r, run.observations, values, run.theta_r, run.remaining, load=run.loader,
-                   progress=run.say)
+    with stage("score sensitivities"):
+        sens = collect(spec_r, run.observations, values, run.theta_r, run.remaining, load=run.loader,
+                       progress=run.say)
     run.n_forward += sens.n_forward
     tests = score_all(sens)
     ok = corrected(tests, run.alpha)
     if run.error_estimate and run.disc is None and any(ok.values()) and has_mesh(run.base):
-        run.disc = _discretisation(run.base, run.observations, values, run.state0["prediction"], sens,
-                                   run.alpha, run.say)
+        with stage("discretisation check"):
+            run.disc = _discretisation(run.base, run.observations, values, run.state0["prediction"], sens,
+                                       run.alpha, run.say)
         run.n_forward += 1
     mesh_only = _mesh_only(run.disc, sens, tests, ok, run.alpha)
     top = [t for t in tests if ok[t.effect] and t.effect not in mesh_only][:run.candidates]
@@ -468,9 +478,10 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
         return states
     for t in top:
         try:
-            states[t.effect] = _refit(run.spec, run.tables, run.observations, run.held, values,
-                                      run.theta_r, t, sens, load=run.loader, say=run.say,
-                                      max_iterations=run.max_iterations)
+            with stage(f"refit {t.effect}"):
+                states[t.effect] = _refit(run.spec, run.tables, run.observations, run.held, values,
+                                          run.theta_r, t, sens, load=run.loader, say=run.say,
+                                          max_iterations=run.max_iterations)
             run.n_forward += states[t.effect]["result"].n_forward + 1
         except SkinkitError as exc:
             run.say(f"refit with {t.effect} failed: {exc}")

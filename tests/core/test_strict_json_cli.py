@@ -29,6 +29,7 @@ SHORT_ROWS = 3000
 #: --json commands not run here, and why
 EXPENSIVE: dict[str, str] = {
     "bench coverage": "fits 20 virtual sessions per case (minutes to hours)",
+    "bench diagnose": "diagnoses two finite-element sessions, truths on their own meshes (minutes)",
     "bench fem": "needs sfepy, solves a 10,000-unknown block twice",
     "bench fit": "three fits of a finite-element model (minutes)",
     "bench fit-invivo": "fits at in vivo scale (hours)",
