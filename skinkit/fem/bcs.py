@@ -68,6 +68,20 @@ class Rigid:
 
 
 @dataclass
+class ComplianceSupport:
+    """The rim held by a distributed elastic support of compliance ``value`` [m/Pa] (traction =
+    −u/value): its ``dofs`` ``(n,)`` — those no other set fixes — and the face area each one
+    carries, ``area`` ``(n,)`` [m²]. ``value = 0`` is the fixed rim; the derivative there is
+    that of the rim's motion −c f/A (the support's own force over its stiffness)."""
+
+    dofs: np.ndarray
+    area: np.ndarray
+    value: float
+    #: the model parameter's name
+    name: str = "boundary.compliance"
+
+
+@dataclass
 class BoundaryConditions:
     """Prescribed displacements and an optional rigid reference point on a mesh of ``n_dof`` dofs."""
 
@@ -76,6 +90,9 @@ class BoundaryConditions:
     rigid: Rigid | None = None
     #: distributed elastic supports: (dofs, stiffness per dof [N/m]) — traction = -u / compliance
     springs: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    #: the ``[boundary] compliance`` support as a differentiable parameter (also at 0, where its
+    #: sets stay fixed): :class:`ComplianceSupport`
+    compliance: ComplianceSupport | None = None
 
     def support(self, nodes: np.ndarray, stiffness_N_per_m: np.ndarray) -> BoundaryConditions:
         """Hold ``nodes`` by springs to ground, ``stiffness_N_per_m`` ``(len(nodes),)`` in every

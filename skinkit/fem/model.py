@@ -23,7 +23,7 @@ import numpy as np
 from skinkit import registry
 from skinkit.errors import PluginError
 from skinkit.fem import lawkit
-from skinkit.fem.bcs import BoundaryConditions, Rigid
+from skinkit.fem.bcs import BoundaryConditions, ComplianceSupport, Rigid
 from skinkit.fem.errors import ModelError
 from skinkit.fem.mesh import FEMesh, block_mesh, disc_mesh
 from skinkit.fem.problem import Material, Problem
@@ -619,13 +619,26 @@ def _elastic_supports(d: Any, mesh: FEMesh, fixed: list[str], bc: BoundaryCondit
     c = quantity(_get(d, "value", "boundary.compliance"), "m/Pa", "boundary.compliance.value")
     if c < 0 or not math.isfinite(c):
         raise ModelError("boundary.compliance.value", f"must be zero or positive, got {c}")
+    still = [s for s in fixed if s not in sets]
+    held = np.zeros(mesh.n_nodes, bool)     # nodes another set keeps fixed whatever c is
+    for s in still:
+        if s in mesh.node_sets:
+            held[mesh.node_sets[s]] = True
+    areas = {s: nodal_areas(mesh, mesh.node_sets[s]) for s in sets}
+    area = np.zeros(mesh.n_nodes)
+    on = np.zeros(mesh.n_nodes, bool)
+    for s in sets:     # a node of two sets: both springs
+        nodes = mesh.node_sets[s]
+        area[nodes] += areas[s][nodes]
+        on[nodes] = True
+    rim = np.flatnonzero(on & ~held & (area > 0))
+    bc.compliance = ComplianceSupport((3 * rim[:, None] + np.arange(3)).ravel(), np.repeat(area[rim], 3), c)
     if c == 0:
         return fixed
     for s in sets:
-        area = nodal_areas(mesh, mesh.node_sets[s])
         nodes = mesh.node_sets[s]
-        bc.support(nodes, area[nodes] / c)
-    return [s for s in fixed if s not in sets]
+        bc.support(nodes, areas[s][nodes] / c)
+    return still
 
 
 def nodal_areas(mesh: FEMesh, nodes: np.ndarray) -> np.ndarray:

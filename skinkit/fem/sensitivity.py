@@ -14,7 +14,11 @@ Parameters differentiated (every one the model has, static or through a viscous 
   ``Ce = F0ᵀ C F0`` and the push-forward ``F0 S F0ᵀ`` both change (∂F0/∂p by complex step);
 * **field parameters** ``"<field>.<key>"``: ∂φ/∂p times the law's elastic stress;
 * **drive parameters** (named by the rigid region's programme, e.g. instrument biases):
-  the applied force (force control) or the imposed motion (displacement control) changes.
+  the applied force (force control) or the imposed motion (displacement control) changes;
+* **the support's compliance** ``"boundary.compliance"`` c [m/Pa] (``[boundary] compliance``):
+  for c > 0 the rim's springs A/c give ∂r/∂c = −(A/c²) u on its dofs; at c = 0 (the rim fixed)
+  the rim moves as −c f/A to first order, f the support's force on it (the internal force at
+  its dofs), so its motion's derivative −f/A is imposed as a drive's would be.
 
 Through a viscous history (Prony recurrence hⁿ = e hⁿ⁻¹ + β (Sₑⁿ − Sₑⁿ⁻¹), S = g∞ Sₑ + Σ g h) the
 derivative of the stress at fixed displacement carries the derivatives of the history; the
@@ -48,6 +52,7 @@ _CS = 1e-30
 METHODS = ("iterative", "direct")
 
 if TYPE_CHECKING:  # the solver runs this module's trackers; annotations only here
+    from skinkit.fem.bcs import ComplianceSupport
     from skinkit.fem.solver import NewtonSolver
 
 
@@ -95,13 +100,14 @@ class _Par:
     """One parameter: its name, its kind and, for material parameters, the material."""
 
     name: str
-    kind: str            # "law", "prony", "prestretch", "field", "drive"
+    kind: str            # "law", "prony", "prestretch", "field", "drive", "compliance"
     k: int = -1          # material (law, prony, prestretch)
     local: str = ""      # law parameter name, or prestretch index as str
 
 
-def parameter_list(problem: Problem, drive_names: tuple[str, ...] = ()) -> list[_Par]:
-    """Every differentiable parameter of ``problem`` (and of its drive)."""
+def parameter_list(problem: Problem, drive_names: tuple[str, ...] = (),
+                   compliance: ComplianceSupport | None = None) -> list[_Par]:
+    """Every differentiable parameter of ``problem`` (and of its drive and elastic support)."""
     out: list[_Par] = []
     for k, m in enumerate(problem.materials):
         pr = m.prony() is not None
@@ -114,12 +120,15 @@ def parameter_list(problem: Problem, drive_names: tuple[str, ...] = ()) -> list[
     for f in problem.fields:
         out.extend(_Par(n, "field") for n in f.parameter_names)
     out.extend(_Par(n, "drive") for n in drive_names)
+    if compliance is not None:
+        out.append(_Par(compliance.name, "compliance"))
     return out
 
 
-def parameter_names(problem: Problem, drive_names: tuple[str, ...] = ()) -> list[str]:
+def parameter_names(problem: Problem, drive_names: tuple[str, ...] = (),
+                    compliance: ComplianceSupport | None = None) -> list[str]:
     """Names of :func:`parameter_list`."""
-    return [p.name for p in parameter_list(problem, drive_names)]
+    return [p.name for p in parameter_list(problem, drive_names, compliance)]
 
 
 class HistorySensitivity:
@@ -154,7 +163,7 @@ class HistorySensitivity:
         prob = solver.problem
         rigid = solver.dofmap.bc.rigid
         drive = tuple(getattr(rigid, "parameter_names", ())) if rigid is not None else ()
-        pars = parameter_list(prob, drive)
+        pars = parameter_list(prob, drive, solver.dofmap.bc.compliance)
         if only is not None:
             known = {p.name for p in pars}
             unknown = sorted(set(only) - known)
@@ -253,6 +262,7 @@ class HistorySensitivity:
         dm = solver.dofmap
         rigid = dm.bc.rigid
         dup = self._drive(rhs, t, lin)
+        self._support(rhs, u, lin, dup)
         dq = -self._solve(rhs, lin, states) if npar else rhs
         mp = dm.map
         du = dup.copy()
@@ -417,6 +427,25 @@ class HistorySensitivity:
         if moved:   # the imposed motion's forces on the unknowns: K_fp ∂u_p/∂p
             rhs[:, moved] += self._reduce(self._apply(lin, dup[:, moved]))
         return dup
+
+    def _support(self, rhs: np.ndarray, u: np.ndarray, lin: list, dup: np.ndarray) -> None:
+        """Add the support compliance's part to ``rhs`` and, at c = 0, its rim's motion to ``dup``
+        (both in place; see the module docstring)."""
+        j = next((i for i, p in enumerate(self.pars) if p.kind == "compliance"), None)
+        if j is None:
+            return
+        dm = self.solver.dofmap
+        sup = dm.bc.compliance
+        if sup.value > 0:
+            free = dm.map[sup.dofs] >= 0
+            np.add.at(rhs[:, j], dm.map[sup.dofs[free]], -(sup.area[free] / sup.value**2) * u[sup.dofs[free]])
+            return
+        prob, g = self.solver.problem, self.solver.problem.geom
+        f = np.zeros(prob.n_dof)
+        for k, (F, S, _, _) in enumerate(lin):
+            f += full_vector(g.edofs[prob.slices[k]], self._residuals(k, F, S[None])[0], prob.n_dof)
+        dup[sup.dofs, j] = -f[sup.dofs] / sup.area
+        rhs[:, [j]] += self._reduce(self._apply(lin, dup[:, [j]]))
 
     def _update_history(self, u: np.ndarray, du: np.ndarray, dt: float, cache: dict) -> None:
         """Carry the total dSₑ/dp and dh/dp of this step to the next (every parameter at once)."""

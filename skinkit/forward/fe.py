@@ -306,7 +306,7 @@ class FEForwardModel(ForwardModel):
         from skinkit.fem.model import build_model
         probe = build_model(spec, require_load=False)
         from skinkit.fem.sensitivity import parameter_names as fe_names
-        fe = set(fe_names(probe.problem))
+        fe = set(fe_names(probe.problem, compliance=probe.bc.compliance))
         inst = {str(e.get(k)) for e in spec.get("instrument", []) or []
                 for k in ("parameter", "azimuth_parameter", "tau_parameter") if e.get(k)}
         bind = dict(spec.get("bindings", {}))

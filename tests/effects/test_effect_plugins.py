@@ -433,7 +433,8 @@ def test_effects_compose_into_one_valid_description(plain_nh):
                  "preconditioning", "support-compliance", "indenter-tilt", "force-offset", "force-drift",
                  "robot-compliance", "tracking-bias"):
         spec = effect(name).apply(spec, typical(name))
-    assert len(spec["bindings"]) == 2 + 3 + 4
+    # viscoelastic 2, prestress 3, fibres 4, support-compliance 1
+    assert len(spec["bindings"]) == 2 + 3 + 4 + 1
     assert {f["name"] for f in spec["fields"]} == {"layer-slip", "fascia", "inclusion", "preconditioning"}
     slip = next(f for f in spec["fields"] if f["name"] == "layer-slip")
     assert slip["depth"] - slip["half_width"] == pytest.approx(spec["layers"][0]["thickness"])

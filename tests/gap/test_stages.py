@@ -48,9 +48,8 @@ def test_marks_outside_a_recording_do_nothing():
 def test_a_diagnosis_is_recorded_by_stage():
     """The mesh-null benchmark's gel with a force offset withheld (truth on the model's mesh): the
     calibration, the score sensitivities and the refit are stages of their own; the clock sees
-    at least the predictions the report counts (and the central differences' own besides), and
-    every parameter's derivative method is the model's (the support's compliance, at its null
-    in the score step, by differences)."""
+    at least the predictions the report counts, and every parameter's derivative, the support's
+    compliance at its null included, is analytic."""
     from skinkit.bench.gap_cases import plugin_values
     from skinkit.bench.mesh_nulls import CASES
     from skinkit.gap.diagnose import diagnose
@@ -75,5 +74,5 @@ def test_a_diagnosis_is_recorded_by_stage():
     if rep["named"]:
         assert f"refit {rep['named'][0]}" in by
     assert prof["forward_equivalents"] >= rep["n_forward"]
-    assert prof["methods"]["gel.E"] == "analytic"
-    assert prof["methods"]["support-compliance.compliance"] == "central-difference"
+    assert {"gel.E", "support-compliance.compliance"} <= set(prof["methods"])
+    assert set(prof["methods"].values()) == {"analytic"}, prof["methods"]

@@ -49,11 +49,12 @@ class SupportCompliance(BaseEffect):
     depend on the mesh; 0 is the fixed support exactly. The typical 1 mm/kPa is about the
     compliance R/E of soft tissue (E = 10–20 kPa) over the hole's radius R = 20 mm, i.e. a rim
     that moves as much as the tissue around it would. Refused when the model has no fixed rim or
-    already has a ``compliance`` table."""
+    already has a ``compliance`` table. Binding ``support-compliance.compliance`` ->
+    ``boundary.compliance`` (differentiated by the engine, also at its null)."""
 
     name = "support-compliance"
     kinds = ("fe",)
-    touches = {"fe": frozenset({"boundary"})}
+    touches = {"fe": frozenset({"boundary", "bindings"})}
 
     def _declared(self) -> list[Declared]:
         return [declare("compliance", 1.0, 0.0, "mm/kPa", 0.0, 20.0)]
@@ -72,6 +73,7 @@ class SupportCompliance(BaseEffect):
             raise self.fail(f"the model has no fixed rim to make elastic (boundary.fixed = {fixed})")
         bd["compliance"] = {"sets": rim, "value": v["compliance"]}
         model["boundary"] = bd
+        self.bind(model, "compliance", "boundary.compliance")
 
 
 __all__ = ["SupportCompliance", "Thickness"]
