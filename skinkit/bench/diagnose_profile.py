@@ -64,7 +64,8 @@ def profile_case(name: str, mesh: str = "own", workers: int = 2, seed: int = 0,
     truth_s = time.perf_counter() - t0
     obs = lab(seed)
     model = copy.deepcopy(lab.model_spec)
-    model["effects"] = []
+    model["effects"] = []       # the withheld effect
+    model["model"] = {"name": f"{name} (without {', '.join(withheld)})"}
     say(f"{name}: truth solved in {truth_s:.0f} s ({mesh} mesh); diagnosing")
     t1 = time.perf_counter()
     with recording() as clock:
