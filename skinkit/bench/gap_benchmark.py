@@ -82,7 +82,11 @@ class _Pool:
         if scheduler:
             from dask.distributed import Client
 
-            self.client = Client(scheduler)
+            try:    # a caller that skips the command line's check still gets a prompt, named refusal
+                self.client = Client(scheduler, timeout="10s", set_as_default=False)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise BenchmarkError(f"scheduler {scheduler!r}: cannot reach the Dask scheduler "
+                                     f"({exc})") from None
         elif parallel > 1:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor

@@ -222,7 +222,8 @@ def profiler_kwargs(profiler: Any, values: Mapping[str, Any],
               help="grid step [px]")
 @click.option("--subset", "subset_px", default=31, show_default=True, type=click.IntRange(8, 4096),
               help="subset side [px]")
-@click.option("--name", "out_name", default="profile", show_default=True, help="name of the stored profile")
+@click.option("--name", "out_name", default="profile", show_default=True,
+              callback=name_callback("profile name"), help="name of the stored profile")
 @click.option("--plot", "plot_path", default=None, type=click.Path(dir_okay=False),
               help="also save a figure (height and ISU maps) to this PNG")
 @click.option("--overwrite", is_flag=True, help="replace a profile of that name already stored (and --plot)")

@@ -49,3 +49,8 @@ def test_fit_and_gap_diagnose_refuse_an_empty_name(model, record, tmp_path, monk
 def test_vision_track_3d_refuses_an_empty_name_before_reading(tmp_path):
     one_error(_run("vision", "track-3d", str(tmp_path / "s.h5"), "--name", ""),
               "--name: expected a track name", "got an empty string")
+
+
+def test_vision_profile_refuses_an_empty_name_before_reading(tmp_path):
+    one_error(_run("vision", "profile", str(tmp_path / "s.h5"), "--name", ""),
+              "--name: expected a profile name", "got an empty string")

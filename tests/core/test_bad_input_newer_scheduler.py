@@ -85,3 +85,13 @@ def test_gap_benchmark_refuses_a_bad_scheduler_before_any_case(tmp_path, alterna
     one_error(_run("gap", "benchmark", "--quick", *alternative, "--scheduler", address,
                    "--journal", str(journal)), f"--scheduler '{address}'", "cannot reach")
     assert not journal.exists()
+
+
+def test_the_benchmark_pool_refuses_an_unreachable_scheduler_by_name():
+    """A Python caller that skips the command line's check: a prompt, named refusal, no hang."""
+    from skinkit.bench.gap_benchmark import _Pool
+    from skinkit.bench.gap_cases import BenchmarkError
+
+    address = f"tcp://127.0.0.1:{_unused_port()}"
+    with pytest.raises(BenchmarkError, match="cannot reach the Dask scheduler"):
+        _Pool(1, address)
