@@ -1,8 +1,12 @@
-"""What the CLI tests share: the contract of a refused command (exit 2, one ``error:`` line)."""
+"""What the CLI tests share: the contract of a refused command (exit 2, one ``error:`` line), and a
+small one-axis extension record to feed the model commands."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 
 def one_error(r: Any, *needles: str, warnings_ok: bool = False) -> str:
@@ -17,3 +21,15 @@ def one_error(r: Any, *needles: str, warnings_ok: bool = False) -> str:
     for n in needles:
         assert n in lines[0], (n, lines[0])
     return lines[0]
+
+
+def extension_record(path: Path, displacement_mm: np.ndarray) -> str:
+    """Write a one-axis extension record CSV at 100 Hz to ``path``: the tip displacement
+    ``displacement_mm`` ``(n,)`` [mm] and an exponential force of it [N] with a small ripple;
+    returns the path as a string."""
+    d_mm = np.asarray(displacement_mm, dtype=float)
+    t = np.arange(d_mm.size) / 100.0
+    f = 0.015 * np.expm1(0.32 * d_mm) - 0.077 + 1e-3 * np.sin(7.0 * t)
+    path.write_text("time_s,displacement_mm,force_N\n"
+                    + "".join(f"{a:.4f},{b:.5f},{c:.6f}\n" for a, b, c in zip(t, d_mm, f, strict=True)))
+    return str(path)

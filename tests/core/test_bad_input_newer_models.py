@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from skinkit.cli import cli
 from skinkit.examples import example_model
-from tests.core._cli import one_error
+from tests.core._cli import extension_record, one_error
 
 pytestmark = pytest.mark.needs_plugins
 
@@ -31,13 +31,8 @@ def model() -> str:
 def record(tmp_path_factory) -> str:
     """Three seconds of a one-axis extension record (ramp to 4 mm, hold) the lumped model
     predicts along x."""
-    t = np.arange(300) / 100.0
-    d_mm = 2.0 * np.clip(t, 0.0, 2.0)
-    f = 0.015 * np.expm1(0.32 * d_mm) - 0.077 + 1e-3 * np.sin(7.0 * t)
-    path = tmp_path_factory.mktemp("record") / "rec.csv"
-    path.write_text("time_s,displacement_mm,force_N\n"
-                    + "".join(f"{a:.4f},{b:.5f},{c:.6f}\n" for a, b, c in zip(t, d_mm, f, strict=True)))
-    return str(path)
+    return extension_record(tmp_path_factory.mktemp("record") / "rec.csv",
+                            2.0 * np.clip(np.arange(300) / 100.0, 0.0, 2.0))
 
 
 @pytest.mark.parametrize("free", ["", " , "])

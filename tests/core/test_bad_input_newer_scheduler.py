@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from skinkit.cli import cli
 from skinkit.examples import example_model
-from tests.core._cli import one_error
+from tests.core._cli import extension_record, one_error
 
 pytestmark = pytest.mark.needs_plugins
 
@@ -38,13 +38,8 @@ def model() -> str:
 @pytest.fixture(scope="module")
 def record(tmp_path_factory) -> str:
     """Two seconds of a one-axis extension record (ramp to 2 mm) the lumped model predicts."""
-    t = np.arange(200) / 100.0
-    d_mm = np.clip(t, 0.0, 2.0)
-    f = 0.015 * np.expm1(0.32 * d_mm) - 0.077 + 1e-3 * np.sin(7.0 * t)
-    path = tmp_path_factory.mktemp("record") / "rec.csv"
-    path.write_text("time_s,displacement_mm,force_N\n"
-                    + "".join(f"{a:.4f},{b:.5f},{c:.6f}\n" for a, b, c in zip(t, d_mm, f, strict=True)))
-    return str(path)
+    return extension_record(tmp_path_factory.mktemp("record") / "rec.csv",
+                            np.clip(np.arange(200) / 100.0, 0.0, 2.0))
 
 
 @pytest.mark.parametrize("extra", [[], ["--protocols", "rec,rec", "--workers", "2"]])
