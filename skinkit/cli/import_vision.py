@@ -68,26 +68,39 @@ def import_calibration(experiment: Path, files: tuple[Path, ...], unit: str | No
 
 @click.command("import-tracks")
 @click.argument("experiment", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("csv_file", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--name", default=None, help="track name in EXPERIMENT (default: the CSV file's stem)")
+@click.argument("csv_file", type=click.Path(path_type=Path))
+@click.option("--name", default=None,
+              help="track name in EXPERIMENT (default: the file's stem, or the folder's name)")
+@click.option("--format", "fmt", type=click.Choice(["csv", "dice", "vic3d"]), default=None,
+              help="format of CSV_FILE (default: told by its header): csv (frame, point, x_mm, ...), "
+                   "dice (DICe_solution_*.txt per frame) or vic3d (Vic-3D CSV export per frame)")
+@click.option("--columns", type=click.Choice(["metric", "pixel"]), default=None,
+              help="which coordinates to read from a file holding both pixel columns (x, y, "
+                   "COORDINATE_X, *_px) and metric ones (X, Y, Z, MODEL_COORDINATES_X, *_mm)")
 @click.option("--unit", type=click.Choice(["m", "mm", "cm", "um", "px"]), default=None,
-              help="unit of coordinate columns named without one (x, y, z)")
+              help="unit of coordinate columns named without one (x, y, z; X, Y, Z; DICe's MODEL_*)")
 @click.option("--m-per-px", type=FiniteFloat(min=0.0, min_open=True), default=None,
               help="scale of pixel coordinates [m/px]")
 @click.option("--fps", default=1.0, show_default=True, type=FiniteFloat(min=0.0, min_open=True),
               help="frame rate [Hz] when the CSV has no time column: frame k at k / fps seconds")
 @click.option("--ignore", multiple=True, help="a column to skip (e.g. a correlation score); repeatable")
 @click.option("--overwrite", is_flag=True, help="replace a track of that name")
-def import_tracks(experiment: Path, csv_file: Path, name: str | None, unit: str | None,
-                  m_per_px: float | None, fps: float, ignore: tuple[str, ...], overwrite: bool) -> None:
-    """Import 2D/3D point tracks from another DIC tool (CSV: frame, point, x_mm, y_mm[, z_mm],
-    or one row per frame) as a track in EXPERIMENT (created if it does not exist)."""
+def import_tracks(experiment: Path, csv_file: Path, name: str | None, fmt: str | None, columns: str | None,
+                  unit: str | None, m_per_px: float | None, fps: float, ignore: tuple[str, ...],
+                  overwrite: bool) -> None:
+    """Import 2D/3D point tracks from another DIC tool as a track in EXPERIMENT (created if it
+    does not exist). CSV_FILE: a tracks CSV (frame, point, x_mm, y_mm[, z_mm], or one row per
+    frame), or per-frame DICe / Vic-3D exports: one file, a folder or a quoted glob."""
     from skinkit.cli._paths import check_name
+    from skinkit.store.dic_formats import default_track_name
     from skinkit.store.track_import import import_tracks as run
 
     if name is not None:   # an empty --name is refused, not read as "the CSV file's stem"
         check_name(name, "--name", "track name")
-    imp = run(experiment, csv_file, name, unit, m_per_px, fps, ignore, overwrite)
+    imp = run(experiment, csv_file, name, unit, m_per_px, fps, ignore, overwrite, fmt=fmt, columns=columns)
     t = imp.track
-    click.echo(f"imported {t.n_points} points x {t.n_frames} frames ({imp.attrs['dimensions']}D, "
-               f"{int(t.valid.sum())} valid positions) as track {name or csv_file.stem!r} into {experiment}")
+    a = imp.attrs
+    how = f"{a['format']}" + (f", {a['columns']} columns" if "columns" in a else "")
+    click.echo(f"imported {t.n_points} points x {t.n_frames} frames ({a['dimensions']}D, {how}, "
+               f"{int(t.valid.sum())} valid positions) as track {name or default_track_name(csv_file)!r} "
+               f"into {experiment}")

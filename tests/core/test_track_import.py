@@ -27,7 +27,7 @@ def _truth(P=5, F=4, seed=0):
 
 def test_long_form_3d_mm(tmp_path):
     pts, valid = _truth()
-    lines = ["Frame,Point,time_ms,x_mm,y_mm,z_mm"]
+    lines = ["frame,point,time_ms,x_mm,y_mm,z_mm"]
     for f in range(pts.shape[1]):
         for p in range(pts.shape[0]):
             if valid[p, f]:
