@@ -75,13 +75,14 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 @click.option("--resume", is_flag=True,
               help="continue a killed fit from its last completed evaluation (same --out)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="directory for fit.json, plots and the checkpoint (default: the fit's --name, in "
-                   "the current directory)")
+              help="directory for fit.json, model.toml (the calibrated model), plots and the checkpoint "
+                   "(default: the fit's --name, in the current directory)")
 @click.option("--plots", is_flag=True, help="write plots of the fit to --out")
 @click.option("--name", "fit_name", default=None, callback=name_callback("fit name"),
               help="name of the fit stored in an experiment-file SESSION (default: fit-<model name>)")
 @click.option("--overwrite", is_flag=True,
-              help="replace a fit of that name already stored in SESSION, and fit.json in --out")
+              help="replace a fit of that name already stored in SESSION, and fit.json and model.toml "
+                   "in --out")
 @click.option("--error-estimate", is_flag=True,
               help="after the fit, solve once on a mesh refined 2x and report the discretisation error "
                    "beside the residual and each parameter's bias from it (finite-element models)")
@@ -99,13 +100,16 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         error_estimate: bool, model_error: bool, workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
 
+    --out receives fit.json and model.toml: the calibrated model, MODEL_FILE with the fitted values
+    written in and a [calibration] table (the session, date, version, objective and each fitted
+    parameter's value and 95 % interval); predict with it like any model file.
+
     Every evaluation is kept under --out until the fit ends, so a killed fit run again with
     --resume replays what was done (no forward solve repeated) and goes on to the same optimum.
     """
     import shutil
 
     from skinkit.forward import load
-    from skinkit.inverse import fit_json
 
     _check_choices(weighting, optimiser)
     model = load(model_file, workers=workers)
@@ -170,18 +174,12 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
             from skinkit.store import open_experiment
             with open_experiment(session, "a") as exp:
                 exp.write_fit(fit_name, best_result)
-        best = fit_json(best_result)
-        best["n_forward"] = sum(r.n_forward for r in results)
-        best["n_sensitivity"] = sum(r.n_sensitivity for r in results)
-        best["n_replayed"] = sum(r.extra.get("n_replayed", 0) for r in results)
-        best["model"] = model.name
-        best["session"] = str(session)
-        if stores:
-            best["stored_as"] = fit_name
+        best = _result_json(best_result, results, model.name, session, fit_name if stores else None)
         if plots:
             from skinkit.inverse.plots import fit_plots
             best["plots"] = [str(p) for p in fit_plots(model, obs, best_result, out)]
         _checkpoint(out / "fit.json", best)
+        best["calibrated_model"] = str(_write_model(model_file, session, best_result, names, weighting, out))
         # the fit is whole: its evaluations are no longer needed to resume it
         shutil.rmtree(evals_dir, ignore_errors=True)
         state_file.unlink(missing_ok=True)
@@ -191,6 +189,21 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         click.echo(jsonio.dumps(best, indent=2, default=float))
         return
     _echo_summary(best, model.name, session, best_result.wall_s, names, out)
+
+
+def _result_json(best_result, results: list, model_name: str, session: str, stored_as: str | None) -> dict:
+    """fit.json: the best start's result with the counts summed over every start."""
+    from skinkit.inverse import fit_json
+
+    best = fit_json(best_result)
+    best["n_forward"] = sum(r.n_forward for r in results)
+    best["n_sensitivity"] = sum(r.n_sensitivity for r in results)
+    best["n_replayed"] = sum(r.extra.get("n_replayed", 0) for r in results)
+    best["model"] = model_name
+    best["session"] = str(session)
+    if stored_as is not None:
+        best["stored_as"] = stored_as
+    return best
 
 
 def _check_choices(weighting: str, optimiser: str) -> None:
@@ -258,7 +271,20 @@ def _check_out(out: Path, state_file: Path, identity: dict, *, resume: bool, ses
                 raise SkinkitError(f"{session} already holds a fit named {fit_name!r}: give another --name, "
                                    "or --overwrite to replace it")
     if not resume:   # a finished fit's fit.json is a result too: not replaced silently by a new fit
-        check_result_files(out, ("fit.json",), "--out", overwrite=overwrite)
+        check_result_files(out, ("fit.json", "model.toml"), "--out", overwrite=overwrite)
+
+
+def _write_model(model_file: str, session: str, result, names: list[str], weighting: str, out: Path) -> Path:
+    """``out/model.toml``: the model file with the fitted values and their 95 % intervals
+    (:mod:`skinkit.inverse.calibrated`)."""
+    from skinkit.forward import read_description
+    from skinkit.inverse.calibrated import write_calibrated
+
+    values = {n: float(result.parameters[n]) for n in names}
+    se = {n: result.se.get(n) for n in names}
+    return write_calibrated(out, read_description(model_file), values, se, session=session,
+                            objective=weighting, command="skinkit fit", model_file=model_file,
+                            notes={"chi2_per_dof": result.chi2_per_dof, "converged": result.converged})
 
 
 def _start_points(params, names: list[str], starts: int) -> tuple[object, list]:
@@ -351,3 +377,4 @@ def _echo_summary(best: dict, model_name: str, session: str, wall_s: float, name
     for p in best.get("plots", []):
         click.echo(f"  plot {p}")
     click.echo(f"wrote {out / 'fit.json'}")
+    click.echo(f"wrote {best['calibrated_model']} (the calibrated model)")

@@ -48,11 +48,13 @@ def gap() -> None:
               help="refit the model with this many top-scoring effects per round")
 @click.option("--free", default=None, help="parameters to calibrate (comma-separated; default: the model's)")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="write gap.json (and gap.html) to this directory")
+              help="write gap.json (and gap.html) and model.toml (the calibrated model with the added "
+                   "effects, at their fitted values) to this directory")
 @click.option("--name", "gap_name", default=None, callback=name_callback("report name"),
               help="name of the report stored in an experiment-file SESSION (default: gap-<model name>)")
 @click.option("--overwrite", is_flag=True,
-              help="replace a report of that name already stored in SESSION, and gap.json/gap.html in --out")
+              help="replace a report of that name already stored in SESSION, and gap.json/gap.html/"
+                   "model.toml in --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes (FE models)")
 @click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="diagnose only the session's first seconds [s] (e.g. the imaged part of a record)")
@@ -79,7 +81,8 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     refined 2x) projected out. It is named a cause when it removes at least --min-share of the
     excess residual, else a minor contribution; what no effect explains is reported as such.
     Residuals are prewhitened by each record's noise model. An experiment-file SESSION stores
-    the report (/gaps/<name>).
+    the report (/gaps/<name>); --out receives gap.json and model.toml, the final model (MODEL_FILE
+    with the added effects, every calibrated value and a [calibration] table of 95 % intervals).
     """
     from skinkit.forward import read_description
     from skinkit.gap.diagnose import diagnose, write_report
@@ -101,7 +104,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
                 raise SkinkitError(f"{session} already holds a gap report named {name!r}: give another "
                                    "--name, or --overwrite to replace it")
     if out_dir:   # an earlier report in --out is not replaced silently either
-        check_result_files(out_dir, ("gap.json", "gap.html"), "--out", overwrite=overwrite)
+        check_result_files(out_dir, ("gap.json", "gap.html", "model.toml"), "--out", overwrite=overwrite)
 
     def progress(line: str) -> None:
         click.echo(f"  {line}", err=True)
@@ -120,6 +123,9 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
         with open_experiment(session, "a") as exp:
             exp.write_gap(name, report)
     written = write_report(report, out_dir) if out_dir else []
+    if out_dir:
+        from skinkit.gap.calibrated import write_model
+        written.append(write_model(report, model_file, out_dir, workers=workers))
     if out_dir and not any(str(p).endswith(".html") for p in written):
         click.echo("  note: skinkit.gap.html is not installed: no gap.html written", err=True)
     d = report.to_dict()

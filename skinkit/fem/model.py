@@ -47,7 +47,9 @@ else:  # pragma: no cover
 
 TOP_KEYS = {"model", "geometry", "layers", "boundary", "indenter", "load", "solver", "output",
             # session-driven forward models (skinkit.forward) and candidate effects
-            "effects", "fields", "bindings", "instrument", "surface", "drive", "session"}
+            "effects", "fields", "bindings", "instrument", "surface", "drive", "session",
+            # a calibrated model's record of where its values came from (skinkit.inverse.calibrated)
+            "calibration"}
 
 
 def _get(d: Mapping[str, Any], key: str, entry: str, default: Any = ...):

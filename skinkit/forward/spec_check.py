@@ -1,6 +1,6 @@
 """Check the model-file tables the forward models read but ``skinkit solve`` does not build
 from: ``[session]``, ``[surface]``, ``[drive]``, ``[[instrument]]``, ``[[fields]]``,
-``[[effects]]`` and ``bindings``.
+``[[effects]]``, ``bindings`` and ``[calibration]``.
 
 :func:`check_description` runs when a description is read (``read_description``, ``skinkit
 solve``), before any work, so that a misspelt key, a value of the wrong type or outside its
@@ -243,9 +243,15 @@ def check_bindings(value: Any) -> None:
             raise ForwardError(f"bindings.{k}", f"expected a parameter name (a string), got {v!r}")
 
 
+def check_calibration(value: Any) -> None:
+    """``[calibration]``: a table (a calibrated model's record of its fit, read by no model;
+    :mod:`skinkit.inverse.calibrated`)."""
+    _table(value, "calibration", ForwardError)
+
+
 _CHECKS = {"session": check_session, "surface": check_surface, "drive": check_drive,
            "instrument": check_instrument, "fields": check_fields, "effects": check_effects,
-           "bindings": check_bindings}
+           "bindings": check_bindings, "calibration": check_calibration}
 
 
 def check_description(spec: Mapping[str, Any]) -> None:
@@ -257,5 +263,5 @@ def check_description(spec: Mapping[str, Any]) -> None:
             check(spec[key])
 
 
-__all__ = ["check_bindings", "check_description", "check_drive", "check_effects", "check_fields",
-           "check_instrument", "check_session", "check_surface"]
+__all__ = ["check_bindings", "check_calibration", "check_description", "check_drive", "check_effects",
+           "check_fields", "check_instrument", "check_session", "check_surface"]
