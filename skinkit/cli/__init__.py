@@ -67,6 +67,7 @@ COMMANDS: dict[str, str] = {
     "lab": "skinkit.cli.lab:lab",
     "gap": "skinkit.cli.gap:gap",
     "report": "skinkit.cli.report:report",
+    "export": "skinkit.cli.export:export",
 }
 #: old top-level names kept for one release (hidden; a one-line warning, then they run)
 ALIASES: dict[str, str] = {"profile": "profile-likelihood"}
