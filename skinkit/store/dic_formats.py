@@ -309,7 +309,8 @@ def read_frames(source: str, files: list[Path], fmt: str, columns: str | None = 
         raise StoreError(source, "", str(exc)) from None
     src = source if glob.has_magic(source) else str(Path(source).resolve())
     attrs: dict[str, object] = {"source": src, "format": fmt, "columns": c.kind, "dimensions": c.dims,
-                                "layout": "per-frame files", "files": [f.name for f in files]}
+                                "layout": "per-frame files", "files": {
+                                    "first": files[0].name, "last": files[-1].name, "count": len(files)}}
     if c.dims == 2:
         attrs["z"] = "not measured (2D tracks): stored as 0"
     return track, attrs
