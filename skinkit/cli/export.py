@@ -41,6 +41,12 @@ def febio(model_file: str, session: str | None, protocol: str | None, out_file: 
     tree, summary = febio_model(model_file, session=session, protocol=protocol)
     with staged_file(out) as tmp:
         write_feb(tree, tmp)
+    if summary["inverted_at_gauss_points"]:
+        # the quadratic map of a strongly curved or graded element can fold near a corner: skinkit's
+        # mesh as it is, which FEBio refuses at its first step ("negative jacobian")
+        click.echo(f"warning: {summary['inverted_at_gauss_points']} element(s) have a non-positive "
+                   "Jacobian at a Gauss point (the model file's mesh); FEBio will refuse them -- "
+                   "refine or ungrade the mesh", err=True)
     drive = summary["drive"]
     how = "no drive" if drive is None else (f"{drive['mode']} drive from {drive['source']}, "
                                             f"{drive['steps']} steps over {drive['duration']:g} s")

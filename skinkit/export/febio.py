@@ -92,6 +92,23 @@ def hex27_connectivity(nodes: np.ndarray, elements: np.ndarray) -> np.ndarray:
     return out
 
 
+def gauss_jacobians(x: np.ndarray) -> np.ndarray:
+    """``(E, 27)`` Jacobian determinants of hex27 elements with node positions ``x`` ``(E, 27, 3)``
+    (FEBio order) at the 3x3x3 Gauss points FEBio integrates them with."""
+    g = math.sqrt(0.6)
+    out = []
+    for r, s, t in ((a, b, c) for a in (-g, 0.0, g) for b in (-g, 0.0, g) for c in (-g, 0.0, g)):
+        # 1-D quadratic shape functions and derivatives at -1, +1, 0, per natural coordinate
+        vals = [np.array([0.5 * q * (q - 1), 0.5 * q * (q + 1), 1 - q * q]) for q in (r, s, t)]
+        ders = [np.array([q - 0.5, q + 0.5, -2 * q]) for q in (r, s, t)]
+        idx = np.where(FEBIO_HEX27_RST == -1, 0, np.where(FEBIO_HEX27_RST == 1, 1, 2)).astype(int)
+        V = [vals[k][idx[:, k]] for k in range(3)]
+        D = [ders[k][idx[:, k]] for k in range(3)]
+        dN = np.stack([D[0] * V[1] * V[2], V[0] * D[1] * V[2], V[0] * V[1] * D[2]], axis=1)  # (27, 3)
+        out.append(np.linalg.det(np.einsum("eai,ak->eik", x, dN)))
+    return np.stack(out, axis=1)
+
+
 def _build(spec: dict[str, Any], session: str | os.PathLike | None, protocol: str | None):
     """The built :class:`skinkit.fem.model.Model` and its :class:`Drive`."""
     from skinkit.fem.model import build_model
@@ -231,7 +248,10 @@ def febio_model(model_file: str | os.PathLike, *, session: str | os.PathLike | N
     _load_data(root, drive, lcs)
     _output(root)
     ET.indent(root, space="  ")
+    conn = hex27_connectivity(model.mesh.nodes, model.mesh.elements)
+    bad = int(np.sum(gauss_jacobians(model.mesh.nodes[conn]).min(axis=1) <= 0))
     summary = {"model": model.name, "nodes": model.mesh.n_nodes, "elements": model.mesh.n_elements,
+               "inverted_at_gauss_points": bad,
                "materials": [m.region for m in model.problem.materials],
                "drive": None if drive is None else {"mode": drive.mode, "source": drive.source,
                                                     "steps": drive.n_steps, "duration": drive.duration},
