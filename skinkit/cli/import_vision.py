@@ -71,14 +71,16 @@ def import_calibration(experiment: Path, files: tuple[Path, ...], unit: str | No
 @click.argument("csv_file", type=click.Path(path_type=Path))
 @click.option("--name", default=None,
               help="track name in EXPERIMENT (default: the file's stem, or the folder's name)")
-@click.option("--format", "fmt", type=click.Choice(["csv", "dice", "vic3d"]), default=None,
-              help="format of CSV_FILE (default: told by its header): csv (frame, point, x_mm, ...), "
-                   "dice (DICe_solution_*.txt per frame) or vic3d (Vic-3D CSV export per frame)")
+@click.option("--format", "fmt", type=click.Choice(["csv", "dice", "vic3d", "multidic"]), default=None,
+              help="format of CSV_FILE (default: told by its header, or .mat): csv (frame, point, "
+                   "x_mm, ...), dice (DICe_solution_*.txt per frame), vic3d (Vic-3D CSV export per "
+                   "frame) or multidic (MultiDIC's DIC3DPPresults .mat)")
 @click.option("--columns", type=click.Choice(["metric", "pixel"]), default=None,
               help="which coordinates to read from a file holding both pixel columns (x, y, "
                    "COORDINATE_X, *_px) and metric ones (X, Y, Z, MODEL_COORDINATES_X, *_mm)")
 @click.option("--unit", type=click.Choice(["m", "mm", "cm", "um", "px"]), default=None,
-              help="unit of coordinate columns named without one (x, y, z; X, Y, Z; DICe's MODEL_*)")
+              help="unit of coordinate columns named without one (x, y, z; X, Y, Z; DICe's MODEL_*; "
+                   "MultiDIC's Points3D)")
 @click.option("--m-per-px", type=FiniteFloat(min=0.0, min_open=True), default=None,
               help="scale of pixel coordinates [m/px]")
 @click.option("--fps", default=1.0, show_default=True, type=FiniteFloat(min=0.0, min_open=True),
@@ -90,7 +92,8 @@ def import_tracks(experiment: Path, csv_file: Path, name: str | None, fmt: str |
                   overwrite: bool) -> None:
     """Import 2D/3D point tracks from another DIC tool as a track in EXPERIMENT (created if it
     does not exist). CSV_FILE: a tracks CSV (frame, point, x_mm, y_mm[, z_mm], or one row per
-    frame), or per-frame DICe / Vic-3D exports: one file, a folder or a quoted glob."""
+    frame), per-frame DICe / Vic-3D exports (one file, a folder or a quoted glob), or MultiDIC's
+    3D results (.mat)."""
     from skinkit.cli._paths import check_name
     from skinkit.store.dic_formats import default_track_name
     from skinkit.store.track_import import import_tracks as run

@@ -17,7 +17,9 @@ told by the header of its first file, or given (``fmt``):
   metric ``X, Y, Z`` (reference position) and ``U, V, W`` (displacement), pixel ``x, y``
   (position in the reference camera-0 image) and ``u, v`` [px], ``sigma`` [px] (-1: not
   correlated). A name may carry its unit in brackets (``"X [mm]"``); without one the metric
-  unit must be given. Other columns (strains, ``q, r``, ...) are skipped.
+  unit must be given. Other columns (strains, ``q, r``, ...) are skipped;
+* ``multidic`` -- MultiDIC's 3D results, a ``.mat`` file (:mod:`skinkit.store.multidic`),
+  told by its suffix.
 
 Column names are matched case-sensitively (``X`` is metric, ``x`` pixels). A source holding
 both pixel and metric columns is refused, naming both sets, unless ``columns`` chooses
@@ -43,7 +45,7 @@ from skinkit.errors import SchemaError, StoreError
 from skinkit.schemas import SurfaceTrack
 
 #: the formats a source may be read as
-FORMATS = ("csv", "dice", "vic3d")
+FORMATS = ("csv", "dice", "vic3d", "multidic")
 #: what ``columns`` may choose when a source holds both pixel and metric coordinate columns
 COLUMN_SETS = ("metric", "pixel")
 #: metres per metric unit
@@ -118,6 +120,8 @@ def source_files(source: str | os.PathLike[str], fmt: str | None) -> tuple[list[
         files = [p]
     else:
         raise StoreError(text, "", "no such file or folder")
+    if fmt is None and files[0].suffix.lower() == ".mat":
+        return files, "multidic"
     return files, fmt or detect_format(files[0])
 
 
@@ -164,7 +168,7 @@ def detect_format(path: Path) -> str:
     shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
     raise StoreError(str(path), "line 1", f"unknown track format (header: {shown}); expected DICe "
                      "(COORDINATE_X, COORDINATE_Y, DISPLACEMENT_X, ...), Vic-3D (X, Y, Z, U, V, W, x, y, "
-                     "sigma) or csv (frame, point, x_mm, y_mm, ...); or give --format csv|dice|vic3d")
+                     "sigma), MultiDIC (.mat) or csv (frame, point, x_mm, y_mm, ...); or give --format")
 
 
 @dataclass

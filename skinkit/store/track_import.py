@@ -338,9 +338,10 @@ def _is_int(s: str) -> bool:
 def read_tracks(source: str | os.PathLike[str], fmt: str | None = None, *, columns: str | None = None,
                 unit: str | None = None, m_per_px: float | None = None, fps: float = 1.0,
                 ignore: Sequence[str] = ()) -> TrackImport:
-    """Read the tracks of ``source`` -- a tracks CSV (module docstring) or DICe / Vic-3D
-    per-frame exports (:mod:`skinkit.store.dic_formats`: a file, a folder or a glob) -- in
-    format ``fmt`` (``csv``, ``dice``, ``vic3d``; None: told by the header) into a
+    """Read the tracks of ``source`` -- a tracks CSV (module docstring), DICe / Vic-3D
+    per-frame exports (:mod:`skinkit.store.dic_formats`: a file, a folder or a glob) or
+    MultiDIC's ``.mat`` results (:mod:`skinkit.store.multidic`) -- in format ``fmt`` (``csv``,
+    ``dice``, ``vic3d``, ``multidic``; None: told by the header or the suffix) into a
     :class:`SurfaceTrack` ``(P, F, 3)`` [m]. ``columns``: ``"metric"`` or ``"pixel"``, the set
     to read from a source holding both; ``unit``: unit of metric columns named without one;
     ``m_per_px`` [m/px]; ``fps`` [Hz]; ``ignore``: columns the csv format skips. Raises
@@ -355,6 +356,8 @@ def read_tracks(source: str | os.PathLike[str], fmt: str | None = None, *, colum
     if not (np.isfinite(fps) and fps > 0):
         raise StoreError(where, "", f"frame rate must be positive, got {fps} Hz")
     files, fmt = source_files(source, fmt)
+    if fmt == "multidic":
+        return _read_multidic(where, files, columns, unit, fps)
     if fmt != "csv":
         track, attrs = read_frames(where, files, fmt, columns, unit, m_per_px, fps)
         return TrackImport(track, dict(attrs))
@@ -364,6 +367,25 @@ def read_tracks(source: str | os.PathLike[str], fmt: str | None = None, *, colum
     imp = read_tracks_csv(files[0], unit, m_per_px, fps, ignore, columns)
     imp.attrs["format"] = "csv"
     return imp
+
+
+def _read_multidic(where: str, files: list[Path], columns: str | None, unit: str | None,
+                   fps: float) -> TrackImport:
+    """MultiDIC's ``Points3D`` of one ``.mat`` file as a track; frame ``k`` at ``k / fps`` s."""
+    from skinkit.store.multidic import read_points3d
+
+    if len(files) != 1:
+        raise StoreError(where, "", f"MultiDIC's results are one .mat file, but {len(files)} files "
+                         "were given")
+    metric = {u: f for u, f in UNITS.items() if f is not None}
+    pts, valid, struct = read_points3d(files[0], unit, metric, columns)
+    P, F = valid.shape
+    try:
+        track = SurfaceTrack(pts, valid, np.arange(F) / fps, np.arange(P))
+    except SchemaError as exc:
+        raise StoreError(where, "", str(exc)) from None
+    return TrackImport(track, {"source": str(files[0].resolve()), "format": "multidic", "columns": "metric",
+                               "dimensions": 3, "layout": f"{struct}.Points3D"})
 
 
 def import_tracks(experiment: str | os.PathLike[str], path: str | os.PathLike[str], name: str | None = None,

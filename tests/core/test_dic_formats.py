@@ -258,3 +258,59 @@ def test_bad_input_is_one_line(tmp_path):
     one_error(_run(str(exp), str(tmp_path / "dice")), "in pixels", "--m-per-px")
     one_error(_run(str(exp), str(tmp_path / "dice"), "--format", "csv"), "csv format is one file")
     assert not exp.exists()
+
+
+# ---- MultiDIC ---------------------------------------------------------------------------------
+
+def _points3d(P=5, F=4, seed=2):
+    """``Points3D``: one ``(P, 3)`` matrix [mm] per frame, point 1 not reconstructed (NaN) in
+    frame 2."""
+    rng = np.random.default_rng(seed)
+    frames = [rng.uniform(-20, 20, (P, 3)) + 0.1 * f for f in range(F)]
+    frames[2][1] = np.nan
+    return frames
+
+
+def test_multidic_mat_v5_and_v73(tmp_path):
+    import h5py
+    import scipy.io
+
+    frames = _points3d()
+    cell = np.empty((len(frames), 1), dtype=object)
+    for k, a in enumerate(frames):
+        cell[k, 0] = a
+    v5 = tmp_path / "DIC3DPPresults.mat"
+    scipy.io.savemat(v5, {"DIC3DPPresults": {"Points3D": cell, "Faces": np.array([[1, 2, 3]])}})
+    exp = tmp_path / "s.h5"
+    one_error(_run(str(exp), str(v5)), "DIC3DPPresults.mat", "calibration's unit", "--unit")
+    one_error(_run(str(exp), str(v5), "--unit", "mm", "--columns", "pixel"), "metric positions only")
+    r = _run(str(exp), str(v5), "--unit", "mm", "--fps", "2")
+    assert r.exit_code == 0, r.output
+    assert "5 points x 4 frames (3D, multidic, metric columns, 19 valid positions)" in r.output
+    with open_experiment(exp) as e:
+        t = e.read_track("DIC3DPPresults")
+    want = np.stack(frames, axis=1) * 1e-3
+    ok = np.all(np.isfinite(want), axis=2)
+    assert np.array_equal(t.valid, ok) and not ok[1, 2] and np.allclose(t.time_s, np.arange(4) / 2)
+    assert np.allclose(t.points[ok], want[ok], rtol=0, atol=1e-15)
+
+    # MAT v7.3 as MATLAB lays it out: HDF5, the cell a dataset of references to (3, N) matrices
+    v73 = tmp_path / "pairs.mat"
+    with h5py.File(v73, "w", userblock_size=512) as f:
+        refs = [f.create_dataset(f"#refs#/{k}", data=a.T).ref for k, a in enumerate(frames)]
+        g = f.create_group("DIC3DpairResults")
+        g.create_dataset("Points3D", data=np.array(refs, dtype=h5py.ref_dtype).reshape(-1, 1))
+    with open(v73, "r+b") as f:   # MATLAB's text header in the HDF5 user block
+        f.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: test HDF5 schema 1.00 .".ljust(116))
+    t = read_tracks(v73, unit="mm").track
+    assert np.array_equal(t.valid, ok) and np.allclose(t.points[ok], want[ok], rtol=0, atol=1e-15)
+
+    short = tmp_path / "short.mat"
+    cell[3, 0] = frames[3][:4]
+    scipy.io.savemat(short, {"DIC3DPPresults": {"Points3D": cell}})
+    one_error(_run(str(exp), str(short), "--unit", "mm"),
+              "Points3D{4} holds 4 points but Points3D{1} holds 5")
+    other = tmp_path / "ncorr.mat"
+    scipy.io.savemat(other, {"data_dic_save": {"dispinfo": 1}})
+    one_error(_run(str(exp), str(other), "--unit", "mm"), "holds no DIC3DPPresults or DIC3DpairResults",
+              "data_dic_save")
