@@ -36,12 +36,16 @@ from skinkit.units import unit_suffix
               help="tip axis of a one-axis CSV record (default: the model's, else z)")
 @click.option("--out", "out_file", type=click.Path(dir_okay=False), default=None,
               help="write the predictions (HDF5) here")
-@click.option("--overwrite", is_flag=True, help="replace an existing --out file")
+@click.option("--vtu", "vtu_dir", type=click.Path(file_okay=False), default=None,
+              help="a finite-element model: write each protocol's fields for ParaView to this directory "
+                   "(<protocol>.pvd and one .vtu per step on the 27-node mesh: displacement, Green-Lagrange "
+                   "strain, Cauchy stress, fibre directions)")
+@click.option("--overwrite", is_flag=True, help="replace an existing --out file or --vtu series")
 @click.option("--json", "as_json", is_flag=True, help="print the residual summary as JSON")
 def predict(model_file: str, session: str, protocols: str | None, until_s: float | None, holdout: str | None,
             segments: str | None, sets: tuple[str, ...],
             sensitivities: bool, workers: int | None, scheduler: str | None, axis: str | None,
-            out_file: str | None, overwrite: bool, as_json: bool) -> None:
+            out_file: str | None, vtu_dir: str | None, overwrite: bool, as_json: bool) -> None:
     """Predict SESSION (experiment file or CSV record) with MODEL_FILE; report the residuals."""
     from skinkit.fem.model import quantity
     from skinkit.forward import load
@@ -55,6 +59,9 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
 
     model = load(model_file, workers=workers, scheduler=scheduler)
     try:
+        if vtu_dir and getattr(model, "kind", None) != "fe":   # before the session is read
+            raise SkinkitError(f"--vtu: model {model.name!r} is lumped; only a finite-element model has "
+                               "fields to write")
         obs = read_session(model, session, holdout, segments, axis, protocols)
         if until_s is not None:
             obs = obs.until(until_s)
@@ -71,7 +78,8 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
                                     params.param(name).unit,
                                     f"--set {name}")
         params = params.with_values(values) if values else params
-        pred = model.predict(params, obs, sensitivities=sensitivities)
+        extra = {"fields_dir": _check_vtu(model, obs, vtu_dir, overwrite)} if vtu_dir else {}
+        pred = model.predict(params, obs, sensitivities=sensitivities, **extra)
         summary = summarise(pred, obs)
         if not summary["samples"]:
             # a residual over no sample (chi2 nan) would read as a prediction that ran
@@ -84,6 +92,8 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
         if out_file:
             _write(Path(out_file), pred, summary)
             summary["file"] = out_file
+        if vtu_dir:
+            summary["vtu"] = {p: i["vtu"] for p, i in pred.info["protocols"].items()}
     finally:
         model.close()
     if as_json:
@@ -98,6 +108,15 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
             click.echo(f"  {proto:24s} {cname:13s} chi2/n {c['chi2_per_sample']:9.3g}  "
                        f"rms [{rms}]{unit_suffix(c['unit'])}"
                        f"{'  (held out)' if c['held_out'] else ''}")
+    for path in summary.get("vtu", {}).values():
+        click.echo(f"wrote {path}")
+
+
+def _check_vtu(model, obs, vtu_dir: str, overwrite: bool) -> Path:
+    """--vtu: a folder holding none of the protocols' series (unless --overwrite)."""
+    from skinkit.cli._paths import check_result_files
+
+    return check_result_files(vtu_dir, [f"{p}.pvd" for p in obs.names], "--vtu", overwrite=overwrite)
 
 
 def _nothing_predicted(model, session: str, axis: str | None) -> str:

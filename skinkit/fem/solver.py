@@ -287,7 +287,8 @@ class NewtonSolver:
 
     def run(self, times: Sequence[float], u0: np.ndarray | None = None, viscous_time: bool = False,
             progress: Callable[[float], None] | None = None, sensitivities: bool | Sequence[str] = False,
-            extrapolate: bool = True, sensitivity_method: str = "iterative") -> Solution:
+            extrapolate: bool = True, sensitivity_method: str = "iterative",
+            on_step: Callable[[float, np.ndarray], None] | None = None) -> Solution:
         """Solve at each of ``times`` (increasing); cut increments that fail.
 
         ``viscous_time``: ``times`` are seconds and viscous histories advance; otherwise
@@ -300,6 +301,9 @@ class NewtonSolver:
         states) or ``"direct"`` — both exact, see :class:`~skinkit.fem.sensitivity.HistorySensitivity`.
         ``extrapolate``: start each increment from a quadratic extrapolation of the last
         converged states (falls back to the tangent predictor after a failure).
+        ``on_step(t, u)``: called at each output time with its converged displacement
+        ``(n_dof,)`` [m], while the problem's viscous history is the one at ``u`` (what the
+        field output, :mod:`skinkit.fem.vtu`, reads the total stress from).
 
         Floating-point warnings (overflow, division by zero, invalid values in a law's stress)
         are silenced here: the solver checks every residual and increment itself, cuts the
@@ -307,11 +311,12 @@ class NewtonSolver:
         """
         with np.errstate(all="ignore"):
             return self._run(times, u0, viscous_time, progress, sensitivities, extrapolate,
-                             sensitivity_method)
+                             sensitivity_method, on_step)
 
     def _run(self, times: Sequence[float], u0: np.ndarray | None, viscous_time: bool,
              progress: Callable[[float], None] | None, sensitivities: bool | Sequence[str],
-             extrapolate: bool, sensitivity_method: str = "iterative") -> Solution:
+             extrapolate: bool, sensitivity_method: str = "iterative",
+             on_step: Callable[[float, np.ndarray], None] | None = None) -> Solution:
         from skinkit.fem import sensitivity as sens_mod
         only = None if isinstance(sensitivities, bool) else list(sensitivities)
         want_sens = bool(sensitivities) if isinstance(sensitivities, bool) else True
@@ -362,6 +367,8 @@ class NewtonSolver:
             out_steps.append(self.step_result(u, t_target, its, norm, None if not viscous_time else 0.0))
             if tracker is not None:
                 sens_out.append(last_sens if viscous_time else tracker.step(u, t_target, None))
+            if on_step is not None:
+                on_step(t_target, u)
             if progress is not None:
                 progress(t_target)
             t_prev = t_target

@@ -105,8 +105,10 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
                 f.level = _interp_table(job.times, job.level if job.level is not None else none)
                 f.strokes = _interp_table(job.times, job.strokes if job.strokes is not None else none)
         solver = NewtonSolver(model.problem, model.bc, model.options)
+        series = _field_series(job, model)
         sol = solver.run(job.times, viscous_time=model.problem.viscous, sensitivities=job.sens or False,
-                         extrapolate=job.options.get("extrapolate", True))
+                         extrapolate=job.options.get("extrapolate", True),
+                         on_step=None if series is None else series[1])
         n = len(job.times) + 1
         P = 0 if job.embed is None else len(job.embed[0])
         npar = len(job.sens)
@@ -143,9 +145,28 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
                 "newton_per_step": tm.iterations / max(solver.steps_taken, 1),
                 "assembly_s": tm.assembly, "linear_solve_s": tm.solve, "n_dof": mesh.n_dof,
                 "linear_solver": solver.linear.name, "process": os.getpid()}
+        if series is not None:
+            info["vtu"] = str(series[0].close())
         return {"name": job.name, "times": np.concatenate([[0.0], job.times]), "tip_u": tip_u,
                 "tip_f": tip_f, "points": pts, "d_tip_u": d_tip_u, "d_tip_f": d_tip_f, "d_points": d_pts,
                 "untied": untied, "col_names": list(job.sens), "info": info}
+
+
+def _field_series(job: ProtocolJob, model: Any) -> tuple[Any, Callable[[float, np.ndarray], None]] | None:
+    """With ``job.options["vtu"]`` (a folder): the protocol's PVD series
+    (:class:`skinkit.fem.vtu.Series`, its unloaded state written) and the solver's ``on_step``
+    that writes each solved step into it; else None."""
+    if not job.options.get("vtu"):
+        return None
+    from skinkit.fem import vtu
+
+    series = vtu.Series(job.options["vtu"], job.name, model.mesh)
+    viscous = model.problem.viscous
+    series.write(0.0, vtu.point_data(model.problem, np.zeros(model.mesh.n_dof)))
+
+    def on_step(t: float, u: np.ndarray) -> None:
+        series.write(t, vtu.point_data(model.problem, u, viscous))
+    return series, on_step
 
 
 def _instrument() -> Any:
@@ -324,8 +345,13 @@ class FEForwardModel(ForwardModel):
     # -- prediction --------------------------------------------------------------------------
     def predict(self, params: ParameterSet, observations: Observations,
                 sensitivities: bool | Sequence[str] = False,
-                progress: Callable[[str, float], None] | None = None) -> Prediction:
-        """Predictions of every observed channel but the drive (see the module docstring)."""
+                progress: Callable[[str, float], None] | None = None, *,
+                fields_dir: str | os.PathLike[str] | None = None) -> Prediction:
+        """Predictions of every observed channel but the drive (see the module docstring).
+
+        ``fields_dir``: also write each protocol's fields there as a PVD series
+        (``<protocol>.pvd``, ``<protocol>_NNNN.vtu``: :mod:`skinkit.fem.vtu`), by the process
+        that solves it; ``pred.info["protocols"][name]["vtu"]`` is its path."""
         if not isinstance(observations, Observations):
             raise SchemaError("observations", f"expected Observations, got {type(observations).__name__}")
         names = self._pset.names if sensitivities is True else \
@@ -338,7 +364,7 @@ class FEForwardModel(ForwardModel):
         fe_names = sorted({v[1] for v in cls.values() if v[0] == "fe"})
         inst_names = sorted({v[1] for v in cls.values() if v[0] == "instrument"})
         t0 = time.perf_counter()
-        results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names)
+        results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names, fields_dir)
         pred = self._assemble(spec, observations, results, jobs_meta, cls, inst_names)
         fd = [nm for nm, (m, _) in cls.items() if m == "fd"]
         if fd:
@@ -452,7 +478,8 @@ class FEForwardModel(ForwardModel):
             raise ForwardError("indenter.mode", f"must be 'force' or 'displacement', got {mode!r}")
         return mode, ("tip_force" if mode == "force" else "tip_position")
 
-    def _solve_all(self, spec, observations: Observations, fe_names: list[str], inst_names: list[str]):
+    def _solve_all(self, spec, observations: Observations, fe_names: list[str], inst_names: list[str],
+                   fields_dir: str | os.PathLike[str] | None = None):
         from skinkit.fem.model import quantity
         inst_mod = _instrument()
         mode, drive_name = self._drive_channel(spec)
@@ -504,7 +531,8 @@ class FEForwardModel(ForwardModel):
                 locs = np.concatenate([e[1] for e in embeds.values()])
                 emb = (els, locs)
             jobs.append(ProtocolJob(po.name, spec, nodes, mode, times, dsteps, dd, level, emb,
-                                    list(fe_names) + list(dd), strokes=strokes))
+                                    list(fe_names) + list(dd), strokes=strokes,
+                                    options={"vtu": str(fields_dir)} if fields_dir is not None else {}))
         results = self._run(jobs)
         return results, meta
 
