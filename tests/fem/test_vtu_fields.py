@@ -130,6 +130,26 @@ def test_series_read_back_with_meshio(series):
     assert below.size and np.all(fib[below] == 0)                 # none in the neo-Hookean layer
 
 
+def test_stress_carries_the_viscous_history(series):
+    """The skin's QLV stress at the last step is its total stress from the solver's committed
+    history, not the elastic response at the same strain (at a sinusoid's end they differ)."""
+    import meshio
+
+    from skinkit.fem.vtu import point_data, total_stress
+
+    d, _, kept = series
+    sol, problem = kept["solution"], kept["problem"]
+    u = sol.u[-1]
+    skin = problem.mesh.region == problem.mesh.regions.index("skin")
+    viscous, elastic = total_stress(problem, u, True), problem.stress_at(u)
+    assert np.abs(viscous[skin] - elastic[skin]).max() > 0.01 * np.abs(viscous[skin]).max()
+    np.testing.assert_array_equal(viscous[~skin], elastic[~skin])
+    last = sorted((d / "v").glob("normal_indentation_*.vtu"))[-1]
+    written = meshio.read(last).point_data["cauchy_stress"]
+    np.testing.assert_allclose(written, point_data(problem, u, True)["cauchy_stress"], rtol=0,
+                               atol=1e-9 * np.abs(written).max())
+
+
 def _vtk_volumes(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, float]:
     """Each cell's volume [m³] and the smallest Jacobian determinant, from VTK's own triquadratic
     shape functions (``vtkTriQuadraticHexahedron.InterpolationDerivs``, in VTK's node order) at
