@@ -302,7 +302,9 @@ def read_observations(path: str | os.PathLike[str], held_out: Sequence[str] = ()
     """The observations of a session file: an experiment file or a CSV record.
 
     ``held_out``: protocol names to mark held out (in addition to those the file marks).
-    ``axis``: the tip axis of one-axis CSV columns (``displacement_mm``, ``force_N``).
+    ``axis``: the tip axis of one-axis CSV columns (``displacement_mm``, ``force_N``); for a
+    model, :func:`skinkit.forward.session.read_session` takes it from the model (as
+    :func:`skinkit.fit` and the command line do).
     ``segments``: split every record into protocols first (:func:`skinkit.forward.segments.split`;
     ``"cycles"``: one protocol per loading cycle, named ``<protocol>-cycle-<k>``), so that
     ``held_out`` can name a segment (fit cycles 1-2, predict 3-4). ``noise``: how each robot

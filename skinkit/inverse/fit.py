@@ -162,7 +162,8 @@ class _FitRun:
         except (SkinkitError, ArithmeticError) as exc:
             if self.m is None:
                 raise FitError(f"the model cannot be solved at the start of the fit "
-                               f"({_describe(pset, self.names)}): {exc}") from None
+                               f"({_describe(pset, self.names)}): {exc}"
+                               f"{_component_hint(self.obj.model, self.obj.observations)}") from None
             # not a penalty: a non-finite residual makes the optimiser reject the step and shrink it
             return {"z": np.full(self.m, np.nan), "J": np.zeros((self.m, len(self.names))), "ok": False,
                     "error": str(exc), "blocks": []}
@@ -306,6 +307,22 @@ def _start_parameters(model: Any, free: Sequence[str] | None, bounds: dict[str, 
                                f"[{p.lower:g}, {p.upper:g}]")
         params = params.with_values(start)
     return params
+
+
+def _component_hint(model: Any, observations: Observations) -> str:
+    """Why a start may not be solvable: the model reads tip components (``record_components``)
+    that no tip channel of the session holds -- a one-axis CSV record read along another axis;
+    "" when that is not the case."""
+    wanted = str(getattr(model, "record_components", "") or "")
+    held = {"xyz"[j] for p in observations for c in p.channels.values() if not c.is_points
+            for j in range(min(c.valid.shape[1], 3)) if c.valid[:, j].any()}
+    if not wanted or not held or set(wanted) & held:
+        return ""
+    axis = wanted[0]
+    return (f"; the session's tip channels hold component(s) {', '.join(sorted(held))} only, and model "
+            f"{model.name!r} reads {', '.join(wanted)}: read a one-axis CSV record along the model's axis "
+            f"(skinkit.fit(model, path), skinkit.forward.session.read_session(model, path), or "
+            f"read_observations(path, axis={axis!r}))")
 
 
 def _describe(pset: ParameterSet, names: Sequence[str]) -> str:

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from skinkit.errors import SchemaError
+from skinkit.schemas import display
 from skinkit.schemas.protocol import Protocol
 from skinkit.schemas.surface import SurfaceProfile
 
@@ -125,6 +126,10 @@ class Channel:
             if lead == 0 or ref.shape != (v.shape[0], 3):
                 raise SchemaError(f"{f}.reference", f"expected (P, 3) for a point channel, got {ref.shape}")
             self.reference = ref
+
+    def __repr__(self) -> str:
+        """Two lines: name, unit, shape, valid samples, time span, noise (never the arrays)."""
+        return "\n".join(display.channel_lines(self))
 
     def _check_noise_model(self, f: str, k: int) -> None:
         """Validate ``noise_ar`` and ``noise_innovation`` (``f``: the channel's entry name)."""
@@ -255,6 +260,10 @@ class ProtocolObservations:
                 raise SchemaError(f"ProtocolObservations[{self.name}].channels[{k!r}]",
                                   "must be a Channel of that name")
 
+    def __repr__(self) -> str:
+        """One line: the protocol, its kind and duration, each channel's shape and noise."""
+        return "ProtocolObservations " + display.protocol_line(self)
+
     @property
     def name(self) -> str:
         """The protocol's name."""
@@ -296,6 +305,10 @@ class Observations:
             if not isinstance(p, ProtocolObservations) or p.name != k:
                 raise SchemaError(f"Observations.protocols[{k!r}]",
                                   "must be ProtocolObservations of that name")
+
+    def __repr__(self) -> str:
+        """A few lines: the source, one per protocol (channels, shapes, noise), never the arrays."""
+        return "\n".join(display.observations_lines(self))
 
     def __iter__(self) -> Iterator[ProtocolObservations]:
         return iter(self.protocols.values())
@@ -400,6 +413,10 @@ class ChannelPrediction:
     d: dict[str, np.ndarray] = field(default_factory=dict)
     predicted: np.ndarray | None = None
 
+    def __repr__(self) -> str:
+        """One line: the shape, the entries predicted, the parameters with derivatives."""
+        return display.channel_prediction_line(self)
+
     def mask(self, channel: Channel) -> np.ndarray:
         """Entries that are observed (valid), predicted, and not a measured reference frame."""
         return channel.fit_mask(self.predicted)
@@ -421,6 +438,10 @@ class Prediction:
     methods: dict[str, str] = field(default_factory=dict)
     inputs: dict[str, str] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """A few lines: per protocol the channels predicted and their shapes (never the arrays)."""
+        return "\n".join(display.prediction_lines(self))
 
     def items(self) -> Iterator[tuple[str, str, ChannelPrediction]]:
         """``(protocol, channel, prediction)`` in order."""

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from skinkit.errors import SchemaError
+from skinkit.schemas import display, display_gap
 from skinkit.schemas._fields import as_array, as_float
 from skinkit.schemas.parameters import ParameterSet
 
@@ -80,6 +81,21 @@ class FitResult:
         if self.correlation is not None:
             n = len(self.parameters.free_names)
             self.correlation = as_array(self.correlation, "FitResult.correlation", (n, n), "1", {})
+
+    def __repr__(self) -> str:
+        """A few lines: the model, convergence, each free parameter's value ± se [unit], the
+        objective and the counts (never the arrays; :meth:`to_dict` has everything)."""
+        return "\n".join(display.fit_lines(self))
+
+    def _repr_html_(self) -> str:
+        """The notebook view: a table of the parameters."""
+        return display.fit_html(self)
+
+    def to_dataframe(self) -> Any:
+        """The parameters as a pandas DataFrame, one row each (fixed ones included), columns
+        ``parameter``, ``value`` [SI], ``se`` [SI], ``unit``, ``free``, ``lower``, ``upper`` [SI],
+        ``identifiable``. Needs pandas (``pip install skinkit[table]``)."""
+        return display.fit_frame(self)
 
     def to_dict(self) -> dict[str, Any]:
         """The fit result as a JSON-ready dict."""
@@ -294,6 +310,25 @@ class GapReport:
     def significant(self) -> bool:
         """Whether the calibrated model's residual is above the noise (step 1)."""
         return bool(self.gap.get("significant", False))
+
+    def __repr__(self) -> str:
+        """A few lines: the calibration, where the gap is, the effects named and the best
+        candidates (never the arrays; :meth:`to_dict` has everything)."""
+        return "\n".join(display_gap.gap_lines(self))
+
+    def _repr_html_(self) -> str:
+        """The notebook view: a table of the candidates, the verdict in words below."""
+        return display_gap.gap_html(self)
+
+    def to_dataframe(self, table: str = "candidates") -> Any:
+        """A pandas DataFrame of the ``"candidates"`` (one row per candidate effect, ranked by
+        its score test: ``effect``, ``named``, ``role``, ``score``, ``dof``, ``p_value``,
+        ``significant``, ``refitted``, ``delta_aic``, ``shrinkage``, ``parameters``) or of the
+        residual's ``"cells"`` (one row per protocol, channel, phase, frequency band, ...:
+        ``axis``, ``label``, ``share`` of the excess, ``chi2_per_dof``, ``p_value``,
+        ``significant``, ``chi2``, ``dof``, ``n`` samples, ``chi2_per_dof_after``). Needs pandas
+        (``pip install skinkit[table]``)."""
+        return display_gap.gap_frame(self, table)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (``skinkit gap diagnose --json``): the pinned keys of :data:`GAP_KEYS`,

@@ -7,8 +7,10 @@ blocks, so it sits on the engines, and no engine imports it) -> the applications
 report, bench) -> the command line. A module may import from its own ring or below, never above;
 ``click`` only in the command line. Every import counts — at module level, inside functions,
 under ``TYPE_CHECKING`` — except that a module's import of its own package's ``__init__`` (which
-Python runs first anyway) is not an edge. A cycle between modules is refused whatever the rings;
-for cycles, imports under ``TYPE_CHECKING`` (never executed) are left out.
+Python runs first anyway) is not an edge, and the few upward imports of :data:`LAZY_EDGES`,
+each allowed only inside a function (run on first use, never on import). A cycle between modules
+is refused whatever the rings; for cycles, imports under ``TYPE_CHECKING`` (never executed) are
+left out.
 """
 
 from __future__ import annotations
@@ -28,14 +30,18 @@ RINGS: dict[str, int] = {
     "export": 1,
     # the plugin surface
     "plugin": 2,
-    # applications
-    "pipelines": 3, "report": 3, "bench": 3,
+    # applications (``api``: the one-call Python API, skinkit.fit and skinkit.diagnose)
+    "pipelines": 3, "report": 3, "bench": 3, "api": 3,
     # the command line
     "cli": 4, "__main__": 4,
 }
 #: modules placed apart from their package's ring: the command kit hands click types to command
 #: authors, so it stands with the command line
 MODULE_RINGS: dict[str, int] = {"skinkit.plugin.commands": 4}
+#: upward imports allowed inside a function only: the top-level package's ``__getattr__`` hands
+#: out ``skinkit.fit`` and ``skinkit.diagnose`` from the application-level API on first use, so
+#: ``import skinkit`` loads no engine
+LAZY_EDGES: frozenset[tuple[str, str]] = frozenset({("skinkit", "skinkit.api")})
 RING_NAMES = {0: "contract", 1: "engines", 2: "plugin surface", 3: "applications", 4: "command line"}
 #: third-party packages allowed only from a ring and up
 THIRD_PARTY_FLOOR = {"click": 4}
@@ -49,6 +55,7 @@ class Import:
     target: str
     line: int
     type_only: bool
+    in_function: bool = False
 
 
 def module_sources(root: Path) -> dict[str, str]:
@@ -75,11 +82,20 @@ def _type_checking_lines(tree: ast.AST) -> set[int]:
     return lines
 
 
+def _function_lines(tree: ast.AST) -> set[int]:
+    lines: set[int] = set()
+    for n in ast.walk(tree):
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            lines.update(range(n.lineno, (n.end_lineno or n.lineno) + 1))
+    return lines
+
+
 def imports(module: str, source: str, sources: Mapping[str, str]) -> list[Import]:
     """Every import in ``source`` (module ``module``), resolved to a module of ``sources`` where it
     is one (``from pkg import sub`` -> ``pkg.sub``) or kept as written (third-party)."""
     tree = ast.parse(source)
     typed = _type_checking_lines(tree)
+    in_function = _function_lines(tree)
     package = module if _is_package(module, sources) else module.rpartition(".")[0]
     out = []
     for n in ast.walk(tree):
@@ -98,7 +114,7 @@ def imports(module: str, source: str, sources: Mapping[str, str]) -> list[Import
         for t in targets:
             while t and t not in sources and t.startswith("skinkit."):
                 t = t.rpartition(".")[0]
-            out.append(Import(module, t, n.lineno, n.lineno in typed))
+            out.append(Import(module, t, n.lineno, n.lineno in typed, n.lineno in in_function))
     return out
 
 
@@ -128,7 +144,8 @@ def violations(sources: Mapping[str, str]) -> list[str]:
             if m.startswith(imp.target + ".") and imp.target in sources:
                 continue  # its own package's __init__
             r = ring_of(imp.target)
-            if r is not None and r > own:
+            lazy = imp.in_function and (m, imp.target) in LAZY_EDGES
+            if r is not None and r > own and not lazy:
                 what = RING_NAMES.get(r, f"ring {r}") if imp.target.startswith("skinkit") else imp.target
                 out.append(f"{m}:{imp.line} imports {imp.target} ({what}) from the "
                            f"{RING_NAMES[own]} ring")

@@ -46,3 +46,12 @@ def test_a_type_only_import_is_not_a_cycle_but_still_may_not_go_up():
                                 "    from skinkit.fem.a import g\n    from skinkit.cli import h\n"}
     found = rings.violations(sources)
     assert found == ["skinkit.fem.b:4 imports skinkit.cli (command line) from the engines ring"]
+
+
+def test_the_top_level_package_reaches_the_api_lazily_only():
+    sources = rings.module_sources(PACKAGE)
+    assert not [v for v in rings.violations(sources) if v.startswith("skinkit:")]
+    # the same import at module level loads the engines on `import skinkit`: refused
+    sources["skinkit"] = "from skinkit.api import fit\n" + sources["skinkit"]
+    found = rings.violations(sources)
+    assert any(v.startswith("skinkit:1 imports skinkit.api (applications)") for v in found), found
