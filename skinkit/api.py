@@ -272,7 +272,8 @@ def diagnose(model: ModelLike, session: SessionLike, *, effects: Names = None, h
     elif isinstance(spec, Mapping):
         name = str(dict(spec.get("model", {}) or {}).get("name", "the model"))
     else:
-        name = Path(spec).stem
+        from skinkit.forward import read_description
+        name = str(dict(read_description(spec).get("model", {}) or {}).get("name", Path(spec).stem))
     where = obs.source if isinstance(obs, Observations) else os.fspath(obs)
     say.stage(f"diagnosing {name} on {where or 'the session'}")
     t0 = time.perf_counter()
