@@ -8,7 +8,7 @@ BIN    := $(VENV)/bin
 RUN_STAMP  := $(VENV)/.installed-run
 TEST_STAMP := $(VENV)/.installed-test
 RUN_REQS   := -e ".[fast]" -e ./plugins -e ./hardware
-TEST_REQS  := -e ".[fast,test,dev,bench,cluster]" -e ./plugins -e ./hardware
+TEST_REQS  := -e ".[fast,test,dev,bench,cluster,table]" -e ./plugins -e ./hardware
 # uv (from PyPI) resolves and installs several times faster than pip; pip when uv cannot be had
 INSTALL = if [ -x $(BIN)/uv ]; then $(BIN)/uv pip install --python $(BIN)/python $(1); \
           else $(BIN)/python -m pip install --progress-bar on $(1); fi
