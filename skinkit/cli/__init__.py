@@ -24,6 +24,11 @@ Every :class:`skinkit.errors.SkinkitError` and every usage error ends the comman
 one-line message on stderr and exit status 2; any other exception is a bug and ends it with
 one line and exit status 3 (``--debug`` or ``SKINKIT_DEBUG=1`` shows the traceback); Ctrl-C
 ends it with status 130.
+
+Progress goes to stderr (:mod:`skinkit.cli._progress`): a bar with the ETA on a terminal, plain
+lines at least every 10 s in a log. Every group and command the registry hands out takes
+``-q/--quiet`` and ``-v/--verbose``, so both ``skinkit --quiet CMD`` and ``skinkit CMD --quiet``
+work (the registry adds them once: :class:`skinkit.cli.registry.LazyGroup`).
 """
 
 from __future__ import annotations
@@ -139,6 +144,9 @@ def cli(debug: bool) -> None:
 
     Exit status: 0 success, 2 bad input (one line on stderr naming what is wrong),
     3 internal error (a bug: please report it), 130 interrupted.
+
+    Progress goes to stderr: a bar on a terminal, a plain line at least every 10 s in a log.
+    -q/--quiet and -v/--verbose also work after any command's name.
     """
 
 

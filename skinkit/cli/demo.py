@@ -55,8 +55,7 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, shared_mesh: bool,
     four rendered cameras, stochastic records) into one experiment file, identify the lumped
     models, calibrate-profile-track, identify the thesis's finite-element model, diagnose the
     sim-to-real gap, write the report; only then compare every step with the truth."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
+    from skinkit.cli._progress import progress
     from skinkit.errors import SkinkitError
     from skinkit.pipelines.chain import missing_plugins, run_chain
 
@@ -66,17 +65,10 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, shared_mesh: bool,
                            "(install skinkit-plugins: `make demo` does)")
     if out_dir.exists() and not out_dir.is_dir():
         raise SkinkitError(f"--out {out_dir}: exists and is not a folder")
-    with Progress(TextColumn("{task.description:<44}"), BarColumn(), TimeElapsedColumn(),
-                  disable=as_json) as bar:
-        tasks: dict[str, int] = {}
-
-        def progress(step: str, fraction: float) -> None:
-            key = step.split(":")[0] if step.startswith("gap:") else step
-            if key not in tasks:
-                tasks[key] = bar.add_task(step[:44], total=1.0)
-            bar.update(tasks[key], completed=fraction, description=step[:44])
-
-        summary = run_chain(out_dir, seed=seed, quick=quick, workers=workers, progress=progress,
+    # on stderr, also with --json: stdout carries only the summary
+    with progress() as bar:
+        summary = run_chain(out_dir, seed=seed, quick=quick, workers=workers,
+                            progress=lambda step, f: _advance(bar, step, f),
                             mesh="shared" if shared_mesh else "own")
     lines = _summary_lines(summary, out_dir)
     write_page(page, "The main job on the virtual lab", summary, lines)
@@ -85,6 +77,15 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, shared_mesh: bool,
         return
     for line in lines:
         click.echo(line)
+
+
+def _advance(bar: Any, step: str, fraction: float) -> None:
+    """One progress report of the chain: the gap's running messages are notes of one stage,
+    of unknown fraction until done."""
+    if step.startswith("gap:"):
+        bar.update("gap", 1.0 if fraction >= 1.0 else None, step[4:].strip())
+        return
+    bar.update(step, fraction)
 
 
 def _summary_lines(summary: dict[str, Any], out_dir: Path) -> list[str]:

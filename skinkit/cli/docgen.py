@@ -40,7 +40,13 @@ def render() -> str:
             "(a file, an option, a device reply).", "",
             "Positional arguments: `EXPERIMENT` is an experiment file (HDF5) and comes first in every "
             "command that imports into or writes one; `MODEL_FILE SESSION` is a model description, "
-            "then the experiment file or CSV record it is compared with.", ""]
+            "then the experiment file or CSV record it is compared with.", "",
+            "Progress goes to stderr, never stdout (which carries the result, `--json` included): a bar "
+            "with the ETA on a terminal; in a log or CI (stderr not a terminal) a plain `progress:` line "
+            "(stage, fraction, elapsed, ETA) at least every 10 s, also through a step that reports no "
+            "fraction. Every command takes `-q/--quiet` (no progress, only results and errors) and "
+            "`-v/--verbose` (also each stage's time and sub-steps), before or after its name: "
+            "`skinkit --quiet CMD` or `skinkit CMD --quiet`.", ""]
     return "\n".join(head + _walk(cli, ctx, ["skinkit"])) + "\n"
 
 

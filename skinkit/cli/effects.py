@@ -103,6 +103,7 @@ def visibility(model_file: str, session: str | None, names: str | None, threshol
                workers: int | None, as_json: bool) -> None:
     """Each effect at its null (exact?) and typical magnitude: which protocols and channels see it."""
     from skinkit.bench.forward import trajectory_observations
+    from skinkit.cli._progress import progress
     from skinkit.errors import SkinkitError
     from skinkit.forward import load, model_kind, read_description, read_observations
     from skinkit.forward.visibility import DEFAULT_NOISE, effect_visibility
@@ -120,13 +121,17 @@ def visibility(model_file: str, session: str | None, names: str | None, threshol
             raise SkinkitError(f"{model_file}: no [session] protocols; give --session")
         obs = trajectory_observations(protos)
         noise = DEFAULT_NOISE
-        mode = str(dict(spec.get("indenter", {}) or {}).get("mode", "force"))
-        if mode == "force":
+    mode = str(dict(spec.get("indenter", {}) or {}).get("mode", "force"))
+    # progress on stderr, also with --json (stdout carries only the result)
+    with progress() as bar:
+        if not session and mode == "force":
             # the protocols' programmes give tip trajectories: the model driven by them gives the
             # tip forces that then drive it as the model file says (by the recorded force)
-            obs = _forces_from_trajectories(spec, obs, workers)
-    res = effect_visibility(spec, obs, wanted, noise, threshold, load=lambda s: load(s, workers=workers),
-                            progress=None if as_json else (lambda n: click.echo(f"  {n} ...", err=True)))
+            with bar.feeding("tip forces of the trajectories"):
+                obs = _forces_from_trajectories(spec, obs, workers)
+        with bar.feeding("effect visibility"):
+            res = effect_visibility(spec, obs, wanted, noise, threshold,
+                                    load=lambda s: load(s, workers=workers))
     if wanted and not any(e["applicable"] for e in res["effects"].values()):
         # e.g. an effect the model's own law already holds: the model refuses it when loaded
         first = next(iter(res["effects"].items()))

@@ -33,9 +33,7 @@ def lab() -> None:
 def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | None, noise_scale: str,
             images: bool, shared_mesh: bool) -> None:
     """Run the TRUTH model file (effects included) through the protocols and record it as a session."""
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
+    from skinkit.cli._progress import progress
     from skinkit.forward import read_description
     from skinkit.lab.session import check_noise_scale, check_options, make_session
 
@@ -46,17 +44,9 @@ def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | No
     check_out_file(out, "--out")
     check_out_file(truth_out, "--truth-out")
     read_description(truth)  # a missing or malformed model file: one line, before any progress bar
-    with Progress(TextColumn("{task.description:<16}"), BarColumn(), TimeElapsedColumn(),
-                  console=Console(stderr=True), transient=True) as bar:
-        tasks: dict[str, int] = {}
-
-        def progress(stage: str, fraction: float) -> None:
-            if stage not in tasks:
-                tasks[stage] = bar.add_task(stage, total=1.0)
-            bar.update(tasks[stage], completed=fraction)
-
+    with progress(transient=True, width=24) as bar:
         doc = make_session(truth, out, truth_out, seed, protocols=protocols, noise_scale=scale,
-                           images=images, progress=progress, mesh="shared" if shared_mesh else "own")
+                           images=images, progress=bar, mesh="shared" if shared_mesh else "own")
     names = ", ".join(f"{p['name']} ({p['samples']} samples, {p['frames']} frames)" for p in doc["protocols"])
     click.echo(f"session {out}: {names}")
     click.echo(f"truth {truth_out}: {doc['kind']} model, {len(doc['parameters'])} parameters, "

@@ -47,6 +47,7 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
             sensitivities: bool, workers: int | None, scheduler: str | None, axis: str | None,
             out_file: str | None, vtu_dir: str | None, overwrite: bool, as_json: bool) -> None:
     """Predict SESSION (experiment file or CSV record) with MODEL_FILE; report the residuals."""
+    from skinkit.cli._progress import progress
     from skinkit.fem.model import quantity
     from skinkit.forward import load
     from skinkit.forward.residuals import summarise
@@ -79,7 +80,8 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
                                     f"--set {name}")
         params = params.with_values(values) if values else params
         extra = {"fields_dir": _check_vtu(model, obs, vtu_dir, overwrite)} if vtu_dir else {}
-        pred = model.predict(params, obs, sensitivities=sensitivities, **extra)
+        with progress() as bar, bar.feeding("predict"):   # on stderr, also with --json
+            pred = model.predict(params, obs, sensitivities=sensitivities, **extra)
         summary = summarise(pred, obs)
         if not summary["samples"]:
             # a residual over no sample (chi2 nan) would read as a prediction that ran

@@ -7,6 +7,10 @@ level, ``skinkit.commands.<group>`` for a group (``skinkit.commands.bench``,
 command to any group. A command's module is imported only when the command is looked up, so
 ``skinkit --help`` and ``skinkit plugins`` import no engine. An extension that fails to import
 shows as a one-line error when it is run and does not stop the other commands.
+
+Every group and every command it hands out takes ``-q/--quiet`` and ``-v/--verbose``
+(:func:`skinkit.cli._progress.add_output_options`): the flags are added here, once, so that
+``skinkit --quiet CMD`` and ``skinkit CMD --quiet`` both work for any command, an extension's too.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 import click
+
+from skinkit.cli._progress import add_output_options
 
 #: entry-point group through which other distributions add top-level commands; a group ``G``
 #: takes sub-commands from ``skinkit.commands.G``
@@ -93,6 +99,13 @@ class LazyGroup(click.Group):
         self.table: dict[str, str] = dict(table or {})
         self.entry_group = entry_group if entry_group is not None else entry_point_group(self.name or "")
         self.aliases: dict[str, str] = dict(aliases or {})
+        add_output_options(self)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        """The command ``name``, importing its module now, with ``--quiet``/``--verbose``; None
+        when there is none."""
+        cmd = self._get_command(ctx, name)
+        return add_output_options(cmd) if cmd is not None else None
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         """Every visible command name, sorted (deprecated aliases are left out)."""
@@ -100,8 +113,7 @@ class LazyGroup(click.Group):
         names |= set(extension_entry_points(self.entry_group))
         return sorted(names)
 
-    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        """The command ``name``, importing its module now; None when there is none."""
+    def _get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         cmd = super().get_command(ctx, name)
         if cmd is not None:
             return cmd

@@ -16,6 +16,10 @@ effect's name; anything else (geometry) by central differences of whole solves.
 Protocols are independent solves: they run in worker processes (``workers``, default one
 per core) or on a Dask cluster (``scheduler``); every solve uses one thread, so the numbers
 do not depend on where or how many solves run at once.
+
+Progress: a prediction reports the fraction of its solver steps done
+(:func:`skinkit.forward.stages.report`), step by step from the worker processes too, so a caller
+showing progress sees a long solve advance.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from skinkit.errors import ForwardError, SchemaError
 from skinkit.forward import drive as drive_mod
 from skinkit.forward import stages
 from skinkit.forward.effects import AppliedEffect, apply_all
+from skinkit.forward.solve_progress import SolveProgress, gather, init_worker, step_reporter
 from skinkit.interfaces import ForwardModel
 from skinkit.schemas import ChannelPrediction, Observations, Parameter, ParameterSet, Prediction
 
@@ -71,9 +76,10 @@ def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np
     return f
 
 
-def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
+def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None = None) -> dict[str, Any]:
     """Solve one protocol; the outputs at ``[0, *job.times]`` (the first row is the unloaded
-    state) with their derivatives. Runs with one thread (see the module docstring)."""
+    state) with their derivatives. Runs with one thread (see the module docstring).
+    ``on_fraction(f)``: told the fraction of the output steps solved after each one."""
     from threadpoolctl import threadpool_limits
 
     from skinkit.fem import linsolve
@@ -108,7 +114,8 @@ def solve_protocol(job: ProtocolJob) -> dict[str, Any]:
         series = _field_series(job, model)
         sol = solver.run(job.times, viscous_time=model.problem.viscous, sensitivities=job.sens or False,
                          extrapolate=job.options.get("extrapolate", True),
-                         on_step=None if series is None else series[1])
+                         on_step=None if series is None else series[1],
+                         progress=step_reporter(job.name, job.times, on_fraction))
         n = len(job.times) + 1
         P = 0 if job.embed is None else len(job.embed[0])
         npar = len(job.sens)
@@ -243,6 +250,7 @@ class FEForwardModel(ForwardModel):
         self.workers = workers
         self.scheduler = scheduler
         self._pool = None
+        self._steps: Any = None    # the workers' step reports (a queue), made with the pool
         self.last_info: dict[str, Any] = {}
         eff = apply_all(self.base, effects)
         from skinkit.fem.model import build_model
@@ -364,11 +372,14 @@ class FEForwardModel(ForwardModel):
         fe_names = sorted({v[1] for v in cls.values() if v[0] == "fe"})
         inst_names = sorted({v[1] for v in cls.values() if v[0] == "instrument"})
         t0 = time.perf_counter()
-        results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names, fields_dir)
-        pred = self._assemble(spec, observations, results, jobs_meta, cls, inst_names)
         fd = [nm for nm, (m, _) in cls.items() if m == "fd"]
+        share = 1.0 / (1 + 2 * len(fd))   # of the whole solves reported as progress
+        with stages.portion(0.0, share):
+            results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names, fields_dir)
+        pred = self._assemble(spec, observations, results, jobs_meta, cls, inst_names)
         if fd:
-            self._central_differences(params, observations, pred, fd)
+            with stages.portion(share, 1.0):
+                self._central_differences(params, observations, pred, fd)
         for nm, (m, _) in cls.items():
             pred.methods[nm] = {"fe": "analytic", "instrument": "analytic", "fd": "central-difference"}[m]
         stages.count(len(results), len(names), pred.methods)
@@ -541,16 +552,25 @@ class FEForwardModel(ForwardModel):
             return self._run_dask(jobs)
         workers = self.workers if self.workers is not None else (os.cpu_count() or 1)
         workers = max(1, min(workers, len(jobs)))
+        tracker = SolveProgress(jobs)
         if workers == 1:
-            return {j.name: solve_protocol(j) for j in jobs}
+            return {j.name: solve_protocol(j, lambda f, n=j.name: tracker(n, f)) for j in jobs}
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
         if self._pool is None or self._pool_size != workers:
             self.close()
-            self._pool = ProcessPoolExecutor(max_workers=workers,
-                                             mp_context=multiprocessing.get_context("spawn"))
+            ctx = multiprocessing.get_context("spawn")
+            self._steps = ctx.SimpleQueue()
+            self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                                             initializer=init_worker, initargs=(self._steps,))
             self._pool_size = workers
-        return {r["name"]: r for r in self._pool.map(solve_protocol, jobs)}
+        futures = [self._pool.submit(solve_protocol, j) for j in jobs]
+        try:
+            return gather(futures, self._steps, tracker)
+        except BaseException:
+            # Ctrl-C or a failed solve: stop the other solves now rather than wait for them
+            self.close(now=True)
+            raise
 
     def _run_dask(self, jobs: list[ProtocolJob]) -> dict[str, dict[str, Any]]:
         try:
@@ -579,12 +599,18 @@ class FEForwardModel(ForwardModel):
         return FEForwardModel(refined_spec(self.base, factor), self.effects, workers=self.workers,
                               scheduler=self.scheduler)
 
-    def close(self) -> None:
+    def close(self, now: bool = False) -> None:
         """Shut the worker processes down (they are kept between predictions otherwise);
-        idempotent."""
+        idempotent. ``now``: end running solves too (after an interrupt) instead of waiting."""
         if self._pool is not None:
+            if now:
+                for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+                    proc.terminate()
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+        if getattr(self, "_steps", None) is not None:
+            self._steps.close()
+            self._steps = None
 
     def __del__(self) -> None:  # pragma: no cover - interpreter shutdown order varies
         try:
@@ -689,14 +715,19 @@ class FEForwardModel(ForwardModel):
         """Derivatives of the parameters no analytic route covers, by differences of whole
         solves: central with a step of 1e-5 of the parameter's scale, or, at a bound, the
         second-order one-sided formula (−3 f₀ + 4 f₁ − f₂)/(2h) into the admissible range."""
-        for nm in names:
+        def part(i: int, j: int) -> Any:   # the j-th of parameter i's two solves, as progress
+            return stages.portion((2 * i + j) / (2 * len(names)), (2 * i + j + 1) / (2 * len(names)))
+
+        for i, nm in enumerate(names):
             p = params.param(nm)
             scale = abs(p.value) if p.value != 0 else (
                 0.01 * (p.upper - p.lower) if math.isfinite(p.upper - p.lower) else 1.0)
             h = 1e-5 * max(scale, 1e-12)
             if p.value - h >= p.lower and p.value + h <= p.upper:
-                up = self.predict(params.with_values({nm: p.value + h}), observations)
-                dn = self.predict(params.with_values({nm: p.value - h}), observations)
+                with part(i, 0):
+                    up = self.predict(params.with_values({nm: p.value + h}), observations)
+                with part(i, 1):
+                    dn = self.predict(params.with_values({nm: p.value - h}), observations)
                 for proto, chans in pred.protocols.items():
                     for cname, cp in chans.items():
                         diff = up.protocols[proto][cname].values - dn.protocols[proto][cname].values
@@ -705,8 +736,10 @@ class FEForwardModel(ForwardModel):
             sgn = 1.0 if p.value - h < p.lower else -1.0
             if not (p.lower <= p.value + 2 * sgn * h <= p.upper):
                 raise ForwardError(nm, "cannot be differentiated: its bounds leave no room for a step")
-            f1 = self.predict(params.with_values({nm: p.value + sgn * h}), observations)
-            f2 = self.predict(params.with_values({nm: p.value + 2 * sgn * h}), observations)
+            with part(i, 0):
+                f1 = self.predict(params.with_values({nm: p.value + sgn * h}), observations)
+            with part(i, 1):
+                f2 = self.predict(params.with_values({nm: p.value + 2 * sgn * h}), observations)
             for proto, chans in pred.protocols.items():
                 for cname, cp in chans.items():
                     a, b = f1.protocols[proto][cname].values, f2.protocols[proto][cname].values

@@ -10,12 +10,17 @@ out (the outer stage is charged the rest).
 A *forward equivalent* is one whole-session prediction (every protocol of the observations
 solved once, with whatever sensitivities were asked for; a central-difference derivative adds
 two more).
+
+Progress: a caller that shows progress opens :func:`reporting` with a sink; code deep inside
+(the finite-element model's protocol solves, say) calls :func:`report` with the fraction of its
+own work done, and :func:`portion` maps a part's 0..1 onto its share of the whole. Outside
+:func:`reporting` a report is a no-op, as a stage is outside a recording.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field
@@ -124,4 +129,74 @@ def count(protocols: int, sensitivities: int, methods: Mapping[str, str] | None 
             clock.methods[k] = str(v)
 
 
-__all__ = ["StageClock", "StageRecord", "count", "recording", "stage"]
+#: where reported progress goes: ``sink(fraction in [0, 1] or None when unknown, note)``
+Sink = Callable[[float | None, str], None]
+_SINK: ContextVar[Sink | None] = ContextVar("skinkit_progress_sink", default=None)
+
+
+@contextmanager
+def reporting(sink: Sink | None) -> Iterator[None]:
+    """Send what :func:`report` is told inside the ``with`` block to ``sink`` (None: nowhere)."""
+    token = _SINK.set(sink)
+    try:
+        yield
+    finally:
+        _SINK.reset(token)
+
+
+@contextmanager
+def portion(lo: float, hi: float, note: str = "") -> Iterator[None]:
+    """Inside the block a reported fraction ``f`` reaches the outer sink as ``lo + f (hi - lo)``:
+    one part of a longer step reports its own 0..1 and the whole still advances monotonically.
+    ``note``: what the part is, put before the notes reported inside."""
+    outer = _SINK.get()
+    if outer is None:
+        yield
+        return
+
+    def inner(fraction: float | None, text: str) -> None:
+        outer(None if fraction is None else lo + min(max(fraction, 0.0), 1.0) * (hi - lo),
+              f"{note}: {text}" if note and text else (note or text))
+
+    with reporting(inner):
+        yield
+
+
+@contextmanager
+def feeding(progress: Callable[..., None] | None, name: str, lo: float = 0.0, hi: float = 1.0
+            ) -> Iterator[None]:
+    """Route what :func:`report` is told inside the block into a pipeline's
+    ``progress(stage, fraction)`` callback as stage ``name``, over ``[lo, hi]`` of it (a callback
+    with an ``update(stage, fraction, note)`` method, the command line's, gets the notes too).
+    None: reports stay with the caller's sink, if any."""
+    if progress is None:
+        yield
+        return
+    update = getattr(progress, "update", None)
+
+    def sink(fraction: float | None, note: str) -> None:
+        f = None if fraction is None else lo + min(max(fraction, 0.0), 1.0) * (hi - lo)
+        if callable(update):
+            update(name, f, note)
+        elif f is not None:
+            progress(name, f)
+
+    with reporting(sink):
+        yield
+
+
+def report(fraction: float | None, note: str = "") -> None:
+    """Report the fraction of the current step done (None: unknown, the note alone) and a
+    short note of what runs now (e.g. the protocol being solved)."""
+    sink = _SINK.get()
+    if sink is not None:
+        sink(fraction, note)
+
+
+def reporting_active() -> bool:
+    """Whether anyone listens to :func:`report` (lets a caller skip work done only to report)."""
+    return _SINK.get() is not None
+
+
+__all__ = ["Sink", "StageClock", "StageRecord", "count", "feeding", "portion", "recording", "report",
+           "reporting", "reporting_active", "stage"]

@@ -5,6 +5,9 @@ For a model and a protocol set, every installed effect that applies to the model
 — and (2) at its typical magnitude; the change of every channel, in units of that channel's
 noise (one sample's standard deviation), says where the effect shows. An effect that moves
 no channel by more than ``threshold`` noise levels is one the protocol set cannot see.
+
+Progress: each prediction is an equal share of the whole
+(:func:`skinkit.forward.stages.report`), its own solves advancing within its share.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 
 from skinkit import registry
 from skinkit.errors import EffectError, ForwardError
+from skinkit.forward import stages
 from skinkit.schemas import Observations
 
 #: per-sample noise [SI] used when no session gives it: the robot's tip position
@@ -72,10 +76,19 @@ def effect_visibility(spec: Mapping[str, Any], observations: Observations,
     load = load or default_load
     base_spec = copy.deepcopy(dict(spec))
     base_spec.pop("effects", None)
-    with load(base_spec) as base:
-        ref = base.predict(base.parameters(), observations)
     kind = model_kind(base_spec)
     names = list(effects) if effects is not None else applicable_effects(kind)
+    runs = [0, 1 + 2 * len(names)]   # predictions made, and at most to make (for the progress)
+
+    def predicted(model: Any, note: str) -> Any:
+        stages.report(runs[0] / runs[1], note)
+        with stages.portion(runs[0] / runs[1], (runs[0] + 1) / runs[1], note):
+            pred = model.predict(model.parameters(), observations)
+        runs[0] += 1
+        return pred
+
+    with load(base_spec) as base:
+        ref = predicted(base, "the model without effects")
     out: dict[str, Any] = {"threshold": threshold, "protocols": observations.names, "effects": {}}
     for name in names:
         if progress is not None:
@@ -85,20 +98,22 @@ def effect_visibility(spec: Mapping[str, Any], observations: Observations,
         with_null["effects"] = [{"name": name}]
         try:
             with load(with_null) as m0:
-                null_change = _rel_change(m0.predict(m0.parameters(), observations), ref)
+                null_change = _rel_change(predicted(m0, f"{name} at its null"), ref)
         except (EffectError, ForwardError) as exc:   # e.g. `fibres` on a skin with a fibre law already
             out["effects"][name] = {"applicable": False, "reason": str(exc), "visible": False}
+            runs[1] -= 2     # neither of its predictions is made
             continue
         typical = {p.name: p.value for p in plugin.parameters()}
         with_typ = copy.deepcopy(base_spec)
         with_typ["effects"] = [{"name": name, **typical}]
         with load(with_typ) as m1:
-            change = _max_change(m1.predict(m1.parameters(), observations), ref, observations, noise)
+            change = _max_change(predicted(m1, f"{name} at its typical magnitude"), ref, observations, noise)
         seen = {p: [c for c, v in chans.items() if v > threshold] for p, chans in change.items()}
         out["effects"][name] = {"applicable": True, "typical": typical, "null_relative_change": null_change,
                                 "change_in_noise": change,
                                 "seen_by": {p: cs for p, cs in seen.items() if cs},
                                 "visible": any(seen.values())}
+    stages.report(1.0, "done")
     out["invisible"] = [n for n, e in out["effects"].items() if e["applicable"] and not e["visible"]]
     out["not_applicable"] = {n: e["reason"] for n, e in out["effects"].items() if not e["applicable"]}
     return out

@@ -319,10 +319,13 @@ def _predict_group(model: Any, obs: Observations, drive: dict[str, str]) -> dict
 def run_truth(truth: Any, planned: Sequence[PlannedProtocol], sensors: SensorModel,
               surface: TopSurface, workers: int | None = None,
               progress: Progress | None = None, points: np.ndarray | None = None,
-              ) -> tuple[dict[str, dict[str, np.ndarray]], Any]:
+              stage: str = "truth model") -> tuple[dict[str, dict[str, np.ndarray]], Any]:
     """The noiseless channels ``{protocol: {channel: values (skin frame)}}`` of ``truth`` (a
     model description, or an already built forward model) and a model for its parameters.
-    ``points`` ``(P, 3)`` [m]: the material points to follow (default: the tracked grid)."""
+    ``points`` ``(P, 3)`` [m]: the material points to follow (default: the tracked grid).
+    ``progress(stage, fraction)``: advanced by the solves as they go."""
+    from skinkit.forward.stages import feeding
+
     is_model = hasattr(truth, "predict")
     kind = str(getattr(truth, "kind", "fe")) if is_model else _kind(truth)
     reference = surface.track_reference() if (kind == "fe" and surface.has_mesh) else None
@@ -339,7 +342,7 @@ def run_truth(truth: Any, planned: Sequence[PlannedProtocol], sensors: SensorMod
     first = None
     for i, (key, group) in enumerate(groups.items()):
         if progress:
-            progress("truth model", i / len(groups))
+            progress(stage, i / len(groups))
         if is_model:
             model = truth
         else:
@@ -349,7 +352,8 @@ def run_truth(truth: Any, planned: Sequence[PlannedProtocol], sensors: SensorMod
             model = _load(spec, workers)
         try:
             obs = skeleton(group, sensors, reference, profile)
-            results.update(_predict_group(model, obs, {p.protocol.name: p.drive for p in group}))
+            with feeding(progress, stage, i / len(groups), (i + 1) / len(groups)):
+                results.update(_predict_group(model, obs, {p.protocol.name: p.drive for p in group}))
         except BaseException:
             for m in {id(x): x for x in (model, first) if x is not None and x is not truth}.values():
                 m.close()
@@ -359,7 +363,7 @@ def run_truth(truth: Any, planned: Sequence[PlannedProtocol], sensors: SensorMod
         elif model is not truth:
             model.close()
     if progress:
-        progress("truth model", 1.0)
+        progress(stage, 1.0)
     return results, first
 
 
@@ -510,7 +514,8 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
         mesh_doc = describe_meshes(solved, spec, mesh, mesh_factor)
     if own:   # the same truth on the model's mesh: the truth's own error, bounded
         try:
-            coarse, other = run_truth(spec, planned, sensors, surface, workers, None, points)
+            coarse, other = run_truth(spec, planned, sensors, surface, workers, progress, points,
+                                      stage="truth on the model's mesh")
             other.close()
         except BaseException:
             model.close()

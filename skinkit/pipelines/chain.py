@@ -100,7 +100,7 @@ def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress 
     spec = forearm.truth_spec(quick)
     grid, points = followed_grid(forearm.disc_radius_m(spec), lambda xy: surface_height(xy, True))
     vs = simulate(spec, seed, points=points, workers=workers, mesh=mesh,
-                  progress=lambda s, f: progress("acquire: truth model", f))
+                  progress=lambda s, f: progress(f"acquire: {s}", f))
     write_records(vs, session, operator="skinkit demo")
     lumped = LumpedTruth()
     records = [stochastic_session(lumped, wiener=False, seed=seed),
