@@ -32,6 +32,7 @@ from skinkit.bench.gap_cases import (
     run_case,
 )
 from skinkit.bench.gap_score import assess, clopper_pearson, score
+from skinkit.errors import SkinkitError
 
 
 # -- planning and running -----------------------------------------------------------------------
@@ -82,8 +83,13 @@ class _Pool:
         if scheduler:
             from dask.distributed import Client
 
+            from skinkit.forward.scheduler import check_scheduler
+
             try:    # a caller that skips the command line's check still gets a prompt, named refusal
+                check_scheduler(scheduler, "scheduler")
                 self.client = Client(scheduler, timeout="10s", set_as_default=False)
+            except SkinkitError as exc:
+                raise BenchmarkError(str(exc)) from None
             except (OSError, TimeoutError, ValueError) as exc:
                 raise BenchmarkError(f"scheduler {scheduler!r}: cannot reach the Dask scheduler "
                                      f"({exc})") from None

@@ -5,46 +5,11 @@ command and whether or not its model would have used the cluster."""
 
 from __future__ import annotations
 
-import socket
 from typing import Any
 
 import click
 
-from skinkit.errors import SkinkitError
-
-#: seconds to wait for the scheduler's port to accept a connection
-CONNECT_TIMEOUT_S = 3.0
-
-
-def check_scheduler(address: str, option: str = "--scheduler", *,
-                    timeout_s: float = CONNECT_TIMEOUT_S) -> str:
-    """``address`` (``tcp://host:port``, ``host:port``, or another network scheme Dask knows)
-    when it parses and its host accepts a connection on its port within ``timeout_s`` [s].
-    Raises a one-line :class:`SkinkitError` naming ``option`` and the address otherwise."""
-    where = f"{option} {address!r}"
-    if not address.strip():
-        raise SkinkitError(f"{where}: expected a Dask scheduler address (e.g. tcp://127.0.0.1:8786)")
-    try:
-        from distributed.comm.addressing import get_address_host_port
-    except ImportError:
-        raise SkinkitError(f"{where}: needs dask.distributed (pip install 'skinkit[cluster]')") from None
-    try:
-        host, port = get_address_host_port(address.strip())
-    except (ValueError, TypeError) as exc:
-        raise SkinkitError(f"{where}: not a Dask scheduler address ({exc}); expected e.g. "
-                           "tcp://127.0.0.1:8786") from None
-    if not host or not 0 < int(port) < 65536:
-        raise SkinkitError(f"{where}: not a Dask scheduler address (no host or no port 1-65535); "
-                           "expected e.g. tcp://127.0.0.1:8786")
-    try:
-        with socket.create_connection((host, int(port)), timeout=timeout_s):
-            pass
-    except OSError as exc:
-        why = (f"no answer within {timeout_s:g} s" if isinstance(exc, TimeoutError)
-               else (exc.strerror or str(exc)))
-        raise SkinkitError(f"{where}: cannot reach the Dask scheduler at {host}:{port} ({why}); "
-                           f"start it, or leave out {option}") from None
-    return address.strip()
+from skinkit.forward.scheduler import CONNECT_TIMEOUT_S, check_scheduler
 
 
 def scheduler_callback(ctx: click.Context, param: click.Parameter, value: Any) -> str | None:
@@ -52,3 +17,6 @@ def scheduler_callback(ctx: click.Context, param: click.Parameter, value: Any) -
     if value is None:
         return None
     return check_scheduler(str(value), "--scheduler")
+
+
+__all__ = ["CONNECT_TIMEOUT_S", "check_scheduler", "scheduler_callback"]
