@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -73,20 +74,22 @@ def run_protocol(
     experiment: Any,
     *,
     channels: tuple[str, ...] = DEFAULT_CHANNELS,
-    progress: bool = False,
+    progress: bool | Callable[[float, float, int, int], None] = False,
     rate_hz: float | None = None,
 ) -> RunSummary:
     """Execute ``protocol`` through a connected, homed ``driver`` into ``experiment``.
 
     ``experiment`` is an open, writable :class:`skinkit.store.Experiment`. Returns a
     :class:`RunSummary`; re-raises the driver's :class:`SkinkitError` (after writing every
-    sample received and emergency-stopping the driver) when the run faults.
+    sample received and emergency-stopping the driver) when the run faults. ``progress``: True
+    shows a bar; a callable is told ``(seconds run, seconds of the protocol, samples, samples
+    lost)`` after each block.
     """
     summary = RunSummary(protocol.name)
     # drivers check the programme against their limits here, before any record is created
     blocks = driver.run(protocol)
     total = protocol.duration_s or 0.0
-    bar = _progress(progress)
+    bar = _progress(progress is True)
     t0 = time.monotonic()
     task = None
     if bar is not None:
@@ -112,6 +115,8 @@ def run_protocol(
                             samples=summary.samples,
                             lost=summary.lost,
                         )
+                    if callable(progress):
+                        progress(summary.duration_s, total, summary.samples, summary.lost)
             except BaseException as exc:
                 summary.fault = str(exc) or type(exc).__name__
                 try:

@@ -1,9 +1,11 @@
 """Progress of a long command, on stderr only (stdout carries the result, ``--json`` included).
 
 On a terminal a bar per stage with its fraction, elapsed time and ETA (rich); when stderr is not a
-terminal (a log file, CI) a plain line instead, written when a stage starts and then by a
-heartbeat thread at least every :data:`HEARTBEAT_S` seconds — also through a step that reports no
-fraction for minutes — ``progress: STAGE  37 %  elapsed 0:01:12  ETA 0:02:03  NOTE``.
+terminal (a log file, CI) a plain line instead, written by a heartbeat thread at least every
+:data:`HEARTBEAT_S` seconds — also through a step that reports no fraction for minutes — and, once
+the run has lasted that long, whenever a stage starts:
+``progress: STAGE  37 %  elapsed 0:01:12  ETA 0:02:03  NOTE``. A command done (or failed) within
+the first heartbeat writes none: its result or its one-line error stays alone.
 
 Every command takes ``--quiet`` (no progress: only results and errors) and ``--verbose`` (also
 each stage's time and the notes of its sub-steps) — on the root group (``skinkit --quiet CMD``)
@@ -93,10 +95,12 @@ class Progress:
     ``mode``: ``"quiet"``, ``"normal"`` or ``"verbose"`` (default: the command line's);
     ``stream``: where to write (default stderr); ``tty``: draw a bar (default: when the stream is
     a terminal); ``interval``: the heartbeat [s] of plain lines; ``transient``: a terminal's bars
-    vanish when done."""
+    vanish when done; ``stage``: the stage shown from the start (a command that only says what
+    it does, :meth:`say`)."""
 
     def __init__(self, mode: str | None = None, stream: TextIO | None = None, tty: bool | None = None,
-                 interval: float | None = None, transient: bool = False, width: int = 36) -> None:
+                 interval: float | None = None, transient: bool = False, width: int = 28,
+                 stage: str | None = None) -> None:
         self.mode = mode or verbosity()
         self.stream = stream if stream is not None else sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)()) if tty is None else tty
@@ -113,10 +117,19 @@ class Progress:
         self.note = ""
         self._stage_t0 = self.t0
         self._last_line = 0.0
+        self.lines = 0   # progress lines written to a log
         self.times: dict[str, float] = {}   # seconds per stage, for --verbose
+        self._first = stage
 
     # -- life ------------------------------------------------------------------------------
     def __enter__(self) -> Progress:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop(ok=exc[0] is None)
+
+    def start(self) -> Progress:
+        """Start showing progress (what ``with`` does); returns ``self``."""
         self.t0 = self._stage_t0 = self._last_line = time.monotonic()
         if self.mode == QUIET:
             return self
@@ -125,9 +138,12 @@ class Progress:
         else:
             self._thread = threading.Thread(target=self._beat, name="skinkit-progress", daemon=True)
             self._thread.start()
+        if self._first:
+            self.update(self._first, None)
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def stop(self, ok: bool = True) -> None:
+        """Stop showing progress (``ok``: the command succeeded, so a log says it is done)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
@@ -137,16 +153,24 @@ class Progress:
                 self._bar.stop()
             if self.mode == VERBOSE and self.times:
                 self._print("stage times: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.times.items()))
-            if self.mode != QUIET and not self.tty and self.stage is not None and exc[0] is None:
+            if self.lines and ok:
                 self._print(f"progress: done in {_clock(time.monotonic() - self.t0)}")
 
     def _start_bar(self) -> None:
         from rich import progress as rp
         from rich.console import Console
+        from rich.table import Column
 
-        self._bar = rp.Progress(rp.TextColumn(f"{{task.description:<{self.width}}}"), rp.BarColumn(),
-                                rp.TaskProgressColumn(), rp.TimeElapsedColumn(), rp.TextColumn("ETA"),
-                                rp.TimeRemainingColumn(), rp.TextColumn("{task.fields[note]}"),
+        def fixed() -> Column:   # the times keep their width; the note gives way on a narrow terminal
+            return Column(min_width=7, no_wrap=True)
+
+        # markup off: a model's or protocol's name in brackets or braces is text
+        self._bar = rp.Progress(rp.TextColumn(f"{{task.description:<{self.width}}}", markup=False),
+                                rp.BarColumn(bar_width=20), rp.TaskProgressColumn(),
+                                rp.TimeElapsedColumn(table_column=fixed()), rp.TextColumn("ETA"),
+                                rp.TimeRemainingColumn(table_column=fixed()),
+                                rp.TextColumn("{task.fields[note]}", markup=False,
+                                              table_column=Column(no_wrap=True, overflow="ellipsis")),
                                 console=Console(file=self.stream), transient=self.transient)
         self._bar.start()
 
@@ -167,16 +191,22 @@ class Progress:
             self.note = note
             if self._bar is not None:
                 self._bar_update(stage, new)
-            elif new:
+            elif new and self.lines:   # a long run: its log shows each stage as it starts
                 self._line(now)
 
     def __call__(self, stage: str, fraction: float | None = None) -> None:
         """The ``progress(stage, fraction)`` callback the pipelines take."""
         self.update(stage, fraction)
 
-    def message(self, stage: str) -> None:
-        """A ``progress(message)`` callback's line: a stage of unknown fraction."""
-        self.update(stage.strip(), None)
+    def say(self, text: str) -> None:
+        """A line of what the command does now, as such commands always wrote it (not with
+        ``--quiet``); it is also the current stage's note."""
+        if self.mode == QUIET:
+            return
+        with self._lock:
+            self.note = text.strip()
+            self._print(text)
+            self._last_line = time.monotonic()
 
     @contextmanager
     def feeding(self, stage: str) -> Iterator[None]:
@@ -217,6 +247,7 @@ class Progress:
         self._print(f"progress: {self.stage}{pct}  elapsed {_clock(now - self.t0)}  "
                     f"ETA {self._eta(now)}{note}")
         self._last_line = now
+        self.lines += 1
 
     def _print(self, text: str) -> None:
         if self._bar is not None:

@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from skinkit.cli._bench_out import emit, page_option, write_page
+from skinkit.cli._progress import progress
 
 #: the coverage study's cases (kept here so that ``--help`` imports no benchmark)
 COVERAGE_CASES = ("gel", "invivo", "twopad", "lumped")
@@ -84,7 +85,8 @@ def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: 
     from skinkit.bench import coverage
 
     # progress goes to stderr, also with --json
-    res = coverage.run(case, seeds, start, first_seed, workers, say=lambda s: click.echo(s, err=True))
+    with progress(stage="bench coverage") as bar:
+        res = coverage.run(case, seeds, start, first_seed, workers, say=bar.say)
     lines = coverage.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Coverage of the reported 95 % intervals", res, lines)
@@ -104,7 +106,8 @@ def bench_mesh_nulls(cases: str, seeds: int, first_seed: int, as_json: bool, pag
     from skinkit.bench import mesh_nulls
 
     names = list(mesh_nulls.CASES) if cases == "all" else [cases]
-    res = mesh_nulls.run(names, seeds, first_seed, say=lambda s: click.echo(s, err=True))
+    with progress(stage="bench mesh-nulls") as bar:
+        res = mesh_nulls.run(names, seeds, first_seed, say=bar.say)
     lines = mesh_nulls.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Nulls with the mesh gap only", res, lines)
@@ -124,8 +127,8 @@ def bench_diagnose(cases: str, shared_mesh: bool, workers: int, as_json: bool, p
     from skinkit.bench import diagnose_profile
 
     names = list(diagnose_profile.CASES) if cases == "all" else [cases]
-    res = diagnose_profile.run(names, "shared" if shared_mesh else "own", workers,
-                               say=lambda s: click.echo(s, err=True))
+    with progress(stage="bench diagnose") as bar:
+        res = diagnose_profile.run(names, "shared" if shared_mesh else "own", workers, say=bar.say)
     lines = diagnose_profile.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Where a gap diagnosis spends its time", res, lines)

@@ -52,6 +52,7 @@ def design(model_file: str, session: str, free: str | None, at: str | None, cand
            holdout: str | None, workers: int | None, as_json: bool) -> None:
     """Rank protocols of the library by the gain in log det of the Fisher information they
     would add to SESSION's fit of MODEL_FILE (D-optimality), and say what each pins down."""
+    from skinkit.cli._progress import progress
     from skinkit.forward import load
     from skinkit.inverse.design import format_ranking, parse_candidates, rank_protocols
 
@@ -67,11 +68,9 @@ def design(model_file: str, session: str, free: str | None, at: str | None, cand
         names = split_names(free) if free is not None else fit_free or None
         obs = read_session(model, session, holdout)
 
-        def progress(msg: str) -> None:
-            if not as_json:
-                click.echo(f"  {msg}", err=True)
-
-        res = rank_protocols(model, obs, values or None, names, cands, progress=progress)
+        with progress(stage="design") as bar:   # on stderr, also with --json
+            res = rank_protocols(model, obs, values or None, names, cands,
+                                 progress=lambda m: bar.say(f"  {m}"))
     finally:
         model.close()
     res["session"] = str(session)

@@ -9,6 +9,7 @@ import numpy as np
 
 from skinkit import jsonio
 from skinkit.cli._paths import check_result_dir, staged_dir
+from skinkit.cli._progress import progress
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
@@ -43,13 +44,6 @@ def _fe_spec(path: Path) -> dict:
     return apply_all(spec, resolve(spec.get("effects"), "fe"))
 
 
-def _progress(total: float, label: str):
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-    prog = Progress(TextColumn(label), BarColumn(), TextColumn("t = {task.completed:.4g} / {task.total:.4g}"),
-                    TimeElapsedColumn(), transient=True)
-    return prog
-
-
 @click.command("solve")
 @click.argument("model_file", type=click.Path(dir_okay=False))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
@@ -79,19 +73,18 @@ def solve(model_file: str, out_dir: str | None, overwrite: bool, as_json: bool, 
                            overwrite=overwrite, owned=SOLVE_FILES, command="skinkit solve")
     spec = _fe_spec(_model_path(model_file))
     model = build_model(spec)
-    times = model.load.times
-    # rich formats the label: braces of the model's name are text, not fields
-    name = model.name.replace("{", "{{").replace("}", "}}")
+    end = float(model.load.times[-1])
     controlled = model.discretisation_tolerance is not None or model.point_tolerance is not None
-    prog = _progress(float(times[-1]), f"solving {name} ({model.mesh.n_dof} dofs)")
-    with prog:
-        task = prog.add_task("solve", total=float(times[-1]))
+    label = f"solving {model.name} ({model.mesh.n_dof} dofs)"
+    with progress(transient=True) as bar:   # on stderr, also with --json
+
+        def tick(t: float) -> None:   # the solver's load time t, of the programme's end
+            bar.update(label, t / end if end > 0 else None, f"t = {t:.4g} / {end:.4g}")
+
         if error_estimate or controlled:
-            model, sol, info = solve_with_estimate(
-                spec, error_levels, progress=lambda t: prog.update(task, completed=t),
-                log=None if as_json else (lambda m: prog.console.print(m, markup=False)))
+            model, sol, info = solve_with_estimate(spec, error_levels, progress=tick, log=bar.say)
         else:
-            sol, info = solve_model(model, progress=lambda t: prog.update(task, completed=t))
+            sol, info = solve_model(model, progress=tick)
     with staged_dir(out) as tmp:  # nothing appears at --out unless every file is written
         files = write_outputs(model, sol, info, tmp, vtu=not no_vtu)
         info["files"] = {k: str(out / Path(v).relative_to(tmp)) for k, v in files.items()}
@@ -142,8 +135,8 @@ def verify(as_json: bool, cases: tuple[str, ...]) -> None:
     unknown = [c for c in cases if c not in V.names()]
     if unknown:
         raise SkinkitError(f"unknown verification case(s) {unknown}; cases are {V.names()}")
-    res = V.run(list(cases) or None,
-                progress=None if as_json else (lambda n: click.echo(f"  running {n} ...", err=True)))
+    with progress() as bar:
+        res = V.run(list(cases) or None, progress=lambda n: bar.say(f"  running {n} ..."))
     if as_json:
         click.echo(jsonio.dumps(res, indent=2))
     else:
@@ -195,18 +188,20 @@ def convergence(model_file: str, levels: int, out_dir: str | None, overwrite: bo
     specs = [_refined(spec, f) for f in facs]  # a count a fraction does not divide is refused now
     check_size(specs[-1], layer_table(specs[-1]))  # refuse now, not after solving the coarse levels
     rows = []
-    for lev, (fac, sp) in enumerate(zip(facs, specs, strict=True), start=1):
-        model = first if fac == 1 else build_model(sp)
-        _, info = solve_model(model)
-        step = len(info["steps"]) - 1 if at == "final" else _peak_step(info, spec)
-        last = info["steps"][step]
-        f = last["tip_force_N"]
-        d = last["tip_displacement_m"]
-        rows.append({"level": lev, "factor": str(fac), "dof": info["dof"], "elements": info["elements"],
-                     "step": step, "tip_force_N": f, "tip_displacement_m": d, "wall_s": info["wall_s"]})
-        if not as_json:
-            click.echo(f"level {lev} ({fac}x): {info['dof']} dofs, tip force {f} N, displacement {d} m, "
-                       f"{info['wall_s']:.1f} s", err=True)
+    with progress() as bar:
+        for lev, (fac, sp) in enumerate(zip(facs, specs, strict=True), start=1):
+            model = first if fac == 1 else build_model(sp)
+            end, label = float(model.load.times[-1]), f"level {lev} ({fac}x, {model.mesh.n_dof} dofs)"
+            _, info = solve_model(
+                model, progress=lambda t, e=end, k=label: bar.update(k, t / e if e else None))
+            step = len(info["steps"]) - 1 if at == "final" else _peak_step(info, spec)
+            last = info["steps"][step]
+            f = last["tip_force_N"]
+            d = last["tip_displacement_m"]
+            rows.append({"level": lev, "factor": str(fac), "dof": info["dof"], "elements": info["elements"],
+                         "step": step, "tip_force_N": f, "tip_displacement_m": d, "wall_s": info["wall_s"]})
+            bar.say(f"level {lev} ({fac}x): {info['dof']} dofs, tip force {f} N, displacement {d} m, "
+                    f"{info['wall_s']:.1f} s")
     key = "tip_force_N" if spec.get("indenter", {}).get("mode", "displacement") == "displacement" \
         else "tip_displacement_m"
     finest = rows[-1][key]

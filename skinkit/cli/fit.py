@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -109,10 +111,12 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     """
     import shutil
 
+    from skinkit.cli._progress import progress
     from skinkit.forward import load
 
     _check_choices(weighting, optimiser)
     model = load(model_file, workers=workers)
+    bar = progress(stage="fit").start()   # on stderr, also with --json
     try:
         if error_estimate:
             from skinkit.inverse.discretisation import has_mesh
@@ -152,24 +156,23 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
                            ftol=ftol, xtol=xtol, max_iterations=max_iterations, bounds=bounds or None,
                            checkpoint=evals_dir / f"start-{k:03d}", progress=progress)
 
-        results, done = _run_starts(run_start, sc, x_starts, names, as_json)
+        results, done = _run_starts(run_start, sc, x_starts, names, bar.say)
         best_result = min(results, key=lambda r: r.objective)
         best_result.starts = done
         from skinkit.inverse.discretisation import has_mesh
         if model_error and has_mesh(model):
             from skinkit.inverse import fit as run_fit
             from skinkit.inverse.approximation import refit
-            say = None if as_json else (lambda m: click.echo(f"  {m}", err=True))
             starts_kept = best_result.starts
-            best_result, obs = refit(model, obs, best_result, names, run_fit, progress=say,
+            best_result, obs = refit(model, obs, best_result, names, run_fit,
+                                     progress=lambda m: bar.say(f"  {m}"),
                                      weighting=weighting, optimiser=optimiser, ftol=ftol, xtol=xtol,
                                      max_iterations=max_iterations, bounds=bounds or None)
             best_result.starts = starts_kept
         if error_estimate:
             from skinkit.inverse.discretisation import attach, estimate
-            say = None if as_json else (lambda m: click.echo(f"  {m}", err=True))
             attach(best_result, estimate(model, obs, best_result.parameters, names, weighting=weighting,
-                                         progress=say))
+                                         progress=lambda m: bar.say(f"  {m}")))
         if stores:
             from skinkit.store import open_experiment
             with open_experiment(session, "a") as exp:
@@ -184,6 +187,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         shutil.rmtree(evals_dir, ignore_errors=True)
         state_file.unlink(missing_ok=True)
     finally:
+        bar.stop(ok=sys.exc_info()[0] is None)
         model.close()
     if as_json:
         click.echo(jsonio.dumps(best, indent=2, default=float))
@@ -310,9 +314,11 @@ def _start_points(params, names: list[str], starts: int) -> tuple[object, list]:
     return sc, x_starts
 
 
-def _run_starts(run_start, sc, x_starts: list, names: list[str], as_json: bool) -> tuple[list, list[dict]]:
+def _run_starts(run_start, sc, x_starts: list, names: list[str], say: Callable[[str], None]
+                ) -> tuple[list, list[dict]]:
     """Fit from every start (``run_start(k, start values, progress)``): the results and one record
-    per start (a failed one kept with its reason, unless it is the only start)."""
+    per start (a failed one kept with its reason, unless it is the only start); each evaluation
+    and failure said by ``say(line)`` (stderr)."""
     from skinkit.inverse.fit import FitError
 
     starts = len(x_starts)
@@ -321,10 +327,8 @@ def _run_starts(run_start, sc, x_starts: list, names: list[str], as_json: bool) 
         start_vals = dict(zip(names, sc.to_values(x_starts[k]).tolist(), strict=True))
 
         def progress(i: int, phi: float, x: dict, k: int = k) -> None:
-            if not as_json:
-                vals = ", ".join(f"{n} = {v:.4g}" for n, v in x.items())
-                click.echo(f"  start {k + 1}/{starts} evaluation {i}: objective {phi:.6g}  [{vals}]",
-                           err=True)
+            vals = ", ".join(f"{n} = {v:.4g}" for n, v in x.items())
+            say(f"  start {k + 1}/{starts} evaluation {i}: objective {phi:.6g}  [{vals}]")
 
         try:
             r = run_start(k, start_vals, progress)
@@ -335,8 +339,7 @@ def _run_starts(run_start, sc, x_starts: list, names: list[str], as_json: bool) 
             # model): kept as a failed start, the others go on
             failures.append(str(exc))
             done.append({"start": start_vals, "failed": str(exc)})
-            if not as_json:
-                click.echo(f"  start {k + 1}/{starts} failed: {exc}", err=True)
+            say(f"  start {k + 1}/{starts} failed: {exc}")
             continue
         done.append({"start": start_vals, "objective": r.objective, "converged": r.converged,
                      "parameters": {n: r.parameters[n] for n in names}, "n_forward": r.n_forward,

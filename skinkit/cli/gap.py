@@ -84,6 +84,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     the report (/gaps/<name>); --out receives gap.json and model.toml, the final model (MODEL_FILE
     with the added effects, every calibrated value and a [calibration] table of 95 % intervals).
     """
+    from skinkit.cli._progress import progress
     from skinkit.forward import read_description
     from skinkit.gap.diagnose import diagnose, write_report
 
@@ -106,18 +107,17 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     if out_dir:   # an earlier report in --out is not replaced silently either
         check_result_files(out_dir, ("gap.json", "gap.html", "model.toml"), "--out", overwrite=overwrite)
 
-    def progress(line: str) -> None:
-        click.echo(f"  {line}", err=True)
-
     wanted = split_names(effects) if effects is not None else None
     if effects is not None and not wanted:
         raise SkinkitError("--effects: no effect named")
-    report = diagnose(model_file, session, effects=wanted, holdout=split_names(holdout),
-                      protocols=split_names(protocols) or None,
-                      free=None if free is None else split_names(free), max_effects=max_effects,
-                      candidates=candidates, workers=workers, until=until_s, progress=progress,
-                      error_estimate=not no_error_estimate, min_share=min_share, noise=noise,
-                      max_iterations=max_iterations, model_error=model_error)
+    with progress(stage="gap diagnose") as bar:
+        report = diagnose(model_file, session, effects=wanted, holdout=split_names(holdout),
+                          protocols=split_names(protocols) or None,
+                          free=None if free is None else split_names(free), max_effects=max_effects,
+                          candidates=candidates, workers=workers, until=until_s,
+                          progress=lambda line: bar.say(f"  {line}"),
+                          error_estimate=not no_error_estimate, min_share=min_share, noise=noise,
+                          max_iterations=max_iterations, model_error=model_error)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:

@@ -9,6 +9,7 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._bench_out import page_option, write_page
+from skinkit.cli._progress import progress
 from skinkit.cli._scheduler import scheduler_callback
 
 
@@ -64,9 +65,10 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
     if forms is not None:
         raise BenchmarkError("--forms chooses the truths of --alternative: add --alternative, "
                              "or use --effects")
-    res = benchmark_run(quick, scheduler=scheduler, seeds=seeds, progress=lambda s: click.echo(s, err=True),
-              model=model or "quick", effects=_names(effects), nulls=nulls, parallel=parallel,
-              journal=journal, recorded_only=recorded_only)
+    with progress(stage="gap benchmark") as bar:
+        res = benchmark_run(quick, scheduler=scheduler, seeds=seeds, progress=bar.say,
+                            model=model or "quick", effects=_names(effects), nulls=nulls, parallel=parallel,
+                            journal=journal, recorded_only=recorded_only)
     lines = summary_lines(res)
     write_page(page, "Withheld-effect benchmark of the gap diagnosis", res, lines)
     if as_json:
@@ -91,8 +93,9 @@ def _alternative(quick: bool, scheduler: str | None, as_json: bool, seeds: int |
     if nulls is not None:
         raise BenchmarkError("--alternative: its null sessions are the null forms (white, AR(1), spikes) at "
                              "--seeds seeds each; leave out --nulls")
-    res = run(quick, seeds=seeds, forms_=_names(forms, "--forms"), parallel=parallel, scheduler=scheduler,
-              journal=journal, recorded_only=recorded_only, progress=lambda s: click.echo(s, err=True))
+    with progress(stage="gap benchmark --alternative") as bar:
+        res = run(quick, seeds=seeds, forms_=_names(forms, "--forms"), parallel=parallel, scheduler=scheduler,
+                  journal=journal, recorded_only=recorded_only, progress=bar.say)
     lines = summary_lines(res)
     write_page(page, "The gap diagnosis on truths it did not make", res, lines)
     if as_json:
@@ -111,7 +114,8 @@ def thesis_case(seed: int, workers: int, as_json: bool, page: Path | None) -> No
     """The thesis's case: pre-stress withheld from a GOH + QLV model of a virtual forearm session."""
     from skinkit.bench.gap_thesis_case import run as thesis_case_run
 
-    res = thesis_case_run(seed, workers, progress=lambda m: click.echo(f"  {m}", err=True))
+    with progress(stage="gap thesis-case") as bar:
+        res = thesis_case_run(seed, workers, progress=lambda m: bar.say(f"  {m}"))
     lines = list(res["report"].get("messages", []))
     if "prestress" in res:
         p, e = res["prestress"], res["prestress_error"]

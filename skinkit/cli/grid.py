@@ -12,6 +12,7 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._paths import check_result_files
+from skinkit.cli._progress import progress
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session, split_names
 from skinkit.units import unit_suffix
@@ -46,9 +47,10 @@ def _read_fit(path: str) -> dict[str, Any]:
             "se": dict(zip(names, se, strict=True))}
 
 
-def _say(msg: str) -> None:
-    """A progress line on stderr (stdout stays the result, JSON or text)."""
-    click.echo(f"  {msg}", err=True)
+def _say(bar: Any) -> Any:
+    """The engines' ``progress(message)``: a line on stderr (stdout stays the result, JSON or
+    text) through the command's progress ``bar``."""
+    return lambda msg: bar.say(f"  {msg}")
 
 
 def _end(v: float | None) -> str:
@@ -145,11 +147,11 @@ def grid(model_file: str, session: str, pair: str, n: int, span: str | None, at:
         out = Path(out_dir) if out_dir else Path.cwd() / f"grid-{model.name}-{names[0]}-{names[1]}"
         # before the grid runs
         check_result_files(out, ("grid.json", "grid.png"), "--out", overwrite=overwrite)
-        say = _say
-        say(f"{n} x {n} forward predictions of {model.name} on {session}")
-        g = objective_grid(model, obs, (names[0], names[1]), n=n, span=half, weighting=weighting,
-                           around=around,
-                           progress=say)
+        with progress(stage="grid") as bar:
+            say = _say(bar)
+            say(f"{n} x {n} forward predictions of {model.name} on {session}")
+            g = objective_grid(model, obs, (names[0], names[1]), n=n, span=half, weighting=weighting,
+                               around=around, progress=say)
         if (fitted is not None and fitted["covariance"] is not None
                 and all(p in fitted["names"] for p in names)):
             g = attach_covariance(g, fitted["names"], fitted["covariance"], fitted["values"],
@@ -215,8 +217,9 @@ def profile(model_file: str, session: str, name: str, free: str | None, n: int, 
         # before it runs
         check_result_files(out, ("profile.json", "profile.png"), "--out", overwrite=overwrite)
         others = None if free is None else split_names(free)
-        pr = profile_likelihood(model, obs, name, others, values=vals, n=n, weighting=weighting,
-                                progress=_say)
+        with progress(stage="profile likelihood") as bar:
+            pr = profile_likelihood(model, obs, name, others, values=vals, n=n, weighting=weighting,
+                                    progress=_say(bar))
         pr = _clean({**pr, "session": str(session)})
         out.mkdir(parents=True, exist_ok=True)
         (out / "profile.json").write_text(jsonio.dumps(pr, indent=1))

@@ -25,10 +25,8 @@ def import_images(experiment: Path, cameras: tuple[tuple[str, str], ...], name: 
                   fps: float) -> None:
     """Import image files (TIFF, PNG, BMP, JPEG; 8/16-bit) of each camera into EXPERIMENT
     (created if it does not exist), for `skinkit vision calibrate | profile | track-3d`."""
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
     from skinkit.cli._paths import check_name
+    from skinkit.cli._progress import progress
     from skinkit.vision.image_import import import_images as run
     from skinkit.vision.image_import import plan_frames
 
@@ -37,10 +35,9 @@ def import_images(experiment: Path, cameras: tuple[tuple[str, str], ...], name: 
     for cam, _ in cameras:
         check_name(cam, "--camera", "camera name")
     plan = plan_frames(cameras, match)
-    with Progress(TextColumn(f"importing {name}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=Console(stderr=True), transient=True) as prog:
-        task = prog.add_task("frames", total=plan.n_frames)
-        done = run(experiment, plan, name, fps, lambda k, n: prog.update(task, completed=k))
+    with progress(transient=True) as bar:
+        done = run(experiment, plan, name, fps,
+                   lambda k, n: bar.update(f"importing {name}", k / n if n else None, f"{k}/{n} frames"))
     w, h = done.image_size
     click.echo(f"imported {done.n_frames} frames x {len(done.camera_names)} cameras "
                f"({', '.join(done.camera_names)}), {w}x{h} px {done.dtype}, matched by {done.matched_by}, "

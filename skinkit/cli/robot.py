@@ -15,6 +15,7 @@ from typing import Any
 import click
 
 from skinkit import jsonio
+from skinkit.cli._progress import progress
 from skinkit.cli._types import FiniteFloat
 from skinkit.cli.registry import LazyGroup
 from skinkit.errors import OptionError, RefusedError, SkinkitError
@@ -164,7 +165,9 @@ def run(
         attempt["stage"] = "run"
         exp = _LazyExperiment(path, open_experiment, create_experiment)
         try:
-            summary = run_protocol(driver, protocol, exp, progress=not as_json)
+            with progress(transient=True) as bar:   # on stderr, also with --json
+                summary = run_protocol(driver, protocol, exp, progress=lambda t, end, n, lost: bar.update(
+                    protocol.name, min(t / end, 1.0) if end > 0 else None, f"{n} samples, {lost} lost"))
         finally:
             exp.close()
     except RefusedError:  # nothing was done: leave no trace (a device-side refusal may have

@@ -32,6 +32,7 @@ def select(model_file: str, session: str, subsets: str, weighting: str, holdout:
            rank_by: str, segments: str | None, workers: int | None, as_json: bool) -> None:
     """Fit MODEL_FILE to SESSION with each subset of free parameters; rank by AIC (thesis
     Eq 7.14) and AICc beside the held-out error (k-fold by protocol, and --holdout)."""
+    from skinkit.cli._progress import progress
     from skinkit.forward import load
     from skinkit.inverse import WEIGHTINGS
     from skinkit.inverse.selection import check_subsets, format_table, parse_subsets
@@ -48,12 +49,9 @@ def select(model_file: str, session: str, subsets: str, weighting: str, holdout:
         check_subsets(model.parameters(), wanted)   # before the session is read
         obs = read_session(model, session, holdout, segments)
 
-        def progress(msg: str) -> None:
-            if not as_json:
-                click.echo(f"  {msg}", err=True)
-
-        res = run_select(model, obs, wanted, weighting, None if fold == "none" else fold, rank_by=rank_by,
-                         progress=progress)
+        with progress(stage="select") as bar:   # on stderr, also with --json
+            res = run_select(model, obs, wanted, weighting, None if fold == "none" else fold, rank_by=rank_by,
+                             progress=lambda m: bar.say(f"  {m}"))
     finally:
         model.close()
     res["session"] = str(session)

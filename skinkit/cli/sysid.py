@@ -225,11 +225,15 @@ def _duration(seconds: float | None) -> tuple[str, str]:
 def _incremental(rec: Any, record: Path, axis: str, memory_s: float | None, robot: Any,
                  hold: str, probe_radius_mm: float | None, as_json: bool,
                  plot_dir: Path | None) -> None:
+    from skinkit.cli._progress import progress
     from skinkit.sysid.incremental import identify_incremental
 
     radius = None if probe_radius_mm is None else probe_radius_mm * 1e-3
-    res = identify_incremental(rec, axis=axis, memory_s=memory_s, robot=robot, hold=hold,
-                               probe_radius_m=radius, progress=not as_json)
+    with progress(transient=True) as bar:   # on stderr, also with --json
+        res = identify_incremental(rec, axis=axis, memory_s=memory_s, robot=robot, hold=hold,
+                                   probe_radius_m=radius,
+                                   progress=lambda k, n: bar.update("identifying increments",
+                                                                    k / n if n else None, f"{k}/{n}"))
     out: dict[str, Any] = {"record": str(record), "protocol": rec.protocol.name,
                            "increments": res.table(), "hysteresis": res.hysteresis()}
     if plot_dir is not None:

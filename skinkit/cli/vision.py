@@ -251,9 +251,9 @@ def profile_cmd(experiment: str, images_name: str | None, frame: int, profiler_n
     kwargs = profiler_kwargs(registry.load("skinkit.profilers", profiler_name),
                              {"spacing_px": spacing_px, "subset_px": subset_px}, explicit)
     prof = registry.create("skinkit.profilers", profiler_name, **kwargs)
-    from rich.console import Console
+    from skinkit.cli._progress import progress
 
-    with Console(stderr=True).status(f"profiling with {profiler_name} ..."):
+    with progress(stage=f"profiling with {profiler_name}"):
         sp = prof.profile(seq, rig, frame=frame)
     with open_experiment(experiment, mode="a") as exp:
         exp.write_profile(out_name, sp)
@@ -295,7 +295,12 @@ def track3d_cmd(experiment: str, images_name: str | None, profile_name: str, tra
             raise SkinkitError(f"{experiment} already holds a track named {name!r}; give another "
                                "--name, or --overwrite to replace it")
     tracker = registry.create("skinkit.trackers", tracker_name)
-    track, _ = track_3d(rig, seq, sp.points, tracker, subset_px, progress=True)  # type: ignore[arg-type]
+    from skinkit.cli._progress import progress
+
+    with progress(transient=True) as bar:
+        track, _ = track_3d(rig, seq, sp.points, tracker, subset_px,  # type: ignore[arg-type]
+                            progress=lambda k, n: bar.update("tracking frames", k / n if n else None,
+                                                             f"{k}/{n} frames"))
     with open_experiment(experiment, mode="a") as exp:
         exp.write_track(name, track)
     ok = track.valid.all(axis=1).sum()

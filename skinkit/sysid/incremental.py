@@ -5,7 +5,7 @@ probe of radius Rp), and ascending-versus-descending hysteresis."""
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -173,7 +173,7 @@ def identify_incremental(force_N: Any, position_m: Any = None, rate_hz: float | 
                          memory_s: float | None = None, robot: RobotDynamics | None = None,
                          probe_radius_m: float | None = None, poisson: float = SKIN_POISSON,
                          hold: str = "foh", refine: bool = True,
-                         progress: bool = False) -> IncrementalResult:
+                         progress: bool | Callable[[int, int], None] = False) -> IncrementalResult:
     """Identify a linear model in every ``"identify"`` segment of an incremental record.
 
     ``segments`` come from :func:`skinkit.sysid.inputs.incremental` (``Programme.segments``)
@@ -184,7 +184,7 @@ def identify_incremental(force_N: Any, position_m: Any = None, rate_hz: float | 
     ``refine`` (default on) finishes each fit by output error: increments are short and
     start mid-response, which biases the correlation IRF (and so the damped-sinusoid
     K, B, I) by a few per cent, while the output-error fit leaves out the start-up.
-    ``progress`` shows a progress bar.
+    ``progress`` shows a progress bar (True) or is told ``(increments done, increments)``.
     """
     from skinkit.schemas import RobotRecord
     from skinkit.sysid.record import axis_index
@@ -220,11 +220,13 @@ def identify_incremental(force_N: Any, position_m: Any = None, rate_hz: float | 
         check_irf_size(int(round(memory_s * rate_hz)) + 1, float(rate_hz), memory_s)
     out = []
     it: Iterable[Segment] = segs
-    if progress:
+    if progress is True:
         from rich.progress import track
 
         it = track(segs, description="identifying increments")
-    for s in it:
+    for k, s in enumerate(it):
+        if callable(progress):
+            progress(k, len(segs))
         if not 0 <= s.start < s.stop <= f.size:
             raise SysidError(f"segment {s.start}:{s.stop} lies outside the record of {f.size}")
         with warnings.catch_warnings(record=True) as caught:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -38,7 +38,7 @@ def reference_pixels(rig: CameraRig, points: np.ndarray, subset_px: int) -> np.n
 
 def track_3d(rig: CameraRig, images: ImageSequence, points: np.ndarray, tracker: Any,
              subset_px: int = 41, masks: np.ndarray | None = None, max_reprojection_px: float = 1.0,
-             progress: bool = False) -> tuple[SurfaceTrack, np.ndarray]:
+             progress: bool | Callable[[int, int], None] = False) -> tuple[SurfaceTrack, np.ndarray]:
     """Track ``points`` ``(P, 3)`` [m] (e.g. a surface profile, seen in frame 0) through
     ``images`` and triangulate them in every frame.
 
@@ -47,6 +47,7 @@ def track_3d(rig: CameraRig, images: ImageSequence, points: np.ndarray, tracker:
     RMS reprojection error is at most ``max_reprojection_px``. ``masks``: optional
     ``(F, C, H, W)`` bool, usable pixels (e.g. False over the indenter).
     Returns the :class:`SurfaceTrack` and the ``(P, F)`` reprojection errors [px].
+    ``progress``: True shows a bar; a callable is told ``(frames tracked, frames to track)``.
     """
     order = camera_order(rig, images.camera_names)
     sub = CameraRig(tuple(rig.cameras[i] for i in order))
@@ -60,11 +61,13 @@ def track_3d(rig: CameraRig, images: ImageSequence, points: np.ndarray, tracker:
     cur = np.full((P, F, C, 2), np.nan)
     cur[:, 0] = ref_px
     frames = range(1, F)
-    if progress:
+    if progress is True:
         from rich.progress import track as rich_track
 
         frames = rich_track(frames, description="tracking frames")
     for f in frames:
+        if callable(progress):
+            progress(f - 1, F - 1)
         for c in range(C):
             seen = np.flatnonzero(np.all(np.isfinite(ref_px[:, c]), axis=1))
             if len(seen) == 0:

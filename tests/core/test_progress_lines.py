@@ -43,7 +43,7 @@ def _spec(protocols: list[str]) -> dict:
     return spec
 
 
-def _env(interval: float = 2.0) -> dict[str, str]:
+def _env(interval: float = 1.0) -> dict[str, str]:
     return dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
                 **{INTERVAL_ENV: str(interval)})
 
@@ -186,6 +186,16 @@ def test_heartbeat_writes_through_a_silent_step():
     assert lines[-1].startswith("progress: done in"), lines
 
 
+def test_a_run_shorter_than_the_heartbeat_writes_nothing():
+    """A quick command's result, or its one-line error, stays alone in the log."""
+    log = io.StringIO()
+    with pytest.raises(RuntimeError), Progress(mode="normal", stream=log, tty=False, interval=5) as bar:
+        bar.update("a", 0.1)
+        bar.update("b", None, "x")
+        raise RuntimeError("bad input")
+    assert log.getvalue() == ""
+
+
 def test_quiet_and_verbose():
     log = io.StringIO()
     with Progress(mode="quiet", stream=log, tty=False, interval=0.05) as bar:
@@ -205,7 +215,7 @@ def test_demo_progress_goes_to_stderr_through_a_silent_step(monkeypatch, tmp_pat
 
     def fake_chain(out_dir, progress, **kwargs):
         progress("acquire: truth model", 0.0)
-        time.sleep(1.2)
+        time.sleep(1.5)
         progress("acquire: truth model", 1.0)
         progress("gap: ranking candidates", 0.5)
         progress("gap: done", 1.0)
