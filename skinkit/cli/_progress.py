@@ -198,6 +198,10 @@ class Progress:
         """The ``progress(stage, fraction)`` callback the pipelines take."""
         self.update(stage, fraction)
 
+    def update_note(self, stage: str, fraction: float | None, note: str) -> None:
+        """:meth:`update`, under the name :func:`skinkit.forward.stages.feeding` looks for."""
+        self.update(stage, fraction, note)
+
     def say(self, text: str) -> None:
         """A line of what the command does now, as such commands always wrote it (not with
         ``--quiet``); it is also the current stage's note."""

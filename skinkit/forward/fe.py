@@ -567,8 +567,12 @@ class FEForwardModel(ForwardModel):
         futures = [self._pool.submit(solve_protocol, j) for j in jobs]
         try:
             return gather(futures, self._steps, tracker)
+        except Exception:
+            for f in futures:   # a failed solve: the others of this prediction are not wanted
+                f.cancel()
+            raise
         except BaseException:
-            # Ctrl-C or a failed solve: stop the other solves now rather than wait for them
+            # Ctrl-C: end the running solves now rather than wait for them, leaving nothing behind
             self.close(now=True)
             raise
 

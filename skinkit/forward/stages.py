@@ -167,12 +167,12 @@ def feeding(progress: Callable[..., None] | None, name: str, lo: float = 0.0, hi
             ) -> Iterator[None]:
     """Route what :func:`report` is told inside the block into a pipeline's
     ``progress(stage, fraction)`` callback as stage ``name``, over ``[lo, hi]`` of it (a callback
-    with an ``update(stage, fraction, note)`` method, the command line's, gets the notes too).
+    with an ``update_note(stage, fraction, note)`` method, the command line's, gets the notes too).
     None: reports stay with the caller's sink, if any."""
     if progress is None:
         yield
         return
-    update = getattr(progress, "update", None)
+    update = getattr(progress, "update_note", None)
 
     def sink(fraction: float | None, note: str) -> None:
         f = None if fraction is None else lo + min(max(fraction, 0.0), 1.0) * (hi - lo)
