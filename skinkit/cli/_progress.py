@@ -226,6 +226,8 @@ class Progress:
         if self.stage is None:
             return
         self.times[self.stage] = self.times.get(self.stage, 0.0) + (now - self._stage_t0)
+        if self.mode == VERBOSE:
+            self._print(f"  {self.stage}: {now - self._stage_t0:.1f} s")
         if self._bar is not None and self.stage in self._tasks:
             task = self._tasks[self.stage]
             self._bar.update(task, total=1.0, completed=1.0, note="")
