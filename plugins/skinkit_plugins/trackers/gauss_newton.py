@@ -16,7 +16,10 @@ import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter
 
 from skinkit.plugin.trackers import IntegerMatch, VisionError
-from skinkit_plugins.trackers.base import SubsetTracker
+from skinkit_plugins.trackers.base import SubpixelBatch, SubsetTracker, solve_each, subset_stack
+
+#: subsets refined together: bounds the stacks' memory (512 subsets of 64 px: ~100 MB of Jacobians)
+CHUNK = 512
 
 
 def _warp_matrix(p: np.ndarray, affine: bool) -> np.ndarray:
@@ -120,6 +123,163 @@ class GaussNewtonTracker(SubsetTracker):
         moved = M[:2, :2] @ loc + M[:2, 2]
         extra = {"gradient": M[:2, :2] - np.eye(2)} if affine else {}
         return moved - loc, quality, "", extra
+
+
+    def subpixel_many(self, state: Any, ref: np.ndarray, cur: np.ndarray, pts: np.ndarray,
+                      origins: np.ndarray, s: int, matches: list[IntegerMatch],
+                      mask: np.ndarray | None) -> SubpixelBatch:
+        """:meth:`subpixel` for K points at once (stacked solves, one interpolation per
+        iteration); see :meth:`SubsetTracker.subpixel_many` for the arguments and shapes."""
+        k = len(pts)
+        disp = np.full((k, 2), np.nan)
+        quality = np.full(k, np.nan)
+        reasons = [""] * k
+        grad = np.full((k, 2, 2), np.nan)
+        for a in range(0, k, CHUNK):
+            b = min(a + CHUNK, k)
+            disp[a:b], quality[a:b], reasons[a:b], grad[a:b] = _IcgnBatch(
+                self, state, ref, origins[a:b], s, matches[a:b], mask).run(cur.shape, pts[a:b])
+        # like the per-point path: the gradient exists once some point converged
+        affine = self.shape == "affine"
+        extras = {"gradient": grad} if affine and np.isfinite(grad).any() else {}
+        return disp, quality, reasons, extras
+
+
+class _IcgnBatch:
+    """IC-GN on a stack of K subsets, each with the per-subset path's steps and criteria;
+    masked pixels carry weight 0 where the per-subset path drops them."""
+
+    def __init__(self, trk: GaussNewtonTracker, state: Any, ref: np.ndarray, origins: np.ndarray,
+                 s: int, matches: list[IntegerMatch], mask: np.ndarray | None) -> None:
+        coef, gx_all, gy_all = state
+        self.trk, self.coef, self.s = trk, coef, s
+        self.affine = trk.shape == "affine"
+        n = self.n = len(origins)
+        c0, r0 = origins[:, 0], origins[:, 1]
+        self.centre = np.column_stack([c0 + (s - 1) / 2, r0 + (s - 1) / 2])  # (K, 2) [px]
+        xi = np.arange(s) - (s - 1) / 2
+        self.ex, self.ey = (a.ravel() for a in np.meshgrid(xi, xi))  # (P,) local coordinates
+        self.sel = None if mask is None else subset_stack(mask, c0, r0, s).reshape(n, -1)
+        self.wt = None if mask is None else self.sel.astype(float)  # (K, P) 0/1 weights
+        self.cnt = None if mask is None else self.wt.sum(axis=1)
+        f = subset_stack(ref, c0, r0, s).reshape(n, -1)
+        gx = subset_stack(gx_all, c0, r0, s).reshape(n, -1)
+        gy = subset_stack(gy_all, c0, r0, s).reshape(n, -1)
+        self.fz = self._zero_mean(f, np.arange(n))
+        self.df = np.sqrt(np.sum(self.fz**2, axis=1))
+        ex, ey = self.ex, self.ey
+        parts = [gx, gy, gx * ex, gx * ey, gy * ex, gy * ey] if self.affine else [gx, gy]
+        self.JT = np.stack(parts, axis=1)  # (K, 6 or 2, P) steepest-descent images
+        self.peak = np.array([m.peak for m in matches], dtype=float)
+        self.M = np.tile(np.eye(3), (n, 1, 1))  # (K, 3, 3) warps, starting at the integer shift
+        self.M[:, :2, 2] = np.array([m.shift for m in matches], dtype=float).reshape(n, 2)
+
+    def _zero_mean(self, a: np.ndarray, act: np.ndarray) -> np.ndarray:
+        """``a`` ``(len(act), P)`` (pixels of subsets ``act``) less its mean over the used
+        pixels, 0 at the others."""
+        if self.wt is None:
+            return a - a.mean(axis=1, keepdims=True)
+        wt = self.wt[act]
+        return (a - (np.sum(a * wt, axis=1) / self.cnt[act])[:, None]) * wt
+
+    def _bounds_and_sample(self, act: np.ndarray, hw: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """Which of subsets ``act`` leave the image under their warps, and the current image
+        ``(len(inside), P)`` sampled at the warped pixels of those inside (0 where masked)."""
+        M, c = self.M[act], self.centre[act]
+        wx = M[:, 0, 0, None] * self.ex + M[:, 0, 1, None] * self.ey + M[:, 0, 2, None] + c[:, 0, None]
+        wy = M[:, 1, 0, None] * self.ex + M[:, 1, 1, None] * self.ey + M[:, 1, 2, None] + c[:, 1, None]
+        h, w = hw
+        if self.sel is None:
+            lo_x, lo_y, hi_x, hi_y = wx.min(1), wy.min(1), wx.max(1), wy.max(1)
+        else:  # only the pixels the subset uses
+            sel = self.sel[act]
+            lo_x, lo_y = np.where(sel, wx, np.inf).min(1), np.where(sel, wy, np.inf).min(1)
+            hi_x, hi_y = np.where(sel, wx, -np.inf).max(1), np.where(sel, wy, -np.inf).max(1)
+        out = (lo_x < 0) | (lo_y < 0) | (hi_x > w - 1) | (hi_y > h - 1)
+        wx, wy = wx[~out], wy[~out]
+        order, coef = self.trk.order, self.coef
+        if self.sel is None:
+            g = map_coordinates(coef, [wy.ravel(), wx.ravel()], order=order, prefilter=False,
+                                mode="mirror").reshape(wx.shape)
+        else:
+            sel = self.sel[act][~out]
+            g = np.zeros(wx.shape)
+            g[sel] = map_coordinates(coef, [wy[sel], wx[sel]], order=order, prefilter=False,
+                                     mode="mirror")
+        return out, g
+
+    def run(self, hw: tuple[int, int], pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str],
+                                                                  np.ndarray]:
+        """Iterate every subset to convergence or failure: displacements of ``pts`` ``(K, 2)``
+        [px], qualities ``(K,)``, K reasons, displacement gradients ``(K, 2, 2)`` (NaN where
+        failed or without the affine shape)."""
+        n, trk = self.n, self.trk
+        why = [""] * n
+        quality = np.full(n, np.nan)  # set on failure; from the ZNSSD for the rest
+        znssd = np.full(n, np.nan)
+        converged = np.zeros(n, bool)
+        flat = self.df == 0
+        for j in np.flatnonzero(flat):
+            why[j], quality[j] = "reference subset has no texture", 0.0
+        act = np.flatnonzero(~flat)
+        q = self.JT.shape[1]
+        Hinv = np.full((n, q, q), np.nan)  # inverse Gauss-Newton Hessians
+        JTw = self.JT[act] if self.wt is None else self.JT[act] * self.wt[act, None, :]
+        Hinv[act] = solve_each(JTw @ self.JT[act].transpose(0, 2, 1), np.eye(q)[None])
+        degenerate = np.isnan(Hinv[act]).any(axis=(1, 2))
+        for j in act[degenerate]:
+            why[j], quality[j] = "reference subset gradient is degenerate", 0.0
+        act = act[~degenerate]
+        half = (self.s - 1) / 2
+        for _ in range(trk.max_iter):
+            if not len(act):
+                break
+            out, g = self._bounds_and_sample(act, hw)
+            for j in act[out]:
+                why[j], quality[j] = "displaced subset leaves the current image", self.peak[j]
+            act = act[~out]
+            gz = self._zero_mean(g, act)
+            dg = np.sqrt(np.sum(gz**2, axis=1))
+            for j in act[dg == 0]:
+                why[j], quality[j] = "current subset has no texture", 0.0
+            act, gz, dg = act[dg != 0], gz[dg != 0], dg[dg != 0]
+            df = self.df[act]
+            r = self.fz[act] - (df / dg)[:, None] * gz
+            znssd[act] = np.sum(r**2, axis=1) / df**2
+            # J^T r over the whole chunk (rows of finished subsets zero): cheaper than
+            # gathering the active rows of the (K, 6, P) steepest-descent images
+            r_all = np.zeros_like(self.fz)
+            r_all[act] = r
+            JTr = np.einsum("nkp,np->nk", self.JT, r_all)[act]
+            dp = -(Hinv[act] @ JTr[:, :, None])[:, :, 0]
+            self.M[act] = self.M[act] @ np.linalg.inv(_warp_matrices(dp, self.affine))
+            move = np.hypot(dp[:, 0], dp[:, 1])
+            if self.affine:
+                move += half * np.sqrt(np.sum(dp[:, 2:] ** 2, axis=1))
+            done = move < trk.tol_px
+            converged[act[done]] = True
+            act = act[~done]
+        ran = np.array([not y for y in why])  # no failure before or during the iterations
+        quality[ran] = 1.0 - znssd[ran] / 2.0
+        for j in np.flatnonzero(ran & ~converged):
+            why[j] = f"Gauss-Newton did not converge in {trk.max_iter} iterations"
+        loc = pts - self.centre
+        A, t = self.M[:, :2, :2], self.M[:, :2, 2]
+        disp = np.where(converged[:, None], (A @ loc[:, :, None])[:, :, 0] + t - loc, np.nan)
+        grad = np.where(converged[:, None, None] & self.affine, A - np.eye(2), np.nan)
+        return disp, quality, why, grad
+
+
+def _warp_matrices(p: np.ndarray, affine: bool) -> np.ndarray:
+    """:func:`_warp_matrix` for a stack of parameters ``p`` ``(K, 6 or 2)``: ``(K, 3, 3)``."""
+    M = np.tile(np.eye(3), (len(p), 1, 1))
+    M[:, :2, 2] = p[:, :2]
+    if affine:
+        M[:, 0, 0] += p[:, 2]
+        M[:, 0, 1] = p[:, 3]
+        M[:, 1, 0] = p[:, 4]
+        M[:, 1, 1] += p[:, 5]
+    return M
 
 
 class TranslationGaussNewtonTracker(GaussNewtonTracker):
