@@ -48,13 +48,15 @@ def _env(interval: float = 1.0) -> dict[str, str]:
                 **{INTERVAL_ENV: str(interval)})
 
 
-def _run(args: list[str], folder: Path, name: str) -> tuple[subprocess.CompletedProcess, str, float]:
-    """``skinkit ARGS`` with stderr to a file (not a terminal): the process, its stderr, its seconds."""
+def _run(args: list[str], folder: Path, name: str, interval: float = 1.0
+         ) -> tuple[subprocess.CompletedProcess, str, float]:
+    """``skinkit ARGS`` with stderr to a file (not a terminal) and a heartbeat of ``interval`` [s]:
+    the process, its stderr, its seconds."""
     err = folder / f"{name}.err"
     t0 = time.monotonic()
     with err.open("w") as f:
         p = subprocess.run([sys.executable, "-m", "skinkit", *args], stdout=subprocess.PIPE, stderr=f,
-                           text=True, env=_env(), cwd=folder, timeout=300)
+                           text=True, env=_env(interval), cwd=folder, timeout=300)
     return p, err.read_text(), time.monotonic() - t0
 
 
@@ -113,7 +115,9 @@ def test_fe_predict_reports_its_solve_and_quiet_reports_nothing(folder, session)
     assert p.stdout.lstrip().startswith("{")     # stdout is the JSON alone
     lines = _check_gaps(err, wall)
     assert any(stage == "predict" and (pct or 0) > 0 for stage, pct, _ in lines), err
-    q, qerr, _ = _run(["--quiet", "predict", "one.toml", "s.h5", "--workers", "1"], folder, "quiet")
+    # a short prediction (the first 4 s) under a heartbeat short enough to have written lines
+    q, qerr, _ = _run(["--quiet", "predict", "one.toml", "s.h5", "--workers", "1", "--until", "4"], folder,
+                      "quiet", interval=0.1)
     assert q.returncode == 0 and "chi2/sample" in q.stdout, qerr
     assert qerr == "", qerr
 
