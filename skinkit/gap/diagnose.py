@@ -66,6 +66,7 @@ from skinkit.gap.score import (
     with_effects,
 )
 from skinkit.gap.sentences import messages, num
+from skinkit.gap.series import diagnosis_series
 from skinkit.gap.verdict import (
     MIN_SHARE,
     SMALL_REMAINDER,
@@ -726,7 +727,8 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
              "final_se": {n: num(final["result"].se.get(n)) for n in run.theta_r},
              "effects_model": [dict(t) for t in run.tables], "minor": v["minor"],
              "noise": v["noise"], "remaining": v["remaining"], "warnings": v["warnings"],
-             "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0}
+             "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0,
+             "series": diagnosis_series(observations, state0, final, run.additions)}
     gap_d = _gap_dict(loc0)
     gap_d.update(run.gap0 or {"significant": bool(loc0.significant),
                               "omnibus_significant": bool(loc0.significant), "directed": []})

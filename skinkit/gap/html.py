@@ -7,12 +7,15 @@ and writes one HTML file that needs nothing else: the CSS is inline, the figures
 embedded as base64 ``data:`` URIs, the one script (table sorting) is inline. Any optional key —
 and any pinned key — may be missing: its section then says so or is left out.
 
-Sections, top to bottom: the verdict in plain words; the fit; the residual by protocol, phase,
-channel (and region, frequency) as χ²/dof per cell against the noise level 1, with a ranked
-table; the residual maps per tracked point before and after the named effect(s) (matplotlib,
-and a pyvista surface rendering when VTK renders off screen here); the score ranking of the
-candidate effects; the shrinkage table; the non-separable pairs with the protocol that would
-separate them; the whiteness and input cross-correlation tests; the naming rounds; the raw JSON.
+Sections, top to bottom: the verdict in plain words; the fit; measured against predicted over
+time per protocol and channel (:mod:`skinkit.gap.html_series`, from ``series``); the residual
+by protocol, phase, channel (and region, frequency) as χ²/dof per cell against the noise
+level 1, with a ranked table; the residual maps per tracked point before and after the named
+effect(s), drawn only where there are points (matplotlib, and a pyvista surface rendering when
+VTK renders off screen here); the score ranking of the candidate effects; the shrinkage table;
+the non-separable pairs with the protocol that would separate them; the whiteness and input
+cross-correlation tests; the naming rounds; the raw JSON. Pre-stress is shown in one convention
+(:func:`skinkit.gap.sentences.display_parameters`: λ1 ≥ λ2, θ of λ1 in degrees).
 
 Figures are made on matplotlib's Agg canvas directly (no pyplot, no global backend state).
 """
@@ -33,6 +36,9 @@ import numpy as np
 
 from skinkit import jsonio
 from skinkit.errors import SchemaError, StoreError
+from skinkit.gap.html_series import section_series
+from skinkit.gap.sentences import display_parameters
+from skinkit.inverse.map_mask import hole_triangles
 from skinkit.units import unit_suffix
 
 #: the order in which the residual axes are shown (others, if any, follow alphabetically)
@@ -186,7 +192,7 @@ def _candidate(report: Mapping[str, Any], name: str) -> Mapping[str, Any] | None
 
 def _magnitudes(cand: Mapping[str, Any] | None) -> str:
     """'name = value ± se, ...' of a candidate's identified parameters ('' when none)."""
-    params = (cand or {}).get("parameters") or {}
+    params = display_parameters((cand or {}).get("parameters") or {})
     parts = []
     for name, pv in params.items():
         if isinstance(pv, Mapping):
@@ -253,11 +259,13 @@ def _section_fit(report: Mapping[str, Any]) -> str:
     fit = report.get("fit") or {}
     if not fit:
         return '<section id="fit"><h2>The fit</h2><p class="note">No fit summary in the report.</p></section>'
-    params = fit.get("parameters") or {}
+    params = display_parameters(fit.get("parameters") or {})
     summary = (f"<p>χ²/ν of the fit: <b>{_e(_num(fit.get('chi2_per_dof')))}</b> (1 at the noise level); "
                f"forward solves: <b>{_e(fit.get('n_forward', '—'))}</b>.</p>")
     rows = [[_t(k, str(k)), _t(_num(v, 6), _f(v))] for k, v in params.items()]
-    table = (_table(["parameter", "fitted value (SI)"], rows) if rows
+    head = "fitted value (SI; pre-stress angle θ in °)" if any(str(k).endswith("θ") for k in params) \
+        else "fitted value (SI)"
+    table = (_table(["parameter", head], rows) if rows
              else '<p class="note">No parameters listed.</p>')
     return f'<section id="fit"><h2>The fit</h2>{summary}{table}</section>'
 
@@ -298,7 +306,8 @@ def _residual_figure(cells: list[Mapping[str, Any]]) -> str:
         ax.set_title(f"by {_mpl(a)}", fontsize=9, loc="left")
         ax.grid(axis="x", alpha=0.3)
         ax.tick_params(axis="x", labelsize=8)
-    fig.axes[-1].set_xlabel("χ²/dof of the cell (dashed: 1, the noise level; red: significant)", fontsize=8)
+    fig.axes[-1].set_xlabel("χ²/dof of the cell [1] (dashed: 1, the noise level; red: significant)",
+                            fontsize=8)
     return _png_uri(fig)
 
 
@@ -397,8 +406,9 @@ def _maps_matplotlib(maps: list[dict[str, Any]], M: float) -> str:
                 continue
             ok = np.isfinite(v)
             if ok.sum() >= 3 and _spread(m["xy"][ok]):
-                try:
+                try:   # filled only among the points: not across the probe's footprint or a gap
                     tri = Triangulation(m["xy"][ok, 0], m["xy"][ok, 1])
+                    tri.set_mask(hole_triangles(m["xy"][ok], tri.triangles))
                     ax.tricontourf(tri, np.clip(v[ok], 1.0 / M, M), levels=levels, norm=norm, cmap="RdBu_r",
                                    alpha=0.8)
                 except (ValueError, RuntimeError):   # a degenerate triangulation: the scatter alone
@@ -411,7 +421,7 @@ def _maps_matplotlib(maps: list[dict[str, Any]], M: float) -> str:
     if mappable is not None:
         from matplotlib.ticker import NullFormatter
 
-        cb = fig.colorbar(mappable, ax=fig.axes, label="χ²/dof per point (white: 1, the noise level)",
+        cb = fig.colorbar(mappable, ax=fig.axes, label="χ²/dof per point [1] (white: 1, the noise level)",
                           shrink=0.8)
         # 0.5, 1, 2, 5 … written plainly rather than 5×10⁻¹, 10⁰, 2×10⁰
         ticks = [m * 10.0 ** k for k in range(-6, 7) for m in (1, 2, 5) if 1 / M <= m * 10.0 ** k <= M]
@@ -467,7 +477,9 @@ def _render_pyvista(pv: Any, maps: list[dict[str, Any]], M: float) -> str | None
                 z = np.log10(np.clip(v[ok], 1.0 / M, M))
                 pts = np.column_stack([m["xy"][ok], z * height])
                 flat = pv.PolyData(np.column_stack([m["xy"][ok], np.zeros(ok.sum())])).delaunay_2d()
-                surf = pv.PolyData(pts, faces=flat.faces)
+                tris = flat.faces.reshape(-1, 4)[:, 1:]
+                keep = tris[~hole_triangles(m["xy"][ok], tris)]   # no surface where no point is
+                surf = pv.PolyData(pts, faces=np.column_stack([np.full(len(keep), 3), keep]).ravel())
                 surf[label] = z
                 pl.add_mesh(pv.Plane(center=(*((lo + hi) / 2), 0.0), i_size=float(hi[0] - lo[0]),
                                      j_size=float(hi[1] - lo[1])), color="grey", opacity=0.25)
@@ -526,7 +538,7 @@ def _scores_figure(cands: list[Mapping[str, Any]], named: set[str]) -> str:
         ax.text(max(s[k], 0.0) + 0.01 * max(top, 1e-12), k, f" p = {_p(c.get('p_value'))}", va="center",
                 fontsize=7)
     ax.set_xlim(right=max(top, 1e-12) * 1.3)
-    ax.set_xlabel("score (Lagrange-multiplier) statistic at the effect's null value "
+    ax.set_xlabel("score (Lagrange-multiplier) statistic at the effect's null value [1] "
                   "(green: named; blue: refitted)", fontsize=8)
     ax.grid(axis="x", alpha=0.3)
     return _png_uri(fig)
@@ -719,11 +731,13 @@ def render_html(report: Mapping[str, Any], *, title: str | None = None) -> str:
     model, session = report.get("model"), report.get("session")
     if title is None:
         title = "Gap diagnosis" + (f": {model}" if model else "") + (f" on {session}" if session else "")
-    sections = [f(report) for f in (_section_verdict, _section_fit, _section_residual, _section_maps,
+    sections = [f(report) for f in (_section_verdict, _section_fit, section_series, _section_residual,
+                                    _section_maps,
                                     _section_scores, _section_shrinkage, _section_separation, _section_tests,
                                     _section_rounds)]
     nav = "".join(f'<a href="#{i}">{_e(t)}</a>' for i, t in
-                  (("verdict", "verdict"), ("fit", "fit"), ("residual", "where"), ("maps", "maps"),
+                  (("verdict", "verdict"), ("fit", "fit"), ("series", "measured vs predicted"),
+                   ("residual", "where"), ("maps", "maps"),
                    ("scores", "which"), ("shrinkage", "how far"), ("separation", "not separable")))
     raw = jsonio.dumps(report, indent=1, default=_json_default)
     sub = " · ".join(x for x in (f"model {model}" if model else "", f"session {session}" if session else "")

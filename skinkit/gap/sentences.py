@@ -14,6 +14,9 @@ from typing import Any
 from skinkit.gap.verdict import noise_sentence, remaining_sentence
 from skinkit.units import unit_suffix
 
+#: the pre-stress effect's parameter names (the fitter's: stretches along and across ``angle``)
+PRESTRESS_KEYS = ("l1", "l2", "angle")
+
 
 def num(x: Any) -> float | None:
     """``x`` as a finite float, or None."""
@@ -49,8 +52,57 @@ def disc_messages(disc: Mapping[str, Any] | None) -> list[str]:
     return out
 
 
+def prestress_display(l1: float, l2: float, angle_rad: float) -> tuple[float, float, float]:
+    """The pre-stretch as the reports show it, ``(λ1, λ2, θ)`` [1, 1, deg]: the stretches ordered
+    λ1 ≥ λ2 and θ the direction of λ1 from the x axis, folded into (−90°, 90°] (as the virtual
+    lab writes its truth). The fitter's ``(l1, l2, angle [rad])`` may have l2 > l1 or any angle:
+    the same state then reads differently, so every report converts through this one function."""
+    if l2 > l1:   # l2 acts along angle + 90°
+        l1, l2, angle_rad = l2, l1, angle_rad + math.pi / 2
+    deg = math.degrees(angle_rad) % 180.0   # a stretch direction is an axis: θ and θ + 180° agree
+    return l1, l2, deg - 180.0 if deg > 90.0 else deg
+
+
+def _prestress_groups(names: Sequence[str]) -> list[str]:
+    """The prefixes (``"prestress."``, ``"skin.prestretch."``, ``""``) under which all three
+    pre-stress names :data:`PRESTRESS_KEYS` are present."""
+    return [pre for pre in dict.fromkeys(n[: -len(k)] for n in names for k in PRESTRESS_KEYS if n.endswith(k))
+            if all(pre + k in names for k in PRESTRESS_KEYS) and (pre == "" or pre.endswith("."))]
+
+
+def display_parameters(pars: Mapping[str, Any]) -> dict[str, Any]:
+    """``pars`` (name -> value, or name -> ``{"value", "se", "unit"}`` with values in SI) with
+    each pre-stress triple ``l1, l2, angle`` shown as ``λ1, λ2, θ`` of :func:`prestress_display`
+    (θ in degrees, unit ``"°"``; the standard errors follow their stretch, the angle's in
+    degrees); every other entry unchanged, in order. Only for display: the raw values stay in
+    the JSON as the fitter named them."""
+    out: dict[str, Any] = dict(pars)
+    for pre in _prestress_groups(list(pars)):
+        raw = [pars[pre + k] for k in PRESTRESS_KEYS]
+        vals = [num(r.get("value") if isinstance(r, Mapping) else r) for r in raw]
+        if any(v is None for v in vals):
+            continue
+        l1, l2, deg = prestress_display(*vals)   # type: ignore[arg-type]
+        swapped = vals[1] > vals[0]   # type: ignore[operator]
+        shown: dict[str, Any] = {}
+        for key, v, src, unit in (("λ1", l1, raw[1 if swapped else 0], "1"),
+                                  ("λ2", l2, raw[0 if swapped else 1], "1"), ("θ", deg, raw[2], "°")):
+            if isinstance(src, Mapping):
+                se = num(src.get("se"))
+                shown[pre + key] = {**src, "value": v, "unit": unit,
+                                    "se": None if se is None else (math.degrees(se) if key == "θ" else se)}
+            else:
+                shown[pre + key] = v
+        at = list(out).index(pre + PRESTRESS_KEYS[0])
+        rest = [(n, x) for n, x in out.items() if n not in {pre + k for k in PRESTRESS_KEYS}]
+        out = dict(rest[:at] + list(shown.items()) + rest[at:])
+    return out
+
+
 def parameter_text(pars: Mapping[str, Mapping[str, Any]]) -> str:
-    """``"n = v ± 1.96 se unit, ..."`` (one interval per estimate)."""
+    """``"n = v ± 1.96 se unit, ..."`` (one interval per estimate; pre-stress as
+    :func:`display_parameters` shows it)."""
+    pars = display_parameters(pars)
     return ", ".join(
         f"{n} = {v['value']:.4g}"
         + (f" ± {1.96 * v['se']:.2g}" if v.get("se") else "")
@@ -184,4 +236,5 @@ def messages(
     return out
 
 
-__all__ = ["added_messages", "disc_messages", "messages", "num", "parameter_text"]
+__all__ = ["PRESTRESS_KEYS", "added_messages", "disc_messages", "display_parameters", "messages", "num",
+           "parameter_text", "prestress_display"]

@@ -101,6 +101,13 @@ def measure_surface(path: str | Path, board_inner: tuple[int, int], square_m: fl
     cal = calibrate(boards.frames, board_inner, square_m, camera_names=list(boards.camera_names))
     with open_experiment(path, "a") as exp:
         exp.write_rig(cal.rig)
+        # the calibration's residuals beside the rig, under the name `skinkit vision calibrate`
+        # gives them, so that the session report shows them (the rig holds no residuals)
+        exp.write_calibration("rig", {
+            "images": CALIBRATION_SEQUENCE, "board_inner": [int(n) for n in board_inner],
+            "square_mm": float(square_m) * 1e3,
+            "rms_px": float(cal.rms_px), "per_camera_rms_px": [float(x) for x in cal.per_camera_rms_px],
+            "views": [int(v) for v in cal.detections.found.sum(axis=0)]})
     progress("calibrate rig", 1.0)
 
     progress("profile surface", 0.0)

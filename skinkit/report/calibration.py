@@ -111,6 +111,16 @@ def _reprojection(cals: dict[str, dict[str, Any]], rig: CameraRig | None) -> str
     return table(["calibration", "quantity", "camera", "value"], rows)
 
 
+def _overall_rms(cals: dict[str, dict[str, Any]]) -> float | None:
+    """The first overall reprojection RMS [px] a calibration stored (a number, not per camera)."""
+    for d in cals.values():
+        for key, v in _flatten(d):
+            if _is_reprojection(key) and "per_" not in key and isinstance(v, (int, float)) \
+                    and not isinstance(v, bool):
+                return float(v)
+    return None
+
+
 def _calibration(name: str, d: dict[str, Any]) -> str:
     rows = []
     for key, v in _flatten(d):
@@ -132,7 +142,9 @@ def section(exp: Experiment) -> Section:
                  "quantities as calibrated; distortion coefficients in OpenCV's order.</p>")
         body += _rig_table(rig) + img(_rig_figure(rig), "where the cameras sit and look")
         body += "<h4>Reprojection errors</h4>" + _reprojection(cals, rig)
-        what.append(plural(len(rig.cameras), "camera"))
+        overall = _overall_rms(cals)
+        what.append(plural(len(rig.cameras), "camera")
+                    + ("" if overall is None else f", reprojection RMS {num(overall, 3)} px"))
     if cals:
         body += "<h3>Calibrations stored</h3>" + "".join(_calibration(n, d) for n, d in cals.items())
         what.append(plural(len(cals), "calibration") + f" ({', '.join(cals)})")

@@ -22,9 +22,10 @@ def sections(path: str | os.PathLike[str]) -> tuple[str, list[Section]]:
     with open_experiment(path, "r") as exp:
         summary = exp.summary()
         stored = {n: exp.read_fit(n) for n in exp.fit_names()}
+        gap_reports = {n: exp.read_gap(n) for n in exp.gap_names()}
         out = [session.section(exp, summary), records.section(exp), lumped.section(exp, stored),
                calibration.section(exp), images.section(exp), profile.section(exp), tracks.section(exp),
-               fits.section(stored), gaps.section(exp)]
+               fits.section(stored, gap_reports), gaps.section(exp)]
     return Path(path).name, out
 
 

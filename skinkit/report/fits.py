@@ -1,14 +1,17 @@
 """The model identifications (FE and forward-model fits, ``skinkit fit``): parameters ± standard
 error, χ²/ν, the correlation matrix, the identifiability problems in words, the residual per
-protocol and channel, and the optimiser's path."""
+protocol and channel, measured against predicted over time, and the optimiser's path."""
 
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from skinkit.gap.html_series import section_series
 from skinkit.report.common import (
     Section,
     e,
@@ -82,7 +85,7 @@ def _correlation_figure(names: list[str], corr: np.ndarray) -> str:
                 ax.text(j, i, f"{v:+.2f}", ha="center", va="center", fontsize=6 if n > 8 else 7,
                         color="white" if abs(v) > 0.6 else "black",
                         weight="bold" if abs(v) >= STRONG_CORRELATION and i != j else "normal")
-    fig.colorbar(im, ax=ax, label="correlation", shrink=0.8)
+    fig.colorbar(im, ax=ax, label="correlation [1]", shrink=0.8)
     return png_uri(fig)
 
 
@@ -145,7 +148,7 @@ def _bars(d: dict[str, Any]) -> str:
     ax.barh(np.arange(len(names)), np.where(np.isfinite(v), v, 0.0), color="#2e86c1", height=0.7)
     ax.set_yticks(np.arange(len(names)), [mpl(x) for x in names], fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("Σz² of the protocol (noise-normalised residual)", fontsize=8)
+    ax.set_xlabel("Σz² of the protocol (noise-normalised residual) [1]", fontsize=8)
     ax.grid(axis="x", alpha=0.3)
     return png_uri(fig)
 
@@ -160,8 +163,8 @@ def _history(fit: FitResult) -> str:
     ax.plot(np.arange(1, len(obj) + 1), obj, "o-", ms=3)
     if np.nanmin(obj) > 0 and np.nanmax(obj) / np.nanmin(obj) > 20:
         ax.set_yscale("log")
-    ax.set_xlabel("forward evaluation", fontsize=8)
-    ax.set_ylabel("objective", fontsize=8)
+    ax.set_xlabel("forward evaluation [count]", fontsize=8)
+    ax.set_ylabel("objective [1 with the noise weighting]", fontsize=8)
     ax.grid(alpha=0.3)
     ax.tick_params(labelsize=7)
     return img(png_uri(fig), "the optimiser's path: objective per evaluation")
@@ -177,7 +180,45 @@ def _starts(fit: FitResult) -> str:
     return "<h4>Starts</h4>" + table(["start", "objective", "converged", "result"], rows)
 
 
-def _fit(name: str, fit: FitResult) -> str:
+def _series(name: str, fit: FitResult, gaps: Mapping[str, Mapping[str, Any]]) -> str:
+    """Measured against predicted over time: the fit's own series when it keeps one, else the
+    calibrated prediction of a gap report of the same model on this file (the diagnosis
+    calibrates the model on the same session; its χ²/ν is said beside this fit's)."""
+    out = "<h4>Measured against predicted</h4>"
+    series = fit.extra.get("series")
+    if isinstance(series, Mapping) and series:
+        return out + _nested_series({"series": series}, f"{slug(name)}-series")
+    for gname, rep in gaps.items():
+        gs = rep.get("series")
+        if rep.get("model") != fit.model or not isinstance(gs, Mapping) or not gs:
+            continue
+        calibrated = _only(gs, "calibrated")
+        chi = (rep.get("fit") or {}).get("chi2_per_dof")
+        return (out + f"<p>The fit keeps no prediction; drawn is the calibrated model of gap report "
+                f"<b>{e(gname)}</b> (the same model calibrated on this session by the diagnosis: χ²/ν "
+                f"{e(num(chi, 4))}, this fit's {e(num(fit.chi2_per_dof, 4))}).</p>"
+                + _nested_series({"series": calibrated}, f"{slug(name)}-series"))
+    return out + note("The fit keeps no prediction and no gap report of its model is stored: measured "
+                      "against predicted cannot be drawn (skinkit fit --out draws it beside the fit).")
+
+
+def _only(series: Mapping[str, Any], label: str) -> dict[str, Any]:
+    """``series`` (:mod:`skinkit.gap.series`) with the prediction ``label`` alone."""
+    def channel(ch: Mapping[str, Any]) -> dict[str, Any]:
+        return {**ch, "predicted": {k: v for k, v in (ch.get("predicted") or {}).items() if k == label}}
+
+    return {p: {**v, "channels": {c: channel(ch) for c, ch in (v.get("channels") or {}).items()}}
+            for p, v in series.items() if isinstance(v, Mapping)}
+
+
+def _nested_series(report: Mapping[str, Any], section_id: str) -> str:
+    """The measured-against-predicted section sat inside a fit's block (headings moved down)."""
+    html = section_series(report, section_id)
+    html = re.sub(r"<(/?)h3>", r"<\1h5>", html)
+    return re.sub(r"<h2>.*?</h2>", "", html, count=1)
+
+
+def _fit(name: str, fit: FitResult, gaps: Mapping[str, Mapping[str, Any]] | None = None) -> str:
     x = fit.extra
     chi = f(fit.chi2_per_dof)
     head = f'<div class="item" id="fit-{slug(name)}"><h3>{e(name)}: model {e(fit.model)}</h3>'
@@ -201,15 +242,17 @@ def _fit(name: str, fit: FitResult) -> str:
     if fit.correlation is not None and len(free) > 1:
         body += "<h4>Correlation of the free parameters</h4>" + img(
             _correlation_figure(free, np.asarray(fit.correlation, float)), f"{name}: correlation matrix")
+    body += _series(name, fit, gaps or {})
     body += _identifiability(fit) + _residuals(fit) + _history(fit) + _starts(fit)
     if facts:
         body += kv_table(facts)
     return body + "</div>"
 
 
-def section(fits: dict[str, FitResult]) -> Section:
+def section(fits: dict[str, FitResult], gaps: Mapping[str, Mapping[str, Any]] | None = None) -> Section:
     """The model identifications among ``fits`` (name → stored FitResult; the lumped ones are
-    left to :mod:`skinkit.report.lumped`)."""
+    left to :mod:`skinkit.report.lumped`); ``gaps``: the file's gap reports (name → JSON dict),
+    whose calibrated predictions stand in for a fit that keeps none."""
     mine = {n: r for n, r in fits.items() if not is_lumped(r)}
     title = "Model fits (identification)"
     if not mine:
@@ -217,6 +260,6 @@ def section(fits: dict[str, FitResult]) -> Section:
     intro = ("<p>Parameters identified by fitting a model's predictions of the session to its records "
              "(<code>skinkit fit</code>), SI units. The standard errors come from the Gauss–Newton "
              "covariance at the optimum, inflated by χ²/ν when the fit is worse than the noise.</p>")
-    body = intro + "".join(_fit(n, r) for n, r in mine.items())
+    body = intro + "".join(_fit(n, r, gaps) for n, r in mine.items())
     what = ", ".join(f"{n} (χ²/ν {num(r.chi2_per_dof, 3)})" for n, r in mine.items())
     return Section("fits", title, body, f"{plural(len(mine), 'fit')}: {what}")

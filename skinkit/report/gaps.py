@@ -1,6 +1,7 @@
 """The gap reports (``/gaps/<name>``), each drawn by the gap report's own section renderers
-(:mod:`skinkit.gap.html`: verdict, fit, residual by protocol/phase/channel, surface maps, score
-ranking, shrinkage, non-separable pairs, whiteness tests, naming rounds) nested in one section.
+(:mod:`skinkit.gap.html`: verdict, fit, measured against predicted, residual by
+protocol/phase/channel, surface maps, score ranking, shrinkage, non-separable pairs, whiteness
+tests, naming rounds) nested in one section.
 """
 
 from __future__ import annotations
@@ -10,11 +11,12 @@ from collections.abc import Mapping
 from typing import Any
 
 from skinkit.gap import html as gap_html
+from skinkit.gap.html_series import section_series
 from skinkit.report.common import Section, e, plural, slug
 from skinkit.store.experiment import Experiment
 
 #: the gap report's sections, in its own order
-RENDERERS = (gap_html._section_verdict, gap_html._section_fit, gap_html._section_residual,
+RENDERERS = (gap_html._section_verdict, gap_html._section_fit, section_series, gap_html._section_residual,
              gap_html._section_maps, gap_html._section_scores, gap_html._section_shrinkage,
              gap_html._section_separation, gap_html._section_tests, gap_html._section_rounds)
 
