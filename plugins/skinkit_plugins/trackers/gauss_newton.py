@@ -179,7 +179,7 @@ class _IcgnBatch:
         pixels, 0 at the others."""
         if self.wt is None:
             return a - a.mean(axis=1, keepdims=True)
-        wt = self.wt[act]
+        wt = self.wt if len(act) == self.n else self.wt[act]
         return (a - (np.sum(a * wt, axis=1) / self.cnt[act])[:, None]) * wt
 
     def _bounds_and_sample(self, act: np.ndarray, hw: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -196,7 +196,8 @@ class _IcgnBatch:
             lo_x, lo_y = np.where(sel, wx, np.inf).min(1), np.where(sel, wy, np.inf).min(1)
             hi_x, hi_y = np.where(sel, wx, -np.inf).max(1), np.where(sel, wy, -np.inf).max(1)
         out = (lo_x < 0) | (lo_y < 0) | (hi_x > w - 1) | (hi_y > h - 1)
-        wx, wy = wx[~out], wy[~out]
+        if out.any():
+            wx, wy = wx[~out], wy[~out]
         order, coef = self.trk.order, self.coef
         if self.sel is None:
             g = map_coordinates(coef, [wy.ravel(), wx.ravel()], order=order, prefilter=False,
@@ -242,13 +243,15 @@ class _IcgnBatch:
             dg = np.sqrt(np.sum(gz**2, axis=1))
             for j in act[dg == 0]:
                 why[j], quality[j] = "current subset has no texture", 0.0
-            act, gz, dg = act[dg != 0], gz[dg != 0], dg[dg != 0]
+            if np.any(dg == 0):
+                act, gz, dg = act[dg != 0], gz[dg != 0], dg[dg != 0]
+            every = len(act) == n  # no gathering of rows while every subset iterates
             df = self.df[act]
-            r = self.fz[act] - (df / dg)[:, None] * gz
+            r = (self.fz if every else self.fz[act]) - (df / dg)[:, None] * gz
             znssd[act] = np.sum(r**2, axis=1) / df**2
             # J^T r over the whole chunk (rows of finished subsets zero): cheaper than
             # gathering the active rows of the (K, 6, P) steepest-descent images
-            r_all = np.zeros_like(self.fz)
+            r_all = r if every else np.zeros_like(self.fz)
             r_all[act] = r
             JTr = np.einsum("nkp,np->nk", self.JT, r_all)[act]
             dp = -(Hinv[act] @ JTr[:, :, None])[:, :, 0]
