@@ -11,8 +11,7 @@ cannot render on the machine (the figure's title then says so, and a warning is 
   representative tracked points over time, measured and predicted), ``residual_map.png``
   (tracked points at their reference positions coloured by their RMS noise-normalised
   residual, over the session's surface profile when it has one) and ``correlation.png``
-  (the correlation matrix of the free parameters) and ``series-<protocol>.png`` (every
-  predicted channel over time, measured against predicted: :func:`series_plots`);
+  (the correlation matrix of the free parameters);
 * :func:`grid_plot` — an objective grid (:func:`skinkit.inverse.grid.objective_grid`):
   contours of Δ(2φ), the valley floor (the thesis's red line of Fig 7-10), the minimum, and
   the fit's 95 % indifference ellipses when a covariance is attached;
@@ -320,28 +319,6 @@ def correlation_plot(names: list[str], correlation: np.ndarray, path: Path, titl
     return _save(fig, path)
 
 
-def series_plots(observations: Observations, prediction: Prediction, out_dir: Path) -> list[Path]:
-    """``series-<protocol>.png`` per protocol: every predicted channel's components over time,
-    measured (dots) against predicted (line), forces in N and positions in mm
-    (:mod:`skinkit.gap.html_series` draws them, from :func:`skinkit.gap.series.compact_series`)."""
-    import base64
-    import re
-
-    from skinkit.gap.html_series import series_figure
-    from skinkit.gap.series import compact_series
-
-    made = []
-    for proto, entry in compact_series(observations, {"fitted": prediction}).items():
-        uri = series_figure(proto, entry["channels"])
-        if uri is None:
-            continue
-        path = Path(out_dir) / f"series-{re.sub(r'[^A-Za-z0-9_.-]+', '_', proto)}.png"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(base64.b64decode(uri.split(",", 1)[1]))
-        made.append(path)
-    return made
-
-
 def fit_plots(model: Any, observations: Observations, result: FitResult, out_dir: Path) -> list[Path]:
     """The plots of a fit (module docstring), written to ``out_dir``; their paths.
 
@@ -357,8 +334,7 @@ def fit_plots(model: Any, observations: Observations, result: FitResult, out_dir
     name = getattr(model, "name", result.model)
     made = [loops_plot(observations, pred, out_dir / "loops.png", f"{name}: tip force against displacement"),
             trajectories_plot(observations, pred, out_dir / "trajectories.png", f"{name}: tracked points"),
-            residual_map(observations, pred, out_dir / "residual_map.png", f"{name}: residual per point"),
-            *series_plots(observations, pred, out_dir)]
+            residual_map(observations, pred, out_dir / "residual_map.png", f"{name}: residual per point")]
     names = list(result.extra.get("free") or result.parameters.free_names)
     if result.correlation is not None and len(names) >= 2:
         made.append(correlation_plot(names, np.asarray(result.correlation), out_dir / "correlation.png",
@@ -481,4 +457,4 @@ def profile_plot(profile: dict[str, Any], path: Path) -> Path:
 
 
 __all__ = ["correlation_plot", "fit_plots", "grid_plot", "loops_plot", "point_residuals", "profile_plot",
-           "residual_map", "series_plots", "trajectories_plot"]
+           "residual_map", "trajectories_plot"]
