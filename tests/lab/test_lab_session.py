@@ -64,7 +64,9 @@ FE_SPEC = {
     "session": {"protocols": ["normal_indentation", "in_plane_090"],
                 "parameters": {"normal_indentation": {"periods": 1, "camera_rate": 0.5},
                                "in_plane_090": {"periods": 1, "camera_rate": 0.5}}},
-    "geometry": {"kind": "disc", "diameter": "20 mm", "indenter_diameter": "4 mm", "n_inner": 2, "n_ring": 2},
+    # one element across the indenter: its truth on its own mesh (17,199 unknowns) is the module's
+    # cost; the checks concern the session, not the model's accuracy
+    "geometry": {"kind": "disc", "diameter": "20 mm", "indenter_diameter": "4 mm", "n_inner": 1, "n_ring": 2},
     "layers": [
         {"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "neo-hookean-ni",
          "parameters": {"mu": "13.7 kPa", "K": "517 kPa"}},
