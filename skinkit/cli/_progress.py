@@ -37,6 +37,12 @@ HEARTBEAT_S = 10.0
 INTERVAL_ENV = "SKINKIT_PROGRESS_INTERVAL"
 
 
+def _json_output() -> bool:
+    """Whether the running command was asked for ``--json``."""
+    ctx = click.get_current_context(silent=True)
+    return bool(ctx is not None and ctx.params.get("as_json"))
+
+
 def verbosity() -> str:
     """The running command's verbosity (``"normal"`` outside a command line)."""
     ctx = click.get_current_context(silent=True)
@@ -202,14 +208,21 @@ class Progress:
         """:meth:`update`, under the name :func:`skinkit.forward.stages.feeding` looks for."""
         self.update(stage, fraction, note)
 
-    def say(self, text: str) -> None:
-        """A line of what the command does now, as such commands always wrote it (not with
-        ``--quiet``); it is also the current stage's note."""
+    def say(self, text: str, stdout: bool = False) -> None:
+        """A line of what the command does now, as such commands always wrote it: on stderr
+        (``stdout``: on stdout, where a command's own account of its work goes); not with
+        ``--quiet``, nor with ``--json``, whose stdout is the result and whose stderr is kept for
+        progress and errors. It is also the current stage's note."""
         if self.mode == QUIET:
             return
         with self._lock:
             self.note = text.strip()
-            self._print(text)
+            if _json_output():
+                return
+            if stdout and self._bar is None:
+                click.echo(text)
+            else:
+                self._print(text)
             self._last_line = time.monotonic()
 
     @contextmanager

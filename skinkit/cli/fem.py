@@ -82,7 +82,8 @@ def solve(model_file: str, out_dir: str | None, overwrite: bool, as_json: bool, 
             bar.update(label, t / end if end > 0 else None, f"t = {t:.4g} / {end:.4g}")
 
         if error_estimate or controlled:
-            model, sol, info = solve_with_estimate(spec, error_levels, progress=tick, log=bar.say)
+            model, sol, info = solve_with_estimate(spec, error_levels, progress=tick,
+                                                       log=lambda m: bar.say(m, stdout=True))
         else:
             sol, info = solve_model(model, progress=tick)
     with staged_dir(out) as tmp:  # nothing appears at --out unless every file is written
