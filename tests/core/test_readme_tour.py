@@ -5,8 +5,8 @@ with its fields for ParaView, and the FEBio export. Checked afterwards: the cali
 predicts exactly what the input model predicts at the fitted values (1e-10 relative: the values
 are written with 17 significant digits); the field series reads back in meshio and pyvista with
 the displacement, strain and stress arrays; the FEBio file, read back by plain XML parsing, holds
-the fitted values in FEBio's conventions (the uncoupled neo-Hookean skin as Mooney–Rivlin with
-c1 = μ/2, the subdermal neo-Hookean with E and ν; MPa).
+the fitted values in FEBio's conventions (both uncoupled neo-Hookean layers as Mooney–Rivlin with
+c1 = μ/2, c2 = 0 and k the bulk modulus, the subdermal layer's μ and K from its E and ν; MPa).
 """
 
 from __future__ import annotations
@@ -97,8 +97,10 @@ def test_the_febio_file_holds_the_fitted_values(tour):
     assert root.tag == "febio_spec" and root.get("version") == "4.0"
     mats = {m.get("name"): m for m in root.iter("material")}
     skin, sub = mats["skin"], mats["subdermal"]
-    assert skin.get("type") == "Mooney-Rivlin" and sub.get("type") == "neo-Hookean"
+    assert skin.get("type") == sub.get("type") == "Mooney-Rivlin"   # both uncoupled
     assert float(skin.findtext("c1")) == pytest.approx(mu / 2 * 1e-6, rel=1e-12)
     assert float(skin.findtext("c2")) == 0.0
-    assert float(sub.findtext("E")) == pytest.approx(E * 1e-6, rel=1e-12)
-    assert float(sub.findtext("v")) == pytest.approx(0.45, rel=1e-12)
+    assert float(skin.findtext("k")) == pytest.approx(500e3 * 1e-6, rel=1e-12)
+    nu = 0.45
+    assert float(sub.findtext("c1")) == pytest.approx(E / (2 * (1 + nu)) / 2 * 1e-6, rel=1e-12)
+    assert float(sub.findtext("k")) == pytest.approx(E / (3 * (1 - 2 * nu)) * 1e-6, rel=1e-12)
