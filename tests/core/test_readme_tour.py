@@ -70,6 +70,17 @@ def test_the_calibrated_model_predicts_as_the_fit(tour):
         assert np.max(np.abs(x.values - y.values)) <= RTOL * np.max(np.abs(x.values)), (p, c)
 
 
+def test_the_fit_lands_near_the_truth_with_the_mesh_error_carried(tour):
+    """The model's mesh errs by several noise levels against the truth's own mesh; carried as
+    noise, it keeps the fit within three standard errors of the truth (one seed: not a coverage
+    figure, a check that the intervals are not the noise's alone)."""
+    fit = json.loads((tour / "tour-fit" / "fit.json").read_text())
+    truth = {p["name"]: p["value"] for p in json.loads((tour / "tour-truth.json").read_text())["parameters"]}
+    for name in ("skin.mu", "subdermal.E"):
+        p = fit["parameters"][name]
+        assert abs(p["value"] - truth[name]) < 3 * p["se"], (name, p, truth[name])
+
+
 def test_the_fields_read_back_in_meshio_and_pyvista(tour):
     import meshio
     import pyvista as pv
