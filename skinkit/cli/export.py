@@ -23,13 +23,17 @@ def export() -> None:
 @click.option("--out", "out_file", required=True, type=click.Path(dir_okay=False),
               help="the FEBio model file to write (.feb)")
 @click.option("--overwrite", is_flag=True, help="replace an existing --out file")
+@click.option("--strict", is_flag=True,
+              help="refuse a feature whose nearest FEBio counterpart differs (default: export it, "
+                   "with a warning naming the difference)")
 def febio(model_file: str, session: str | None, protocol: str | None, out_file: str,
-          overwrite: bool) -> None:
+          overwrite: bool, strict: bool) -> None:
     """Write MODEL_FILE (a finite-element model) as an FEBio model (spec 4.0; mm, N, s, MPa).
 
     The mesh (hex27), the layers' materials, the fixed sets, the rigid indenter and its load
     curves: the model file's [load], or with --session the recorded drive of one protocol.
-    A feature FEBio has no exact counterpart of is refused, naming it.
+    A feature FEBio has no counterpart of is refused, naming it; one whose nearest counterpart
+    differs in a known way is exported with a warning naming the difference (--strict: refused).
     """
     from skinkit.export.febio import febio_model, write_feb
 
@@ -38,9 +42,11 @@ def febio(model_file: str, session: str | None, protocol: str | None, out_file: 
         raise SkinkitError(f"--out {out}: already exists; give another --out, or --overwrite to replace it")
     if protocol is not None and session is None:
         raise SkinkitError("--protocol: needs --session (the protocol is one of the session's)")
-    tree, summary = febio_model(model_file, session=session, protocol=protocol)
+    tree, summary = febio_model(model_file, session=session, protocol=protocol, strict=strict)
     with staged_file(out) as tmp:
         write_feb(tree, tmp)
+    for note in summary["approximations"]:
+        click.echo(f"warning: {note}", err=True)
     if summary["inverted_at_gauss_points"]:
         # the quadratic map of a strongly curved or graded element can fold near a corner: skinkit's
         # mesh as it is, which FEBio refuses at its first step ("negative jacobian")

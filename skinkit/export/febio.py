@@ -214,13 +214,15 @@ def _check_model(model: Any) -> None:
 
 
 def febio_model(model_file: str | os.PathLike, *, session: str | os.PathLike | None = None,
-                protocol: str | None = None) -> tuple[ET.ElementTree, dict[str, Any]]:
+                protocol: str | None = None, strict: bool = False) -> tuple[ET.ElementTree, dict[str, Any]]:
     """The FEBio model of ``model_file`` (an FE model file) and a summary of what it holds.
 
     ``session``: drive the indenter by that experiment file's (or CSV record's) recorded tip
     position or force (``[indenter] mode``) of ``protocol`` (needed when it has several).
     Raises :class:`SkinkitError` (one line) for a lumped model, a bad file, and
-    :class:`UnsupportedFeature` for a feature without an FEBio counterpart.
+    :class:`UnsupportedFeature` for a feature without an FEBio counterpart. A feature whose
+    nearest FEBio counterpart differs in a stated way (the GOH fibres' Macaulay switch) is
+    exported and listed in ``summary["approximations"]``; ``strict``: refused instead.
     """
     from skinkit.forward import model_kind, read_description
 
@@ -237,7 +239,8 @@ def febio_model(model_file: str | os.PathLike, *, session: str | os.PathLike | N
                            f"{model.name!r}); units: {UNITS}; FEBio spec {FEBIO_SPEC_VERSION} "))
     ET.SubElement(root, "Module", type="solid")
     _control(root, drive)
-    mats = _materials(root, model)
+    notes: list[str] | None = None if strict else []
+    mats = _materials(root, model, notes)
     probe = _probe_box(model)
     _mesh(root, model, probe)
     _domains(root, model, mats, probe is not None)
@@ -251,7 +254,7 @@ def febio_model(model_file: str | os.PathLike, *, session: str | os.PathLike | N
     conn = hex27_connectivity(model.mesh.nodes, model.mesh.elements)
     bad = int(np.sum(gauss_jacobians(model.mesh.nodes[conn]).min(axis=1) <= 0))
     summary = {"model": model.name, "nodes": model.mesh.n_nodes, "elements": model.mesh.n_elements,
-               "inverted_at_gauss_points": bad,
+               "inverted_at_gauss_points": bad, "approximations": list(notes or []),
                "materials": [m.region for m in model.problem.materials],
                "drive": None if drive is None else {"mode": drive.mode, "source": drive.source,
                                                     "steps": drive.n_steps, "duration": drive.duration},
@@ -288,13 +291,13 @@ def _control(root: ET.Element, drive: Drive | None) -> None:
     ET.SubElement(s, "symmetric_stiffness").text = "symmetric"
 
 
-def _materials(root: ET.Element, model: Any) -> dict[str, str]:
+def _materials(root: ET.Element, model: Any, notes: list[str] | None) -> dict[str, str]:
     """``<Material>``: one per layer, then the rigid body; region -> material name."""
     sec = ET.SubElement(root, "Material")
     names: dict[str, str] = {}
     for i, m in enumerate(model.problem.materials):
         names[m.region] = m.region
-        sec.append(material_element(m, i + 1, m.region, f"layers[{i}] ({m.region})"))
+        sec.append(material_element(m, i + 1, m.region, f"layers[{i}] ({m.region})", notes))
     if model.bc.rigid is not None and tuple(model.bc.rigid.components) == (0, 1, 2):
         rb = _rigid_name(model)
         el = ET.SubElement(sec, "material", id=str(len(names) + 1), name=rb, type="rigid body")

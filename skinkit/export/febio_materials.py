@@ -75,14 +75,22 @@ def neo_hookean_E_v(mu: float, lam: float) -> tuple[float, float]:
     return mu * (3 * lam + 2 * mu) / (lam + mu), lam / (2 * (lam + mu))
 
 
-def _goh(tag: str, law: Any, p: Mapping[str, float], entry: str) -> ET.Element:
+def _goh(tag: str, law: Any, p: Mapping[str, float], entry: str,
+         notes: list[str] | None = None) -> ET.Element:
     if int(getattr(law, "families", 2)) != 2:
         raise UnsupportedFeature(f"{entry} goh families = 1", "FEBio's Holzapfel-Gasser-Ogden "
                                  "material always has two fibre families at +-gamma")
     if getattr(law, "switch", "febio") != "febio":
-        raise UnsupportedFeature(f"{entry} goh switch = {law.switch!r}", "FEBio's "
-                                 "Holzapfel-Gasser-Ogden material activates a family where I4 > 1 "
-                                 "(switch = 'febio'); the Macaulay bracket <E> has no FEBio counterpart")
+        feature = f"{entry} goh switch = {law.switch!r}"
+        why = ("FEBio's Holzapfel-Gasser-Ogden material activates a family where I4 > 1 "
+               "(switch = 'febio'); the Macaulay bracket <E> has no FEBio counterpart")
+        if notes is None:
+            raise UnsupportedFeature(feature, why)
+        # the same energy wherever both switches agree (a stretched family with E > 0): the
+        # nearest FEBio material, said as such rather than refused
+        notes.append(f"{feature}: exported with FEBio's switch (a family active where I4 > 1, "
+                     "not where E > 0); the two differ where a family is stretched but E <= 0, "
+                     "or shortened with E > 0")
     el = _uncoupled(tag, "Holzapfel-Gasser-Ogden", law, p["k"], entry)
     add_param(el, "c", p["c"] * PA_TO_MPA)
     add_param(el, "k1", p["k1"] * PA_TO_MPA)
@@ -110,9 +118,11 @@ def _ogden(tag: str, law: Any, p: Mapping[str, float], entry: str) -> ET.Element
     return el
 
 
-def elastic_element(tag: str, law: Any, p: Mapping[str, float], entry: str) -> ET.Element:
+def elastic_element(tag: str, law: Any, p: Mapping[str, float], entry: str,
+                    notes: list[str] | None = None) -> ET.Element:
     """The FEBio element (tag ``tag``) of the elastic law ``law`` at SI parameters ``p``;
-    ``entry`` names the layer in errors (``layers[0] (skin)``)."""
+    ``entry`` names the layer in errors (``layers[0] (skin)``). ``notes``: where a feature has
+    a near but not exact FEBio counterpart, it is exported and said here (None: refused)."""
     name = str(getattr(law, "name", type(law).__name__))
     if name == "neo-hookean":
         E, v = neo_hookean_E_v(p["mu"], p["lam"])
@@ -138,7 +148,7 @@ def elastic_element(tag: str, law: Any, p: Mapping[str, float], entry: str) -> E
     if name == "ogden":
         return _ogden(tag, law, p, entry)
     if name == "goh":
-        return _goh(tag, law, p, entry)
+        return _goh(tag, law, p, entry, notes)
     raise UnsupportedFeature(f"{entry} law {name!r}", "no FEBio material with the same energy is "
                              "known to the exporter (exported: neo-hookean, neo-hookean-ni, "
                              "neo-hookean-enu, mooney-rivlin, ogden, goh, and qlv around them)")
@@ -171,10 +181,11 @@ def _viscoelastic(inner: ET.Element, g: np.ndarray, tau: np.ndarray, entry: str)
     return el
 
 
-def material_element(mat: Any, mid: int, name: str, entry: str) -> ET.Element:
+def material_element(mat: Any, mid: int, name: str, entry: str,
+                     notes: list[str] | None = None) -> ET.Element:
     """The top-level ``<material id name type>`` of a :class:`skinkit.fem.problem.Material`:
     the elastic law, wrapped in ``prestrain elastic`` when the layer has an F0 and in
-    ``viscoelastic`` when the law is QLV."""
+    ``viscoelastic`` when the law is QLV; ``notes`` as for :func:`elastic_element`."""
     law, p = mat.law, {k: float(np.real(v)) for k, v in dict(mat.params).items()}
     prony = None
     if getattr(law, "name", "") == "qlv":
@@ -185,7 +196,7 @@ def material_element(mat: Any, mid: int, name: str, entry: str) -> ET.Element:
         prony = (np.real(np.asarray(g, dtype=float)), np.asarray(tau, dtype=float))
         p = {q.name: p[q.name] for q in elastic.parameters()}
         law = elastic
-    el = elastic_element("elastic", law, p, entry)
+    el = elastic_element("elastic", law, p, entry, notes)
     if mat.F0 is not None:
         el = _prestrain(el, mat.F0, entry)
     if prony is not None:

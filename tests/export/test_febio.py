@@ -380,8 +380,8 @@ def _one_line_error(r, *needles: str) -> None:
 
 def test_features_without_an_febio_counterpart_are_named(tmp_path):
     out = tmp_path / "m.feb"
-    # the Macaulay fibre switch of the in vivo examples
-    _one_line_error(_run(str(example_model("invivo_goh_qlv")), "--out", str(out)),
+    # the Macaulay fibre switch of the in vivo examples, under --strict
+    _one_line_error(_run(str(example_model("invivo_goh_qlv")), "--out", str(out), "--strict"),
                     "goh switch = 'macaulay'", "layers[0] (skin)")
     spec = _GOH_QLV.replace("families = 2", "families = 1")
     (tmp_path / "one.toml").write_text(spec)
@@ -409,3 +409,17 @@ def test_bad_inputs_are_one_line(tmp_path):
     assert _run(model, "--out", str(existing), "--overwrite").exit_code == 0
     assert existing.read_text().startswith("<?xml")
     _one_line_error(_run(model, "--out", str(tmp_path / "p.feb"), "--protocol", "x"), "--protocol")
+
+
+def test_the_macaulay_switch_is_exported_with_a_warning_naming_it(tmp_path):
+    """Without --strict: FEBio's Holzapfel-Gasser-Ogden with its own switch (I4 > 1), the
+    difference said in one warning line, the GOH parameters written as for switch = 'febio'."""
+    out = tmp_path / "m.feb"
+    r = _run(str(example_model("invivo_quick")), "--out", str(out))
+    assert r.exit_code == 0, r.output
+    warnings = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
+    assert any("goh switch = 'macaulay'" in w and "I4 > 1" in w for w in warnings), r.stderr
+    mats = {m.get("name"): m for m in ET.parse(out).getroot().iter("material")}
+    goh = next(m for m in mats["skin"].iter() if m.get("type") == "Holzapfel-Gasser-Ogden")
+    assert float(goh.findtext("k1")) == pytest.approx(20e3 * 1e-6, rel=1e-12)   # 20 kPa in MPa
+    assert float(goh.findtext("gamma")) == pytest.approx(30.0, rel=1e-12)
