@@ -86,6 +86,7 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
         if not summary["samples"]:
             # a residual over no sample (chi2 nan) would read as a prediction that ran
             raise SkinkitError(_nothing_predicted(model, session, axis))
+        summary.update(_calibrated_dof(model_file, summary))
         summary["model"] = model.name
         summary["session"] = str(session)
         summary["inputs"] = pred.inputs
@@ -101,9 +102,20 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
     if as_json:
         click.echo(jsonio.dumps(summary, indent=2, default=float))
         return
-    click.echo(f"{model.name} on {session}: chi2/sample {summary['chi2_per_sample']:.3g} over "
+    _echo(summary, model.name, session)
+
+
+def _echo(summary: dict, name: str, session: str) -> None:
+    """The residual summary as text: the whole, the calibrated figure, per protocol and channel."""
+    click.echo(f"{name} on {session}: chi2/sample {summary['chi2_per_sample']:.3g} over "
                f"{summary['samples']} samples (noise alone: {summary['noise_only_range_999'][0]:.3g}.."
                f"{summary['noise_only_range_999'][1]:.3g})")
+    if "chi2_per_dof" in summary:
+        cal = summary["calibration"]
+        fit = cal["fit_chi2_per_dof"]
+        click.echo(f"  calibrated model: chi2/dof {summary['chi2_per_dof']:.6g} over {cal['dof']} dof "
+                   f"({cal['fitted_parameters']} fitted parameters)"
+                   + (f"; the fit reported {fit:.6g}" if isinstance(fit, float) else ""))
     for proto, chans in summary["protocols"].items():
         for cname, c in chans.items():
             rms = ", ".join(f"{v:.3g}" for v in c["rms"])
@@ -112,6 +124,27 @@ def predict(model_file: str, session: str, protocols: str | None, until_s: float
                        f"{'  (held out)' if c['held_out'] else ''}")
     for path in summary.get("vtu", {}).values():
         click.echo(f"wrote {path}")
+
+
+def _calibrated_dof(model_file: str, summary: dict) -> dict:
+    """For a calibrated model file (its ``[calibration]`` table lists the fitted parameters):
+    ``chi2_per_dof`` = χ² / (samples − fitted parameters), the figure the fit reported, and the
+    fit's own under ``calibration``; nothing for another model file."""
+    from skinkit.errors import SkinkitError as _Unreadable
+    from skinkit.fem.model import read_model
+    from skinkit.inverse.calibrated import CALIBRATION_TABLE
+
+    try:
+        cal = read_model(model_file).get(CALIBRATION_TABLE)
+    except (OSError, ValueError, _Unreadable):   # read again here only for its [calibration] table
+        return {}
+    if not isinstance(cal, dict) or not isinstance(cal.get("parameters"), dict):
+        return {}
+    k = len(cal["parameters"])
+    dof = max(int(summary["samples"]) - k, 1)
+    return {"chi2_per_dof": float(summary["chi2"]) / dof,
+            "calibration": {"fitted_parameters": k, "dof": dof,
+                            "fit_chi2_per_dof": cal.get("chi2_per_dof"), "session": cal.get("session")}}
 
 
 def _check_vtu(model, obs, vtu_dir: str, overwrite: bool) -> Path:

@@ -164,3 +164,21 @@ mode = "displacement"
         write_calibrated(tmp_path / "no", spec, {"nowhere.x": 1.0}, {}, session="s.h5", objective="noise",
                          command="test")
     assert not (tmp_path / "no" / "model.toml").exists()
+
+
+def test_predict_of_the_calibrated_model_reports_the_fits_chi2_per_dof(session, tmp_path):
+    """χ² / (samples − fitted parameters) of the calibrated file's prediction is the fit's own
+    figure (the same residual at the same values: equal to rounding); a model file without a
+    [calibration] table reports no such figure."""
+    out = tmp_path / "fit"
+    r = CliRunner().invoke(main, ["fit", str(LUMPED), str(session), "--out", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    fit = json.loads(r.stdout)
+    r = CliRunner().invoke(main, ["predict", str(out / "model.toml"), str(session), "--json"])
+    assert r.exit_code == 0, r.output
+    pred = json.loads(r.stdout)
+    n_free = sum(1 for p in fit["parameters"].values() if p["free"])
+    assert pred["calibration"]["fitted_parameters"] == n_free
+    assert pred["chi2_per_dof"] == pytest.approx(fit["chi2_per_dof"], rel=1e-9)
+    r = CliRunner().invoke(main, ["predict", str(LUMPED), str(session), "--json"])
+    assert "chi2_per_dof" not in json.loads(r.stdout)
