@@ -93,8 +93,9 @@ def folder(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def session(folder) -> tuple[Path, str, float]:
+    # a heartbeat of 0.1 s: the tiny truth solves in about a second, and the log must show it advance
     p, err, wall = _run(["lab", "session", "one.toml", "--out", "s.h5", "--truth-out", "t.json",
-                         "--seed", "1", "--shared-mesh"], folder, "lab")
+                         "--seed", "1", "--shared-mesh"], folder, "lab", interval=0.1)
     assert p.returncode == 0, err
     return folder / "s.h5", err, wall
 
