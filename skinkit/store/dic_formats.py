@@ -233,7 +233,9 @@ def _unit_scale(where: str, name: str, own: str | None, kind: str, unit: str | N
     return METRIC_UNITS[u]
 
 
-def _cell(text: str, where: str, col: str) -> float:
+def parse_cell(text: str, where: str, col: str) -> float:
+    """One numeric cell of a track file: empty, nan, na and null are missing (NaN); anything
+    else that is not a number is refused naming ``where`` and the column ``col``."""
     t = text.strip()
     if t == "" or t.lower() in ("nan", "na", "null"):
         return float("nan")
@@ -260,10 +262,10 @@ def _read_frame(path: Path, spec: _Spec, columns: str | None, unit: str | None,
             raise StoreError(where, "", f"has {len(row)} fields, the header {len(names)}")
         x = np.zeros(3)
         for i, (axis, _disp) in c.coords.items():
-            x[axis] += _cell(row[i], where, names[i]) * c.scale[i]
+            x[axis] += parse_cell(row[i], where, names[i]) * c.scale[i]
         good = bool(np.all(np.isfinite(x)))
         if c.sigma is not None:
-            s = _cell(row[c.sigma], where, names[c.sigma])
+            s = parse_cell(row[c.sigma], where, names[c.sigma])
             good = good and bool(np.isfinite(s) and s >= 0)
         ids.append(row[c.point_id].strip() if c.point_id is not None else str(len(ids)))
         pos.append(x if good else np.full(3, np.nan))

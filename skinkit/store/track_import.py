@@ -41,6 +41,7 @@ import numpy as np
 from skinkit.errors import SchemaError, StoreError
 from skinkit.schemas import SurfaceTrack
 from skinkit.store.dic_formats import COLUMN_SETS, FORMATS, read_frames, source_files
+from skinkit.store.dic_formats import parse_cell as _number
 
 #: metres per unit; ``px`` is scaled by the caller's metres per pixel
 UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6, "px": None}
@@ -77,16 +78,6 @@ def _column(name: str, long_form: bool) -> tuple[str, str | None, str | None] | 
     if point is None or (point in UNITS and unit is None):
         return None  # x_mm in a file without a point column: not a per-point column
     return axis, point, unit
-
-
-def _number(text: str, where: str, col: str) -> float:
-    t = text.strip()
-    if t == "" or t.lower() in ("nan", "na", "null"):
-        return float("nan")
-    try:
-        return float(t)
-    except ValueError:
-        raise StoreError(where, "", f"column {col!r}: {t!r} is not a number") from None
 
 
 def read_tracks_csv(path: str | os.PathLike[str], unit: str | None = None, m_per_px: float | None = None,
