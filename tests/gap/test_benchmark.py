@@ -2,7 +2,8 @@
 
 One small run (two effects at moderate magnitude, three null sessions, one seed; the
 extension-relaxation lumped model pulled through three 10 s cycles, 30,001 force samples) is
-shared by the tests. Thresholds, and why:
+shared by the tests, and with the journal's tests (``lumped_benchmark`` in ``conftest.py``).
+Thresholds, and why:
 
 * **false alarms**: the diagnosis names an effect only when the global χ² test (α = 0.05) finds a
   gap, so a null session raises one with probability ≤ 0.05 (the issue's bound); two or more of
@@ -28,21 +29,21 @@ from skinkit.bench.gap_benchmark import (
     effect_at,
     run,
 )
+from tests.gap._shared import BENCHMARK, BENCHMARK_NULLS
 
 # the laws, effects and optimisers these tests use are built-in plugins
-# one xdist worker runs these: it builds the module's benchmark run once
+# one xdist worker runs these and the journal's tests: it builds the shared benchmark run once
 pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("gap_benchmark")]
 
-EFFECTS = ["viscoelastic", "force-drift"]
-NULLS = 3
+EFFECTS = BENCHMARK["effects"]
+NULLS = BENCHMARK_NULLS
 KEYS = ("top1_accuracy", "null_false_alarm_rate", "localisation_accuracy", "magnitude_error_median",
         "shrinkage_error_median", "confusion", "cases", "wall_s")
 
 
 @pytest.fixture(scope="module")
-def result() -> dict:
-    return run(False, model="lumped", effects=EFFECTS, magnitudes=["moderate"], seeds=1, nulls=NULLS,
-               pairs=0, parallel=1)
+def result(lumped_benchmark: tuple[object, dict]) -> dict:
+    return lumped_benchmark[1]
 
 
 def test_keys_and_cases(result: dict) -> None:

@@ -1,8 +1,9 @@
 """The benchmark's journal: a stopped or extended run reruns nothing it has recorded.
 
-On the lumped preset (seconds per case): one effect at moderate magnitude and one null session,
-then the same run asking for a second null session — only that one runs, the others come back
-from the file as they were written.
+On the lumped preset (seconds per case): the benchmark's own run (two effects at moderate
+magnitude and three null sessions, journaled; ``lumped_benchmark`` in ``conftest.py``), then the
+same run asking for a fourth null session — only that one runs, the others come back from the
+file as they were written.
 """
 
 from __future__ import annotations
@@ -14,35 +15,39 @@ import pytest
 
 from skinkit.bench.gap_benchmark import BenchmarkError, execution_order, run
 from skinkit.bench.gap_journal import Journal, JournalError
+from tests.gap._shared import BENCHMARK_NULLS, run_benchmark
 
+# the first run is the benchmark tests' run: the same xdist group, so that one worker builds it
 pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("gap_benchmark")]
+
+#: every case the shared run records: its effects' at moderate magnitude and its null sessions
+RECORDED = ["force-drift/moderate/0", "null/1000", "null/1001", "null/1002", "viscoelastic/moderate/0"]
 
 
 def _run(path: Path, nulls: int, lines: list[str] | None = None, **kw: object) -> dict:
     say = (lambda s: lines.append(s)) if lines is not None else None
-    return run(False, model="lumped", effects=["force-drift"], magnitudes=["moderate"], seeds=1, nulls=nulls,
-               pairs=0, parallel=1, journal=path, progress=say, **kw)
+    return run_benchmark(path, nulls, progress=say, **kw)
 
 
 @pytest.fixture(scope="module")
-def first(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
-    path = tmp_path_factory.mktemp("journal") / "run.jsonl"
-    return path, _run(path, nulls=1)
+def first(lumped_benchmark: tuple[Path, dict]) -> tuple[Path, dict]:
+    return lumped_benchmark
 
 
 def test_an_extended_run_reruns_nothing_recorded(first: tuple[Path, dict], tmp_path: Path) -> None:
     src, res1 = first
+    assert sorted(r["id"] for r in res1["cases"]) == RECORDED
     path = tmp_path / "run.jsonl"
     path.write_bytes(src.read_bytes())
     # a crash while a line was written leaves it cut short: it is dropped, the rest kept
     with open(path, "a", encoding="utf-8") as f:
         f.write('{"case": {"id": "null/10')
     lines: list[str] = []
-    res2 = _run(path, nulls=2, lines=lines)
-    assert res1["resumed_cases"] == 0 and res2["resumed_cases"] == 2
+    res2 = _run(path, nulls=BENCHMARK_NULLS + 1, lines=lines)
+    assert res1["resumed_cases"] == 0 and res2["resumed_cases"] == len(RECORDED)
     assert not any(s.startswith("calibrate") for s in lines)     # the calibration came from the file
     ran = [s for s in lines if s.startswith("case ")]
-    assert len(ran) == 1 and "null/1001" in ran[0]
+    assert len(ran) == 1 and "null/1003" in ran[0]
     by_id = {r["id"]: r for r in res2["cases"]}
     for r in res1["cases"]:                                      # the recorded cases, as they were
         assert by_id[r["id"]]["wall_s"] == r["wall_s"]
@@ -50,17 +55,16 @@ def test_an_extended_run_reruns_nothing_recorded(first: tuple[Path, dict], tmp_p
     assert res2["top1_accuracy"] == res1["top1_accuracy"]
     recs = [json.loads(s) for s in path.read_text(encoding="utf-8").splitlines()]
     assert recs[0]["journal"] == "skinkit gap benchmark"
-    assert sorted(r["case"]["id"] for r in recs if "case" in r) == ["force-drift/moderate/0", "null/1000",
-                                                                     "null/1001"]
+    assert sorted(r["case"]["id"] for r in recs if "case" in r) == sorted(RECORDED + ["null/1003"])
 
 
 def test_recorded_only_scores_the_journal_and_runs_nothing(first: tuple[Path, dict]) -> None:
     path, res1 = first
     size = path.stat().st_size
     lines: list[str] = []
-    res = _run(path, nulls=5, lines=lines, recorded_only=True)
+    res = _run(path, nulls=BENCHMARK_NULLS + 2, lines=lines, recorded_only=True)
     assert path.stat().st_size == size and not any(s.startswith(("case ", "calibrate")) for s in lines)
-    assert res["planned_cases"] == 6 and len(res["cases"]) == 2
+    assert res["planned_cases"] == len(RECORDED) + 2 and len(res["cases"]) == len(RECORDED)
     assert res["null_false_alarm_rate"] == res1["null_false_alarm_rate"]
     assert res["top1_accuracy"] == res1["top1_accuracy"]
     with pytest.raises(BenchmarkError, match="--journal"):
