@@ -4,7 +4,7 @@ Lumped sessions (:class:`skinkit.inverse.coverage.LabSessions`: the virtual lab'
 white noise at the lab's declared levels per seed, the drive exact) of a quasi-static exponential
 element indented through a ramp-and-hold and the normal sinusoid. The model under test is the
 element alone; the truth adds one lumped effect at a moderate magnitude, or nothing (null
-sessions). One small finite-element case runs the whole path end to end.
+sessions, on a shorter programme). One small finite-element case runs the whole path end to end.
 """
 
 from __future__ import annotations
@@ -24,12 +24,19 @@ SPEC = {"model": {"kind": "lumped", "name": "gap-lumped"},
                    "elastic": "exponential", "parameters": {"a": "15 mN", "b": 800.0}},
         "session": {"protocols": ["preconditioning", "normal_indentation"],
                     "parameters": {"preconditioning": {"hold": 15.0}, "normal_indentation": {"periods": 2}}}}
+# the null sessions' programme: a 5 s hold and one period (17,001 samples per channel instead of
+# 37,002). Whether honest rules name nothing when the truth is the model does not depend on the
+# record's length (each test keeps its level at any length), and the score step's cost is per sample.
+NULL_SPEC = copy.deepcopy(SPEC)
+NULL_SPEC["session"]["parameters"] = {"preconditioning": {"hold": 5.0}, "normal_indentation": {"periods": 1}}
+# the force-offset diagnosis two tests read: one xdist worker makes it once
+OFFSET_GROUP = pytest.mark.xdist_group("gap_diagnose_offset")
 
 
-def _lab(effect: dict | None):
+def _lab(effect: dict | None, spec: dict = SPEC):
     from skinkit.inverse.coverage import LabSessions
 
-    truth = copy.deepcopy(SPEC)
+    truth = copy.deepcopy(spec)
     if effect is not None:
         truth["effects"] = [effect]
     return LabSessions(truth)
@@ -79,10 +86,18 @@ def test_withheld_relaxation_is_named_and_quantified():
     assert len(rep.named) == 1 and d["rounds"][-1]["named"] is None
 
 
-def test_force_offset_is_named_in_the_fitted_protocols():
+@pytest.fixture(scope="module")
+def offset_report():
+    """Truth: a 10 mN offset of the force sensor (2.6 noise levels on every sample), diagnosed
+    with two refits per round and up to two rounds."""
+    return diagnose(SPEC, _lab({"name": "force-offset", "z": 0.01})(2), candidates=2)
+
+
+@OFFSET_GROUP
+def test_force_offset_is_named_in_the_fitted_protocols(offset_report):
     """Truth: a 10 mN offset of the force sensor (2.6 noise levels on every sample). Named, its
     value within 4 standard errors, and the cells of step 1 shrink to the noise level."""
-    rep = diagnose(SPEC, _lab({"name": "force-offset", "z": 0.01})(2), candidates=2)
+    rep = offset_report
     assert rep.named == ["force-offset"]
     z = rep.candidates[0].parameters["force-offset.z"]
     assert abs(z["value"] - 0.01) < 4 * z["se"]
@@ -96,9 +111,9 @@ def test_null_sessions_name_nothing():
     """Truth = the model: nothing named, and the verdict says so plainly. Per session the chance of
     naming an effect is below K · P(χ²₁ > 12) ≈ 3e-3 (the AIC margin), so four seeds that name
     nothing are what honest rules give (a failure is not bad luck at 1 %)."""
-    lab = _lab(None)
+    lab = _lab(None, NULL_SPEC)
     for seed in range(4):
-        rep = diagnose(SPEC, lab(seed), max_effects=2)
+        rep = diagnose(NULL_SPEC, lab(seed), max_effects=2)
         assert rep.named == [], (seed, rep.to_dict()["rounds"])
         d = rep.to_dict()
         assert d["shrinkage"]["overall"] == 0.0
@@ -127,12 +142,14 @@ def test_bad_inputs_are_one_line_errors():
         diagnose(spec, obs, effects=["viscoelastic"])
 
 
-def test_report_is_stored_in_the_experiment_file(tmp_path):
-    """write_gap keeps the JSON form; GapReport.from_dict reads it back whole."""
+@OFFSET_GROUP
+def test_report_is_stored_in_the_experiment_file(tmp_path, offset_report):
+    """write_gap keeps the JSON form; GapReport.from_dict reads it back whole (the force-offset
+    test's report: a named effect, its refits, a second round)."""
     from skinkit.schemas import GapReport
     from skinkit.store import create_experiment, open_experiment
 
-    rep = diagnose(SPEC, _lab({"name": "force-offset", "z": 0.01})(3), candidates=1, max_effects=1)
+    rep = offset_report
     path = tmp_path / "s.h5"
     with create_experiment(path) as exp:
         exp.write_gap("gap-test", rep)

@@ -2,18 +2,20 @@
 bad options refused, and the same numbers in the JSON, stdout and the HTML page.
 
 Sessions are made here with numpy (an exponential element with a Prony relaxation, written as
-a hereditary integral), not with the effect plugins the diagnosis tests."""
+a hereditary integral), not with the effect plugins the diagnosis tests. The command line runs
+in this process (click's runner, the same ``cli.main`` that ``python -m skinkit`` calls): what is
+tested is its exit status and its one-line errors, not the interpreter's start."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from skinkit.cli import cli
 from skinkit.forward.observations import channels_from_record
 from skinkit.gap.diagnose import GapError, diagnose
 from skinkit.inverse.fit import FitError
@@ -49,6 +51,18 @@ def _relaxing_session(g: float = 0.4, tau: float = 4.0, seed: int = 0) -> Observ
                         "relaxing truth")
 
 
+def _skinkit(*args: str):
+    """``skinkit ARGS`` run in this process: the click result (exit_code, stdout, stderr)."""
+    return CliRunner().invoke(cli, list(args))
+
+
+@pytest.fixture(scope="module")
+def without_refits():
+    """The relaxing session diagnosed with ``max_effects=0`` (located and scored, nothing refitted):
+    the same diagnosis for the tests that read it."""
+    return diagnose(MODEL, _relaxing_session(), max_effects=0)
+
+
 def _kinds(report) -> dict[str, list[dict]]:
     out: dict[str, list[dict]] = {}
     for w in report.to_dict()["warnings"]:
@@ -64,17 +78,17 @@ def test_a_calibration_stopped_at_its_evaluation_limit_is_stated():
     assert any(m.startswith("Warning: the calibration did not converge") for m in d["messages"])
 
 
-def test_an_offset_that_took_over_the_relaxed_force_is_stated():
+def test_an_offset_that_took_over_the_relaxed_force_is_stated(without_refits):
     # without relaxation in the model, the fitted zero drops to meet the relaxed holds: at rest
     # the model then misses the readings by far more than the noise
-    rep = diagnose(MODEL, _relaxing_session(), max_effects=0)
+    rep = without_refits
     missed = _kinds(rep).get("rest-readings-missed")
     assert missed and abs(missed[0]["value"]) > 3 * 2e-3
     assert any("rest segment" in m for m in rep.to_dict()["messages"])
 
 
-def test_max_effects_zero_does_not_say_no_test_is_significant():
-    d = diagnose(MODEL, _relaxing_session(), max_effects=0).to_dict()
+def test_max_effects_zero_does_not_say_no_test_is_significant(without_refits):
+    d = without_refits.to_dict()
     text = " ".join(d["messages"])
     assert "No installed effect's score test is significant" not in text
     assert "no candidate was refitted" in text
@@ -103,9 +117,8 @@ def test_a_refit_the_solver_gives_up_on_is_stated(monkeypatch):
 def test_min_share_outside_its_range_is_refused(bad):
     with pytest.raises(GapError, match=r"--min-share must be in \(0, 1\]"):
         diagnose(MODEL, _relaxing_session(), min_share=bad)
-    out = subprocess.run([sys.executable, "-m", "skinkit", "gap", "diagnose", str(MODEL), str(REAL),
-                          "--min-share", str(bad)], capture_output=True, text=True)
-    assert out.returncode != 0 and "--min-share must be in (0, 1]" in out.stderr
+    out = _skinkit("gap", "diagnose", str(MODEL), str(REAL), "--min-share", str(bad))
+    assert out.exit_code != 0 and "--min-share must be in (0, 1]" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
 
 
@@ -117,17 +130,15 @@ def test_a_noise_model_that_cannot_be_estimated_says_how_many_samples(tmp_path):
     csv = tmp_path / "no_rest.csv"
     np.savetxt(csv, np.column_stack([t, 1e3 * u, f]), delimiter=",", header="time_s,displacement_mm,force_N",
                comments="")
-    out = subprocess.run([sys.executable, "-m", "skinkit", "gap", "diagnose", str(MODEL), str(csv),
-                          "--noise", "ar"], capture_output=True, text=True)
-    assert out.returncode != 0
+    out = _skinkit("gap", "diagnose", str(MODEL), str(csv), "--noise", "ar")
+    assert out.exit_code != 0
     assert "at least 200 are needed" in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
 @pytest.mark.skipif(not REAL.is_file(), reason="the real record is not beside the checkout")
 def test_real_record_verdict_agrees_in_json_stdout_and_html(tmp_path):
-    out = subprocess.run([sys.executable, "-m", "skinkit", "gap", "diagnose", str(MODEL), str(REAL),
-                          "--out", str(tmp_path / "gap")], capture_output=True, text=True)
-    assert out.returncode == 0, out.stderr
+    out = _skinkit("gap", "diagnose", str(MODEL), str(REAL), "--out", str(tmp_path / "gap"))
+    assert out.exit_code == 0, out.stderr
     d = json.loads((tmp_path / "gap" / "gap.json").read_text())
     html = (tmp_path / "gap" / "gap.html").read_text()
     import html as html_mod
