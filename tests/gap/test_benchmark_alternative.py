@@ -14,12 +14,12 @@ from __future__ import annotations
 import ast
 import json
 import math
-import subprocess
-import sys
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from scipy.integrate import quad
 
 from skinkit.bench import gap_alternative as ga
@@ -278,9 +278,17 @@ def test_every_form_is_clearly_visible_or_a_null() -> None:
 
 
 # -- the command line ----------------------------------------------------------------------------------
-def _skinkit(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "skinkit", *args], capture_output=True, text=True, cwd=cwd,
-                          check=False)
+def _skinkit(*args: str, cwd: Path):
+    """``skinkit ARGS`` run in this process from ``cwd`` (click's runner, the same ``cli.main``
+    that ``python -m skinkit`` calls): the result's exit_code, stdout and stderr."""
+    from skinkit.cli import cli
+
+    here = Path.cwd()
+    os.chdir(cwd)
+    try:
+        return CliRunner().invoke(cli, list(args))
+    finally:
+        os.chdir(here)
 
 
 @pytest.mark.needs_plugins
@@ -289,7 +297,7 @@ def test_quick_run_through_the_command_line(tmp_path: Path) -> None:
     # one form per family: the fewest cases that exercise every family and every score
     out = _skinkit("gap", "benchmark", "--alternative", "--quick", "--json", "--parallel", "1",
                    "--forms", "step-softening,white,mains", cwd=tmp_path)
-    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.exit_code == 0, out.stderr[-3000:]
     res = json.loads(out.stdout)
     for k in ("top1_accuracy", "spurious_rate", "null_false_alarm_rate", "null_gap_significant_rate",
               "unexplained_recall", "cases", "wall_s"):
@@ -311,10 +319,10 @@ def test_quick_run_through_the_command_line(tmp_path: Path) -> None:
 ])
 def test_alternative_refuses_options_that_make_no_sense(tmp_path: Path, args: list[str], says: str) -> None:
     out = _skinkit("gap", "benchmark", "--alternative", *args, cwd=tmp_path)
-    assert out.returncode == 2 and says in out.stderr
+    assert out.exit_code == 2 and says in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1, out.stderr
 
 
 def test_forms_without_alternative_is_refused(tmp_path: Path) -> None:
     out = _skinkit("gap", "benchmark", "--forms", "white", cwd=tmp_path)
-    assert out.returncode == 2 and "--alternative" in out.stderr
+    assert out.exit_code == 2 and "--alternative" in out.stderr
