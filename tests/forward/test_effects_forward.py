@@ -4,7 +4,9 @@ at its null and at its typical magnitude, refused where it does not fit."""
 from __future__ import annotations
 
 import copy
+import zlib
 
+import _directional
 import numpy as np
 import pytest
 
@@ -26,8 +28,8 @@ BASE = {
     ],
     "boundary": {"fixed": ["outer", "bottom"]},
     "indenter": {"mode": "force"},
-    # five steps over the push: the derivative checks compare solves of the same steps, which
-    # need not resolve the sinusoid finely
+    # five steps over the push, ten with the points' frames: the derivative checks compare
+    # solves of the same steps, which need not resolve the sinusoid finely
     "drive": {"max_step": "2 s"},
     "solver": {"rtol": 1e-12},
 }
@@ -64,63 +66,64 @@ def _with(effect: str, **values) -> dict:
     return spec
 
 
-@pytest.mark.parametrize("effect", fe_effects())
-def test_null_value_is_the_model_without_the_effect(effect, reference):
-    """At its null value an effect changes no prediction by more than 1e-12 of its size."""
+@pytest.fixture(scope="module")
+def solved():
+    """``(effect, where) -> (model, parameter names, prediction with their sensitivities)``, each
+    solved once: the null value's serves both the null-value test and the derivative check."""
     from skinkit.forward import load
-    m = load(_with(effect), workers=1)
-    pred = m.predict(m.parameters(), session())
+    cache = {}
+
+    def get(effect: str, where: str):
+        if (effect, where) not in cache:
+            plugin = registry.create("skinkit.effects", effect)
+            values = {} if where == "null" else {p.name: p.value for p in plugin.parameters()}
+            m = load(_with(effect, **values), workers=1)
+            names = [f"{effect}.{p.name}" for p in plugin.parameters()]
+            cache[effect, where] = (m, names, m.predict(m.parameters(), session(), sensitivities=names))
+        return cache[effect, where]
+    return get
+
+
+def _per_effect() -> list:
+    """The FE effects, each effect's tests on one worker (they share its null-value solve)."""
+    return [pytest.param(e, marks=pytest.mark.xdist_group(f"effect-{e}")) for e in fe_effects()]
+
+
+@pytest.mark.parametrize("effect", _per_effect())
+def test_null_value_is_the_model_without_the_effect(effect, reference, solved):
+    """At its null value an effect changes no prediction by more than 1e-12 of its size (the
+    prediction with sensitivities: they are found after each step has converged, so the values
+    are the bits of the plain prediction)."""
+    _, _, pred = solved(effect, "null")
     for (_, c, x), (_, _, y) in zip(pred.items(), reference.items(), strict=True):
         scale = np.max(np.abs(y.values))
         assert np.max(np.abs(x.values - y.values)) <= 1e-12 * scale, (effect, c)
 
 
-def _check_derivatives(m, obs, names, tol=2e-5):
-    """Analytic (or the model's own differences) against differences of whole solves with
-    h = 1e-6 of the parameter's scale: central inside the bounds, the second-order one-sided
-    formula at a bound. Tolerance as in test_fe_forward (solver error rtol/h plus truncation);
-    against the model's own differences (step 1e-5) 1e-3. A derivative whose effect over the
-    parameter's whole scale is below 1e-7 of the channel (fibres' k2 when hardly any fibre
-    is stretched) is compared in absolute terms at that level."""
-    pset = m.parameters()
-    pred = m.predict(pset, obs, sensitivities=names)
-    for nm in names:
-        p = pset.param(nm)
-        scale = abs(p.value) if p.value != 0 else 0.01 * (p.upper - p.lower)
-        h = 1e-6 * scale
-        tol_nm = max(tol, 1e-3) if pred.methods[nm] == "central-difference" else tol
-        if p.value - h >= p.lower and p.value + h <= p.upper:
-            up = m.predict(pset.with_values({nm: p.value + h}), obs)
-            dn = m.predict(pset.with_values({nm: p.value - h}), obs)
-            fds = [(u.values - d.values) / (2 * h) for (_, _, u), (_, _, d) in zip(up.items(), dn.items(),
-                                                                                 strict=True)]
-        else:
-            sg = 1.0 if p.value - h < p.lower else -1.0
-            f1 = m.predict(pset.with_values({nm: p.value + sg * h}), obs)
-            f2 = m.predict(pset.with_values({nm: p.value + 2 * sg * h}), obs)
-            trip = zip(pred.items(), f1.items(), f2.items(), strict=True)
-            fds = [sg * (-3 * x.values + 4 * a.values - b.values) / (2 * h)
-                   for (_, _, x), (_, _, a), (_, _, b) in trip]
-        for (_, c, cp), fd in zip(pred.items(), fds, strict=True):
-            size = max(np.abs(fd).max(), np.abs(cp.d[nm]).max())
-            floor = 1e-7 * np.abs(cp.values).max() / scale
-            err = np.abs(cp.d[nm] - fd).max()
-            assert err <= tol_nm * size or err <= floor, (nm, c, err / max(size, 1e-300))
-    return pred.methods
-
-
-@pytest.mark.parametrize("effect", fe_effects())
+@pytest.mark.parametrize("effect", _per_effect())
 @pytest.mark.parametrize("where", ["null", "typical"])
-def test_effect_sensitivities_match_central_differences(effect, where):
-    from skinkit.forward import load
-    plugin = registry.create("skinkit.effects", effect)
-    values = {} if where == "null" else {p.name: p.value for p in plugin.parameters()}
-    m = load(_with(effect, **values), workers=1)
-    names = [f"{effect}.{p.name}" for p in plugin.parameters()]
-    methods = _check_derivatives(m, session(), names)
+def test_effect_sensitivities_match_central_differences(effect, where, solved):
+    """Analytic (or the model's own differences) against differences of whole solves along a
+    random direction of the effect's parameters (:mod:`_directional`), with h = 1e-6 of each
+    parameter's scale (its value, or 1 % of its range at 0) times its component: central inside
+    the bounds, the second-order one-sided formula when a parameter is at a bound.
+
+    Tolerance 2e-5 of the channel's largest directional derivative, as in test_fe_forward:
+    the truncation error ~(step)² ≤ 1e-8 relative, the solver error ~rtol / h = 1e-6 relative.
+    Against the model's own differences (step 1e-5) 1e-3. A direction that moves a channel by
+    less than 1e-7 of its size per unit (every parameter over half its scale or more) is
+    compared in absolute terms at that level (fibres' k2 when hardly any fibre is stretched)."""
+    m, names, pred = solved(effect, where)
+    scale = {}
+    for nm in names:
+        p = m.parameters().param(nm)
+        scale[nm] = abs(p.value) if p.value != 0 else 0.01 * (p.upper - p.lower)
+    _directional.check(m, session(), names, scale, seed=zlib.crc32(f"{effect}/{where}".encode()),
+                       tol=2e-5, tol_for=lambda method: 1e-3 if method == "central-difference" else 0.0,
+                       floor=1e-7, pred=pred)
     analytic = {"thickness"}
     for nm in names:
-        assert methods[nm] == ("central-difference" if effect in analytic else "analytic"), nm
+        assert pred.methods[nm] == ("central-difference" if effect in analytic else "analytic"), nm
 
 
 def test_effect_that_does_not_fit_is_refused():

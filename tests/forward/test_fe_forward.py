@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 
+import _directional
 import numpy as np
 import pytest
 
@@ -65,13 +66,22 @@ def forward():
     return lambda spec, **kw: load(spec, **{"workers": 1, **kw})
 
 
+def _scale(pset, names) -> dict[str, float]:
+    """Each parameter's size for its difference step (1e-3 where it is near 0: fractions, angles)."""
+    return {nm: max(abs(pset.param(nm).value), 1e-3) for nm in names}
+
+
 @pytest.mark.parametrize("mode", ["force", "displacement"])
 def test_sensitivities_match_central_differences(forward, mode):
-    """Every law, Prony, pre-stretch and field parameter, through the viscous history.
+    """Every law, Prony, pre-stretch and field parameter, through the viscous history: the
+    analytic derivative along a random direction of all of them (:mod:`_directional`: each
+    parameter weighted to move its most sensitive channel as much as any other parameter does)
+    against central differences of whole solves along it.
 
-    Tolerance: the central difference with h = 1e-6 of the parameter's size has a
-    truncation error ~h² |f'''| (1e-12 relative) and a solver error ~rtol |f| / h = 1e-6
-    relative; 2e-5 of the channel's largest derivative leaves a margin of 20."""
+    Tolerance: the central difference with h = 1e-6 of each parameter's size (times its
+    component, at most 150) has a truncation error ~(step)² |f'''| (below 1e-7 relative) and a
+    solver error ~rtol |f| / h = 1e-6 relative; 2e-5 of the channel's largest derivative leaves
+    a margin of 20."""
     spec = copy.deepcopy(SPEC)
     spec["indenter"]["mode"] = mode
     m = forward(spec)
@@ -80,19 +90,8 @@ def test_sensitivities_match_central_differences(forward, mode):
     pred = m.predict(pset, obs, sensitivities=True)
     assert set(pred.methods) == set(pset.names)
     assert set(pred.methods.values()) == {"analytic"}
-    worst = 0.0
-    for p in pset:
-        h = 1e-6 * max(abs(p.value), 1e-3)
-        up = m.predict(pset.with_values({p.name: p.value + h}), obs)
-        dn = m.predict(pset.with_values({p.name: p.value - h}), obs)
-        for (proto, c, cp), (_, _, u), (_, _, d) in zip(pred.items(), up.items(), dn.items(), strict=True):
-            fd = (u.values - d.values) / (2 * h)
-            scale = max(np.abs(fd).max(), np.abs(cp.d[p.name]).max())
-            if scale == 0:
-                continue
-            err = np.abs(cp.d[p.name] - fd).max() / scale
-            worst = max(worst, err)
-            assert err < 2e-5, (p.name, proto, c, err)
+    _, worst = _directional.check(m, obs, pset.names, _scale(pset, pset.names), seed=11, tol=2e-5,
+                                  pred=pred)
     assert worst > 0
 
 
@@ -224,8 +223,8 @@ def test_unknown_parameter_is_named(forward):
 
 def test_instrument_parameters_match_central_differences(forward):
     """Biases on the driving force (load derivatives), a tilt of the probe axis (drive and
-    measured tip channels turned), a series compliance and a similarity of the points: the
-    same tolerance as for the material parameters."""
+    measured tip channels turned), a series compliance and a similarity of the points, along a
+    random direction of them all: the same tolerance as for the material parameters."""
     spec = copy.deepcopy(SPEC)
     spec.pop("fields")
     spec["instrument"] = [
@@ -247,18 +246,7 @@ def test_instrument_parameters_match_central_differences(forward):
     names = ["off.z", "drift.x", "tilt.angle", "comp.c", "trk.scale", "trk.rot"]
     pset = m.parameters()
     assert set(names) <= set(pset.names)
-    pred = m.predict(pset, obs, sensitivities=names)
-    for nm in names:
-        p = pset.param(nm)
-        h = 1e-6 * max(abs(p.value), 1e-3)
-        up = m.predict(pset.with_values({nm: p.value + h}), obs)
-        dn = m.predict(pset.with_values({nm: p.value - h}), obs)
-        for (proto, c, cp), (_, _, u), (_, _, d) in zip(pred.items(), up.items(), dn.items(), strict=True):
-            fd = (u.values - d.values) / (2 * h)
-            scale = max(np.abs(fd).max(), np.abs(cp.d[nm]).max())
-            if scale == 0:
-                continue
-            assert np.abs(cp.d[nm] - fd).max() / scale < 2e-5, (nm, proto, c)
+    _directional.check(m, obs, names, _scale(pset, names), seed=12, tol=2e-5)
 
 
 def test_a_measured_reference_is_distorted_like_every_frame(forward):
