@@ -255,6 +255,8 @@ class FEForwardModel(ForwardModel):
         eff = apply_all(self.base, effects)
         from skinkit.fem.model import build_model
         self._check = build_model(eff, require_load=False)   # validates the description now
+        from skinkit.forward import instrument as inst_mod
+        inst_mod.check_drive(inst_mod.parse(eff.get("instrument")), self._drive_channel(eff)[1])
         self._pset = self._parameters(eff)
 
     # -- parameters ------------------------------------------------------------------------

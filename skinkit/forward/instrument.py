@@ -284,19 +284,25 @@ def parameter_unit(entry: Entry) -> str:
     return "1"
 
 
-def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: np.ndarray,
-          names: Sequence[str] = ()) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """What the skin saw when ``channel`` recorded ``recorded`` ``(T, 3)`` at ``time_s`` ``(T,)``:
-    lags of that channel undone, its biases removed, then a tilt applied. Returns the true
-    drive ``(T, 3)`` and its derivatives ``(T, 3)`` for the parameters in ``names`` it depends on."""
-    x = np.array(recorded, dtype=float)
-    d: dict[str, np.ndarray] = {}
+def check_drive(entries: Sequence[Entry], channel: str) -> None:
+    """Refuse entries a model driven by ``channel`` cannot honour (a series compliance on it);
+    a model checks this when it is built, before any solve."""
     for e in entries:
         if e.kind == "series" and e.channel == channel:
             raise ForwardError(f"instrument ({e.parameter})",
                                f"a series compliance on the driving channel {channel!r} makes the drive "
                                "depend on the predicted force; drive the model by the tip force "
                                "([indenter] mode = \"force\") to include it")
+
+
+def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: np.ndarray,
+          names: Sequence[str] = ()) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """What the skin saw when ``channel`` recorded ``recorded`` ``(T, 3)`` at ``time_s`` ``(T,)``:
+    lags of that channel undone, its biases removed, then a tilt applied. Returns the true
+    drive ``(T, 3)`` and its derivatives ``(T, 3)`` for the parameters in ``names`` it depends on."""
+    check_drive(entries, channel)
+    x = np.array(recorded, dtype=float)
+    d: dict[str, np.ndarray] = {}
     for e in reversed([e for e in entries if e.kind == "lag" and e.channel == channel]):
         x = _lagged(e, time_s, x, d, names, -1.0)    # the chain's output at t was recorded at t + lag
     for e in entries:
@@ -491,5 +497,6 @@ def _tilted(e: Entry, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence
     return v @ R
 
 
-__all__ = ["KINDS", "MAX_LAG_S", "Entry", "drive", "measure", "parameter_names", "parameter_unit",
-           "parameters", "parse", "shift", "similarity_parameters", "unrecord_points", "with_values"]
+__all__ = ["KINDS", "MAX_LAG_S", "Entry", "check_drive", "drive", "measure", "parameter_names",
+           "parameter_unit", "parameters", "parse", "shift", "similarity_parameters", "unrecord_points",
+           "with_values"]

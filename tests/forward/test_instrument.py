@@ -143,3 +143,16 @@ def test_derivatives_match_central_differences(name):
         an = base.get(f"d{k}:{name}", np.zeros_like(fd))
         tol = 1e-8 * np.abs(base[k]).max() / SCALE[name]
         assert np.abs(an - fd).max() <= tol, (k, np.abs(an - fd).max(), tol)
+
+
+def test_a_displacement_driven_fe_model_refuses_a_drive_series_when_built():
+    """Refused when the model is built, not after a prediction's solves have been spent."""
+    from skinkit.examples import example_model
+    from skinkit.fem.model import read_model
+    from skinkit.forward import load
+
+    spec = read_model(example_model("forearm_small"))
+    assert spec["indenter"]["mode"] == "displacement"
+    spec["effects"] = [{"name": "robot-compliance"}]
+    with pytest.raises(ForwardError, match="series compliance on the driving channel 'tip_position'"):
+        load(spec, workers=1)
