@@ -91,8 +91,12 @@ def check_shape(d: dict) -> None:
 
 def test_json_shape_store_and_out(files):
     d = files
+    # three candidates, two refitted: the shape of refitted and of scored-only candidates. Naming
+    # among every installed effect is test_diagnose's (the same model and truth, the Python API);
+    # the default candidate set through the command line is test_verdict's real record
     args = ["gap", "diagnose", str(d / "m.toml"), str(d / "s.h5"), "--holdout", "normal_indentation",
-            "--candidates", "2", "--out", str(d / "out"), "--json"]
+            "--effects", "viscoelastic,force-drift,force-offset", "--candidates", "2",
+            "--out", str(d / "out"), "--json"]
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
