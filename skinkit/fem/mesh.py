@@ -264,10 +264,35 @@ def fitted_block_mesh(size: Sequence[float], indenter_diameter: float,
                   {k: np.flatnonzero(v) for k, v in sets.items()})
 
 
+#: disc meshes already built, by their arguments: a prediction builds its model's mesh several
+#: times (validation, sensitivities' bookkeeping, each worker's solve) and a fit predicts often
+_DISC_CACHE: dict[str, FEMesh] = {}
+
+
 def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
               layers: Sequence[tuple[str, float, int]] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2)),
               n_inner: int = 3, n_ring: int = 3, grading: float = 1.6, inner_grading: float = 1.0,
               layer_grading: float = 1.0, o_grid: bool = False) -> FEMesh:
+    """The in vivo geometry (:func:`_disc_mesh`), a fresh copy of a cached build."""
+    import copy
+
+    key = repr((float(diameter), float(indenter_diameter), [(str(n), float(t), int(k)) for n, t, k in layers],
+                int(n_inner), int(n_ring), float(grading), float(inner_grading), float(layer_grading),
+                bool(o_grid)))
+    mesh = _DISC_CACHE.get(key)
+    if mesh is None:
+        mesh = _disc_mesh(diameter, indenter_diameter, layers, n_inner, n_ring, grading, inner_grading,
+                          layer_grading, o_grid)
+        if len(_DISC_CACHE) >= 16:
+            _DISC_CACHE.pop(next(iter(_DISC_CACHE)))
+        _DISC_CACHE[key] = mesh
+    return copy.deepcopy(mesh)
+
+
+def _disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
+               layers: Sequence[tuple[str, float, int]] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2)),
+               n_inner: int = 3, n_ring: int = 3, grading: float = 1.6, inner_grading: float = 1.0,
+               layer_grading: float = 1.0, o_grid: bool = False) -> FEMesh:
     """The in vivo geometry: a layered disc under the support plate's hole.
 
     One square grid of ``n_inner + 2 n_ring`` elements across is mapped onto the disc so
