@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -81,7 +83,9 @@ def arm_scene(true_rig):
     # Under UV (thesis 5.2.4) only the fluorescent spheres shine; skin and cone are dim.
     dim_tex = SpeckleTexture(cell=0.00045, seed=1, background=0.03, contrast=0.03)
     dim_cone = SolidSpeckle(cell=0.0006, seed=3, background=0.03, contrast=0.03)
-    uv_states = [[scene.Skin(dim_tex, skin.height, skin.half_extent_m, skin.displacement),
+    # The dim skins are the lit ones repainted (replace keeps the shared undeformed ray
+    # solutions: the texture does not move a surface, so their rays need no new Newton solve).
+    uv_states = [[replace(skin, texture=dim_tex),
                   scene.Cone(cone.apex, cone.axis, cone.half_angle_deg, cone.height_m, cone.tip_length_m,
                              dim_cone), mk]
                  for skin, cone, mk in zip((skin0, skin1), (cone0, cone1), markers, strict=True)]

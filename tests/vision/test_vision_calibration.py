@@ -87,8 +87,9 @@ def test_too_few_detections(board_set, true_rig, board):
         calibrate(blank, board.inner, board.square_m, camera_names=true_rig.names, min_views=3)
     with pytest.raises(VisionError, match="expected \\(frames, cameras, H, W\\)"):
         calibrate(images[0], board.inner, board.square_m)
+    # the name count is refused whatever the views hold: one frame is enough to detect
     with pytest.raises(VisionError, match="camera names"):
-        calibrate(images[:5], board.inner, board.square_m, camera_names=["a", "b"])
+        calibrate(images[:1], board.inner, board.square_m, camera_names=["a", "b"])
 
 
 def test_charuco_calibration_with_partial_views(true_rig):
