@@ -169,9 +169,6 @@ def test_fe_path_end_to_end():
     spec["geometry"].update(n_inner=1, n_ring=1)
     spec["layers"][0]["elements"] = 2
     spec["session"]["parameters"]["normal_indentation"]["periods"] = 1
-    # ten increments per period instead of twenty: the gel is neo-Hookean (no history), so the
-    # step only sets where truth and model alike are solved, and the offset is on every sample
-    spec["drive"]["max_step"] = "1 s"
     lab = _lab_fe(spec, {"name": "force-offset", "z": 0.01})
     model = copy.deepcopy(lab.model_spec)
     model.pop("effects", None)
