@@ -22,9 +22,6 @@ def test_a_mesh_gap_alone_is_attributed_to_the_mesh_and_nothing_is_named():
     from skinkit.inverse.coverage import LabSessions
 
     spec, _ = CASES["disc-gel"]()
-    # five increments per period instead of ten: the gel is neo-Hookean (no history), so the step
-    # only sets where truth and model alike are solved; the meshes, the subject, are unchanged
-    spec["drive"]["max_step"] = "2 s"
     lab = LabSessions(spec, workers=1)
     assert lab.truth.truth["mesh"]["mode"] == "own"
     rep = diagnose(copy.deepcopy(lab.model_spec), lab(0), effects=["support-compliance", "inclusion"],
