@@ -10,6 +10,7 @@ element) is halved and retried, down to ``min_step`` of the original increment; 
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -28,6 +29,12 @@ def sp_triu(A):
     """The upper triangle of a sparse matrix (the half PARDISO's symmetric mode reads)."""
     import scipy.sparse as sp
     return sp.triu(A, format="csr")
+
+
+#: a Newton iteration from an extrapolated start must cut the residual at least this much, or
+#: the increment starts again from the tangent predictor (quadratic convergence cuts it by
+#: orders of magnitude; a damped crawl by a few tens of per cent)
+GUESS_PROGRESS = 0.5
 
 
 @dataclass
@@ -135,12 +142,14 @@ class NewtonSolver:
         """
         o = self.options
         self.problem.t = t
+        u_old = u
         if guess is not None:
             u, r, ref = self._extrapolated(u, guess, t, dt)
         else:
             u, r, ref = self._predict(u, t, dt)
         norm = float(np.linalg.norm(r))
         tol = max(o.rtol * ref, o.atol)
+        last = math.inf
         for it in range(o.max_iter + 1):
             if not np.isfinite(norm):
                 raise SolverError(f"residual is not finite at t = {t:g} (a layer's stress overflowed or "
@@ -149,6 +158,17 @@ class NewtonSolver:
                 return u, it, norm
             if it == o.max_iter:
                 break
+            if guess is not None and norm > GUESS_PROGRESS * last:
+                # an extrapolated start outside Newton's basin (it overshot where the drive
+                # turns): Newton crawls there under its line search for a dozen iterations or
+                # fails; the tangent predictor starts close to the solution
+                guess = None
+                u, r, ref = self._predict(u_old, t, dt)
+                norm, last = float(np.linalg.norm(r)), math.inf
+                tol = max(o.rtol * ref, o.atol)
+                if norm <= tol:
+                    return u, it, norm
+            last = norm
             r, K, _ = self._residual(u, t, dt, True)
             t0 = time.perf_counter()
             self.linear.factor(K)
