@@ -141,9 +141,16 @@ def qlv(t: np.ndarray, fe: np.ndarray, g: Sequence[Any], tau: Sequence[Any]) -> 
         return fe * 1.0
     ginf = 1 - sum(g)
     if _uniform(t):
-        num, den = _qlv_tf(g, tau, float(np.mean(np.diff(t))))
-        # relaxed under the first sample: the filter's steady state, DC gain H(1) = g∞
-        return ginf * fe[0] + signal.lfilter(num, den, fe - fe[0])
+        # each term's exact recurrence h[n] = e h[n-1] + β Δfe[n-1] as a first-order filter, in
+        # parallel: a product-form transfer function with poles near 1 (τ ≫ dt) loses some
+        # 1e-10 of the force to rounding, enough to spoil differences of the prediction
+        step = float(np.mean(np.diff(t)))
+        x = np.concatenate([np.diff(fe), 0 * fe[:1]])
+        out = ginf * fe
+        for gi, ti in zip(g, tau, strict=True):
+            e, beta = _step_factors(np.asarray(step), ti)
+            out = out + gi * signal.lfilter([0 * beta, beta], [1 + 0 * e, -e], x)
+        return out
     dt = np.diff(t)
     out = ginf * fe
     dfe = np.diff(fe)
@@ -180,6 +187,11 @@ def qlv_inverse(t: np.ndarray, f: np.ndarray, g: Sequence[Any], tau: Sequence[An
     return fe
 
 
+#: |c| times the element's largest stiffness below which the series compliance is linearised:
+#: the neglected terms, (c k)² relative, are then under double rounding
+LINEAR_COMPLIANCE = 1e-8
+
+
 def _newton_scalar(r: Any, drdu: Any, u: Any, scale: float, entry: str) -> Any:
     for _ in range(_NEWTON_MAX):
         k = drdu(u)
@@ -199,6 +211,16 @@ def series_solve(t: np.ndarray, u_rec: np.ndarray, phi: Any, kind: str, p: Mappi
     QLV response of φ Fe(u). Newton per sample (vectorised over samples without relaxation)."""
     scale = float(np.max(np.abs(np.real(u_rec)))) + 1e-300
     phi = phi + 0 * u_rec
+    k_max = float(np.max(np.abs(phi * elastic_slope(kind, p, u_rec)))) if len(u_rec) else 0.0
+    if abs(c) * k_max <= LINEAR_COMPLIANCE:
+        # a compliance whose deflection is far below the tip's motion (its null, or the complex
+        # step that differentiates it there): to first order u = u_rec − c f0 and f = f0 − c ·
+        # QLV[φ Fe'(u_rec) f0], the second-order terms (c k)² under rounding; filters instead of
+        # a Newton per sample, which made every score step of a lumped model crawl
+        f0 = qlv(t, phi * elastic_force(kind, p, u_rec), g, tau)
+        if isinstance(c, (int, float)) and c == 0:
+            return u_rec * 1.0, f0
+        return u_rec - c * f0, f0 - c * qlv(t, phi * elastic_slope(kind, p, u_rec) * f0, g, tau)
     if not len(g):
         u = u_rec * 1.0
         for _ in range(_NEWTON_MAX):

@@ -369,3 +369,25 @@ def test_quasi_static_terms_on_a_dynamic_model_and_bad_values_at_predict_are_ref
         c: Channel(c, t, ch.values, noise=ch.noise) for c, ch in po.channels.items()})})
     with pytest.raises(ForwardError, match="uniformly sampled"):
         m.predict(m.parameters(), uneven)
+
+
+@pytest.mark.parametrize("kind,p", [("exponential", {"a": 0.05, "b": 900.0}), ("linear", {"k": 250.0})])
+def test_a_compliance_at_its_null_is_linearised_to_rounding(kind, p):
+    """Near c = 0 the series solve takes the first-order filters, not a Newton per sample:
+    the force and its complex-step derivative in c agree with the per-sample solve (forced by a
+    compliance just above the linearisation's bound) to the (c k)² they neglect."""
+    from skinkit.forward import lumped_elements as el
+
+    t = np.linspace(0.0, 10.0, 2001)
+    u = 2e-3 * (1 - np.cos(2 * np.pi * 0.3 * t))
+    g, tau = [0.3, 0.2], [0.2, 2.0]
+    k = float(np.max(np.abs(el.elastic_slope(kind, p, u))))
+    _, f0 = el.series_solve(t, u, 1.0, kind, p, g, tau, 0.0, "c")
+    assert np.array_equal(f0, el.qlv(t, el.elastic_force(kind, p, u), g, tau))
+    h = 1e-30
+    _, fc = el.series_solve(t, u, 1.0, kind, p, g, tau, 1j * h, "c")
+    # the per-sample solve at a compliance 100x the bound: its own second-order term is 1e-12
+    c = 100 * el.LINEAR_COMPLIANCE / k
+    _, fn = el.series_solve(t, u, 1.0, kind, p, g, tau, c, "c")
+    slope = (fn - f0) / c
+    assert np.max(np.abs(np.imag(fc) / h - slope)) <= 1e-5 * np.max(np.abs(slope))
