@@ -67,7 +67,9 @@ def _same(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> None:
 
 def test_fit_writes_the_calibrated_model(session, tmp_path):
     out = tmp_path / "fit"
-    r = CliRunner().invoke(main, ["fit", str(LUMPED), str(session), "--out", str(out), "--json"])
+    # a name of its own: the module's session may already hold the other tests' fits
+    r = CliRunner().invoke(main, ["fit", str(LUMPED), str(session), "--out", str(out), "--json",
+                                  "--name", "chi2-per-dof"])
     assert r.exit_code == 0, r.output
     fit = json.loads(r.stdout)
     path = out / "model.toml"
@@ -171,7 +173,9 @@ def test_predict_of_the_calibrated_model_reports_the_fits_chi2_per_dof(session, 
     figure (the same residual at the same values: equal to rounding); a model file without a
     [calibration] table reports no such figure."""
     out = tmp_path / "fit"
-    r = CliRunner().invoke(main, ["fit", str(LUMPED), str(session), "--out", str(out), "--json"])
+    # a name of its own: the module's session may already hold the other tests' fits
+    r = CliRunner().invoke(main, ["fit", str(LUMPED), str(session), "--out", str(out), "--json",
+                                  "--name", "chi2-per-dof"])
     assert r.exit_code == 0, r.output
     fit = json.loads(r.stdout)
     r = CliRunner().invoke(main, ["predict", str(out / "model.toml"), str(session), "--json"])
