@@ -7,6 +7,7 @@ interface, is reported with its error and never stops the others from loading.
 
 from __future__ import annotations
 
+import sys
 import traceback
 from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
@@ -53,9 +54,19 @@ def _known(group: str) -> None:
         raise PluginError(f"unknown plugin group {group!r}; groups are {sorted(GROUP_NAMES)}")
 
 
+#: entry points per (group, sys.path): a diagnosis asks for its effects' names thousands of
+#: times, and each scan of the installed distributions' metadata takes milliseconds; a
+#: distribution added on a new path entry is seen, one installed into a path already scanned
+#: after :func:`clear_cache`
+_groups: dict[tuple[str, tuple[str, ...]], list[EntryPoint]] = {}
+
+
 def _group(group: str) -> list[EntryPoint]:
     _known(group)
-    return sorted(entry_points(group=group), key=lambda ep: ep.name)
+    key = (group, tuple(sys.path))
+    if key not in _groups:
+        _groups[key] = sorted(entry_points(group=group), key=lambda ep: ep.name)
+    return list(_groups[key])
 
 
 def _info(group: str, ep: EntryPoint) -> PluginInfo:
@@ -154,5 +165,7 @@ def report(groups: list[str] | None = None) -> dict[str, list[PluginStatus]]:
 
 
 def clear_cache() -> None:
-    """Forget loaded plugins (tests, or after installing a distribution at run time)."""
+    """Forget loaded plugins and the entry points read (tests, or after installing a
+    distribution at run time)."""
     _cache.clear()
+    _groups.clear()
