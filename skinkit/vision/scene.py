@@ -83,6 +83,23 @@ class Skin:
             p = p + np.asarray(self.displacement(np.ravel(X), np.ravel(Y)), float)
         return p
 
+    def _position_gradient(self, X: np.ndarray, Y: np.ndarray, eps: float
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(N, 3)`` positions and their derivatives along X and Y: the height by differences
+        of ``eps`` [m], the displacement by its own ``gradient`` when it has one (one
+        evaluation of the field instead of three)."""
+        grad = getattr(self.displacement, "gradient", None)
+        if self.displacement is not None and grad is None:
+            P = self.position(X, Y)
+            return P, (self.position(X + eps, Y) - P) / eps, (self.position(X, Y + eps) - P) / eps
+        P = self.reference(X, Y)
+        dX = (self.reference(X + eps, Y) - P) / eps
+        dY = (self.reference(X, Y + eps) - P) / eps
+        if grad is not None:
+            u, ux, uy = grad(np.ravel(X), np.ravel(Y))
+            P, dX, dY = P + u, dX + ux, dY + uy
+        return P, dX, dY
+
     def deformed(self, displacement: Displacement | None) -> Skin:
         """The same skin under another displacement field."""
         return Skin(self.texture, self.height, self.half_extent_m, displacement, self._rest)
@@ -137,16 +154,15 @@ class Skin:
             if len(active) == 0:
                 break
             ua, da = u[active], dirs[active]
-            P = self.position(ua[:, 0], ua[:, 1])
+            P, dX, dY = self._position_gradient(ua[:, 0], ua[:, 1], eps)
             F = P - origin - ua[:, 2:3] * da
             conv = np.all(np.abs(F) < 1e-11, axis=1)
             done[active[conv]] = True
             keep = ~conv
-            active, ua, da, P, F = active[keep], ua[keep], da[keep], P[keep], F[keep]
+            active, ua, da, F = active[keep], ua[keep], da[keep], F[keep]
             if len(active) == 0:
                 break
-            a = ((self.position(ua[:, 0] + eps, ua[:, 1]) - P) / eps).T
-            b = ((self.position(ua[:, 0], ua[:, 1] + eps) - P) / eps).T
+            a, b = dX[keep].T, dY[keep].T
             c, f = -da.T, F.T
             # Cramer's rule for the 3x3 systems [a b c] step = F, one per ray (by components:
             # a view solves some 10^6 of them per iteration)
