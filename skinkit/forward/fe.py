@@ -231,6 +231,10 @@ def _cubic(t_knots: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
     return CubicSpline(t_knots, y, axis=0)(t)
 
 
+#: tracked points located in a mesh, by the mesh's nodes and elements, the points and their depth
+_EMBED_CACHE: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+
 class FEForwardModel(ForwardModel):
     """A finite-element model file as a :class:`skinkit.interfaces.ForwardModel` (module docstring).
 
@@ -449,10 +453,12 @@ class FEForwardModel(ForwardModel):
             ref = np.column_stack([ref, np.zeros(len(ref))])
         if ch.window_m is not None:   # each point: its subset's 3 x 3 Gauss points, centre first
             ref = (ref[:, None, :] + window_offsets(ch.window_m)[None]).reshape(-1, 3)
-        # protocols of a session share their points, and a fit asks again and again: locate once
+        # protocols of a session share their points, a fit asks again and again, and a diagnosis
+        # builds model after model on the same mesh: locate once per process
         import hashlib
-        key = hashlib.sha1(mesh.nodes.tobytes() + ref.tobytes() + np.float64(depth).tobytes()).hexdigest()
-        cache = self.__dict__.setdefault("_embed_cache", {})
+        key = hashlib.sha1(mesh.nodes.tobytes() + mesh.elements.tobytes() + ref.tobytes()
+                           + np.float64(depth).tobytes()).hexdigest()
+        cache = _EMBED_CACHE
         if key in cache:
             return cache[key]
         try:
@@ -462,7 +468,10 @@ class FEForwardModel(ForwardModel):
             raise ForwardError(where, f"tracked point outside the model: {exc}") from None
         if len(cache) > 64:
             cache.clear()
-        cache[key] = (emb.element, emb.local)
+        element, local = np.array(emb.element), np.array(emb.local)
+        element.setflags(write=False)   # shared by every model of the process
+        local.setflags(write=False)
+        cache[key] = (element, local)
         return cache[key]
 
     def _embed_channel(self, mesh, ch, depth: float, where: str, entries, inst_names: Sequence[str]):
