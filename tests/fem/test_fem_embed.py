@@ -106,10 +106,11 @@ def test_point_on_a_face_that_bulges_above_its_nodes_is_found():
     assert p[2] == pytest.approx(d / 8, rel=1e-9)     # the construction does bulge, by d/8
     emb = embed_points(m, p[None])
     assert np.allclose(emb.positions(m.nodes)[0], p, rtol=0, atol=1e-12)
+
+
 def test_tensor_product_shapes_are_scikit_fems_hex27_basis():
     """The embedding's shape functions, built as products of 1D quadratics, are scikit-fem's
     ElementHex2 basis (value and gradient) to rounding, inside the element and beyond it."""
-    import numpy as np
     from skfem import ElementHex2
 
     from skinkit.fem.embed import _shape
