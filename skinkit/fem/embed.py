@@ -100,7 +100,7 @@ class Embedding:
         P = X[self.nodes]
         if u is not None:
             P = P + np.asarray(u).reshape(-1, 3)[self.nodes]
-        return np.einsum("ma,mai->mi", self.N, P)
+        return _interpolate(self.N.T, P)
 
     def position_jacobian(self, n_dof: int):
         """Sparse ``(3 M, n_dof)`` matrix mapping a displacement (or a sensitivity ``du/dp``)
@@ -138,6 +138,17 @@ def _shape(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return N, dN
 
 
+def _interpolate(N: np.ndarray, Xe: np.ndarray) -> np.ndarray:
+    """``(M, 3)`` sum over nodes of shape values ``N`` ``(27, M)`` times ``Xe`` ``(M, 27, 3)``
+    (a batched product: einsum's generic loop was most of locating points)."""
+    return np.matmul(N.T[:, None, :], Xe)[:, 0, :]
+
+
+def _jacobian(dN: np.ndarray, Xe: np.ndarray) -> np.ndarray:
+    """``(M, 3, 3)`` dX_i/dξ_j from reference gradients ``dN`` ``(27, 3, M)`` and ``Xe``."""
+    return np.matmul(dN.transpose(2, 1, 0), Xe).transpose(0, 2, 1)
+
+
 def embed_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: float = 1e-10) -> Embedding:
     """Locate ``points`` ``(M, 3)`` [m] (moved ``depth`` [m] down first) in ``mesh``.
 
@@ -173,8 +184,8 @@ def embed_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: floa
         xi = np.full((3, todo.size), 0.5)
         for _ in range(30):
             N, dN = _shape(xi)
-            x = np.einsum("am,mai->mi", N, Xe[e])
-            Jm = np.einsum("ajm,mai->mij", dN, Xe[e])
+            x = _interpolate(N, Xe[e])
+            Jm = _jacobian(dN, Xe[e])
             r = pts[todo] - x
             try:
                 dxi = np.linalg.solve(Jm, r[..., None])[..., 0]
@@ -215,8 +226,8 @@ def _face_newton(Xe: np.ndarray, xy: np.ndarray, free: list[int], axis: int, end
     for _ in range(30):
         xi[free] = s
         N, dN = _shape(xi)
-        x = np.einsum("am,mai->mi", N, Xe)
-        Jm = np.einsum("ajm,mai->mij", dN, Xe)[:, :2][:, :, free]
+        x = _interpolate(N, Xe)
+        Jm = _jacobian(dN, Xe)[:, :2][:, :, free]
         r = xy - x[:, :2]
         det = Jm[:, 0, 0] * Jm[:, 1, 1] - Jm[:, 0, 1] * Jm[:, 1, 0]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -227,7 +238,7 @@ def _face_newton(Xe: np.ndarray, xy: np.ndarray, free: list[int], axis: int, end
         if np.max(np.abs(ds)) < tol:
             break
     xi[free] = s
-    x = np.einsum("am,mai->mi", _shape(xi)[0], Xe)
+    x = _interpolate(_shape(xi)[0], Xe)
     return s.T, np.linalg.norm(xy - x[:, :2], axis=1)
 
 
@@ -286,8 +297,8 @@ def surface_points(mesh: FEMesh, points: np.ndarray, depth: float = 0.0, tol: fl
         xi[axis] = end
         N, dN = _shape(xi)
         Xe = Xe_all[found]
-        out = np.einsum("am,mai->mi", N, Xe)
-        Jm = np.einsum("ajm,mai->mij", dN, Xe)
+        out = _interpolate(N, Xe)
+        Jm = _jacobian(dN, Xe)
         n = np.cross(Jm[:, :, free[0]], Jm[:, :, free[1]])
         n = n / np.linalg.norm(n, axis=1, keepdims=True)
         nrm = np.where(n[:, 2:3] > 0, n, -n)
