@@ -643,8 +643,25 @@ def _elastic_supports(d: Any, mesh: FEMesh, fixed: list[str], bc: BoundaryCondit
     return still
 
 
+#: nodal areas already integrated, by mesh and node set: a model is built several times per
+#: prediction (and per worker), the facet basis each time took a quarter of a second
+_AREAS: dict[str, np.ndarray] = {}
+
+
 def nodal_areas(mesh: FEMesh, nodes: np.ndarray) -> np.ndarray:
     """``(N,)`` ∫ Nₐ dA over the boundary faces whose nodes all lie in ``nodes`` [m²]."""
+    import hashlib
+
+    key = hashlib.sha1(mesh.nodes.tobytes() + mesh.elements.tobytes()
+                       + np.asarray(nodes, np.int64).tobytes()).hexdigest()
+    if key not in _AREAS:
+        if len(_AREAS) >= 32:
+            _AREAS.pop(next(iter(_AREAS)))
+        _AREAS[key] = _nodal_areas(mesh, nodes)
+    return _AREAS[key].copy()
+
+
+def _nodal_areas(mesh: FEMesh, nodes: np.ndarray) -> np.ndarray:
     from skfem import ElementHex2, FacetBasis, LinearForm, asm
 
     m2 = mesh.skfem_mesh()
