@@ -306,7 +306,10 @@ def _detect_all(images: np.ndarray, grid: DotGrid, camera_names: Sequence[str] |
 
 
 def _misses(misses: list[tuple[int, str]]) -> str:
-    """``frames 0, 3, 7: <first reason>`` (the frames without the grid, one reason)."""
+    """``frames 0, 3, 7: <first reason>`` (the frames without the grid, one reason); a camera
+    that found the grid in every frame (too few frames in all) says so."""
+    if not misses:
+        return "found in every frame: take more views"
     frames = ", ".join(str(f) for f, _ in misses[:8]) + (", ..." if len(misses) > 8 else "")
     return f"frame{'s' if len(misses) > 1 else ''} {frames}: {misses[0][1]}"
 

@@ -111,7 +111,9 @@ def test_lab_session_truth_solve_advances_in_the_log(session):
 
 @pytest.mark.needs_plugins
 def test_fe_predict_reports_its_solve_and_quiet_reports_nothing(folder, session):
-    p, err, wall = _run(["predict", "one.toml", "s.h5", "--workers", "1", "--json"], folder, "predict")
+    # a heartbeat of 0.1 s: the prediction itself takes about a second
+    p, err, wall = _run(["predict", "one.toml", "s.h5", "--workers", "1", "--json"], folder, "predict",
+                        interval=0.1)
     assert p.returncode == 0, err
     assert p.stdout.lstrip().startswith("{")     # stdout is the JSON alone
     lines = _check_gaps(err, wall)

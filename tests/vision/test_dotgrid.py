@@ -137,6 +137,17 @@ def test_too_few_views_named(true_rig, dot_views, dot_detections):
     assert all(f"{n} found it" not in str(err.value) for n in names[1:])
 
 
+@SHARED_VIEWS
+def test_too_few_views_in_all_is_named_not_a_crash(true_rig, dot_views, dot_detections):
+    """A camera that found the grid in every one of too few frames: one line that says so."""
+    _, images = dot_views
+    c = int(np.flatnonzero(dot_detections.found[:2].all(axis=0))[0])
+    with pytest.raises(VisionError, match=rf"{true_rig.names[c]} found it in 2 of 2 \(found in every "
+                                          r"frame: take more views\)") as err:
+        calibrate_dotgrid(images[:2, [c]], GRID, [true_rig.names[c]], min_views=4)
+    assert len(str(err.value).splitlines()) == 1
+
+
 def _skinkit(*args: str):
     """``skinkit ARGS`` run in this process (the command line's parsing and its one-line error
     contract are the same; a new interpreter would only add its start-up)."""
