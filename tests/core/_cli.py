@@ -1,5 +1,5 @@
-"""What the CLI tests share: the contract of a refused command (exit 2, one ``error:`` line), and a
-small one-axis extension record to feed the model commands."""
+"""What the CLI tests share: a command run in this process, the contract of a refused command
+(exit 2, one ``error:`` line), and a small one-axis extension record to feed the model commands."""
 
 from __future__ import annotations
 
@@ -7,6 +7,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+
+def in_process(*args: str) -> Any:
+    """``skinkit ARGS`` run in this process by click's runner (the command line's parsing and its
+    one-line error contract are the same; a new interpreter would only add its start-up): the
+    result (exit_code, stdout, stderr). An exception that escaped the one-line error handling is
+    raised, as a traceback would be a bug."""
+    from click.testing import CliRunner
+
+    from skinkit.cli import cli
+
+    r = CliRunner().invoke(cli, list(args))
+    if r.exception is not None and not isinstance(r.exception, SystemExit):
+        raise r.exception
+    return r
 
 
 def one_error(r: Any, *needles: str, warnings_ok: bool = False) -> str:

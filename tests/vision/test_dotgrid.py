@@ -7,15 +7,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from skinkit.cli import cli
 from skinkit.store import open_experiment
 from skinkit.vision import VisionError, boards
 from skinkit.vision import camera as C
 from skinkit.vision.dotgrid import DotGrid, parse_fiducials, random_grid_poses
 from skinkit.vision.dotgrid_detect import calibrate_dotgrid, detect_all_dotgrid, detect_dotgrid
 from skinkit.vision.sensor import Sensor
+from tests.core._cli import in_process
 
 #: 14 x 10 dots, 1.6 mm pitch (21 x 14 mm: the whole grid stays in the 40 mm field when tilted),
 #: 0.8 mm dots, three hollow fiducials in an L at (1, 1), (2, 1), (1, 2). The lattice looks the
@@ -148,16 +147,6 @@ def test_too_few_views_in_all_is_named_not_a_crash(true_rig, dot_views, dot_dete
     assert len(str(err.value).splitlines()) == 1
 
 
-def _skinkit(*args: str):
-    """``skinkit ARGS`` run in this process (the command line's parsing and its one-line error
-    contract are the same; a new interpreter would only add its start-up)."""
-    r = CliRunner().invoke(cli, list(args))
-    # an exception that escaped the one-line error handling is a bug, as a traceback would be
-    if r.exception is not None and not isinstance(r.exception, SystemExit):
-        raise r.exception
-    return r
-
-
 def _angle_deg(Ra, Rb):
     return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1) / 2, -1, 1))))
 
@@ -190,11 +179,11 @@ def test_dot_grid_from_files_through_cli(tmp_path, true_rig, dot_views, dot_dete
             assert cv2.imwrite(str(tmp_path / name / f"{name}_grid_{f + 1:04d}.tif"), images[f, c])
     session = tmp_path / "session.h5"
     cams = [a for name in true_rig.names for a in ("--camera", name, str(tmp_path / name / "*.tif"))]
-    r = _skinkit("import-images", str(session), *cams, "--name", "calibration")
+    r = in_process("import-images", str(session), *cams, "--name", "calibration")
     assert r.exit_code == 0, r.stderr
 
     # bad input first: a grid size the images do not hold is one line naming cameras and frames
-    bad = _skinkit("vision", "calibrate", str(session), "--images", "calibration", "--target", "dotgrid",
+    bad = in_process("vision", "calibrate", str(session), "--images", "calibration", "--target", "dotgrid",
                    "--grid", "15x10", "--pitch-mm", "1.6")
     assert bad.exit_code != 0 and "Traceback" not in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1, bad.stderr
@@ -203,7 +192,7 @@ def test_dot_grid_from_files_through_cli(tmp_path, true_rig, dot_views, dot_dete
     with open_experiment(session) as exp:
         assert "rig" not in exp.calibration_names()  # nothing written
 
-    r = _skinkit("vision", "calibrate", str(session), "--images", "calibration", "--target", "dotgrid",
+    r = in_process("vision", "calibrate", str(session), "--images", "calibration", "--target", "dotgrid",
                  "--grid", "14x10", "--pitch-mm", str(GRID.pitch_m * 1e3),
                  "--fiducials", "hollow:1,1;2,1;1,2")
     assert r.exit_code == 0, r.stderr

@@ -6,9 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from skinkit.cli import cli
 from skinkit.store import open_experiment
 from skinkit.vision import VisionError, boards
 from skinkit.vision import camera as C
@@ -16,6 +14,7 @@ from skinkit.vision.board_symmetry import resolve_half_turns
 from skinkit.vision.calibration import detect_all
 from skinkit.vision.scene import Board
 from skinkit.vision.sensor import Sensor
+from tests.core._cli import in_process
 
 # both tests read the rendered views: one xdist worker runs them, rendering the views once
 pytestmark = pytest.mark.xdist_group("symmetric_board_views")
@@ -71,16 +70,6 @@ def test_half_turns_resolved_per_frame(true_rig, sym_views):
         resolve_half_turns(det.corners, few, INNER, SQUARE_M, det.image_size, true_rig.names)
 
 
-def _skinkit(*args: str):
-    """``skinkit ARGS`` run in this process (the command line's parsing and its one-line error
-    contract are the same; a new interpreter would only add its start-up)."""
-    r = CliRunner().invoke(cli, list(args))
-    # an exception that escaped the one-line error handling is a bug, as a traceback would be
-    if r.exception is not None and not isinstance(r.exception, SystemExit):
-        raise r.exception
-    return r
-
-
 def _angle_deg(Ra, Rb):
     return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1) / 2, -1, 1))))
 
@@ -110,10 +99,10 @@ def test_symmetric_board_from_files_through_cli(tmp_path, true_rig, sym_views):
             assert cv2.imwrite(str(tmp_path / name / f"{name}_board_{f + 1:04d}.tif"), images[f, c])
     session = tmp_path / "session.h5"
     cams = [a for name in true_rig.names for a in ("--camera", name, str(tmp_path / name / "*.tif"))]
-    r = _skinkit("import-images", str(session), *cams, "--name", "calibration")
+    r = in_process("import-images", str(session), *cams, "--name", "calibration")
     assert r.exit_code == 0, r.stderr
     assert f"imported {F} frames x {Cn} cameras" in r.stdout and "uint16" in r.stdout
-    r = _skinkit("vision", "calibrate", str(session), "--images", "calibration", "--board", "12x8",
+    r = in_process("vision", "calibrate", str(session), "--images", "calibration", "--board", "12x8",
                  "--square-mm", str(SQUARE_M * 1e3))
     assert r.exit_code == 0, r.stderr
     print(r.stdout)

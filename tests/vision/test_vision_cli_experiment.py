@@ -4,25 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from skinkit.cli import cli
 from skinkit.schemas import ImageSequence
 from skinkit.store import create_experiment, open_experiment
+from tests.core._cli import in_process
 
 # one xdist worker runs these: it builds the rendered scenes of tests/vision/conftest.py once
 pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("vision_scenes")]
 
 
 def _run(*args: str):
-    """``skinkit vision ARGS`` run in this process: the same parsing, exit statuses and one-line
-    errors as the installed command, without a new interpreter's start-up for each of the
-    twelve calls."""
-    r = CliRunner().invoke(cli, ["vision", *args])
-    # an exception that escaped the one-line error handling is a bug, as a traceback would be
-    if r.exception is not None and not isinstance(r.exception, SystemExit):
-        raise r.exception
-    return r
+    """``skinkit vision ARGS`` run in this process (twelve calls: no interpreter start-up each)."""
+    return in_process("vision", *args)
 
 
 def test_calibrate_profile_track(tmp_path, true_rig, board_set, arm_scene):
