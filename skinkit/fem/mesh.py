@@ -7,6 +7,7 @@ surface) keeps the isoparametric, possibly curved, geometry. Lengths are in metr
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -264,31 +265,22 @@ def fitted_block_mesh(size: Sequence[float], indenter_diameter: float,
                   {k: np.flatnonzero(v) for k, v in sets.items()})
 
 
-#: disc meshes already built, by their arguments: a prediction builds its model's mesh several
-#: times (validation, sensitivities' bookkeeping, each worker's solve) and a fit predicts often
-_DISC_CACHE: dict[str, FEMesh] = {}
-
-
 def disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
               layers: Sequence[tuple[str, float, int]] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2)),
               n_inner: int = 3, n_ring: int = 3, grading: float = 1.6, inner_grading: float = 1.0,
               layer_grading: float = 1.0, o_grid: bool = False) -> FEMesh:
-    """The in vivo geometry (:func:`_disc_mesh`), a fresh copy of a cached build."""
+    """The in vivo geometry (:func:`_disc_mesh`), a fresh copy of a cached build: a prediction
+    builds its model's mesh several times (validation, sensitivities' bookkeeping, each
+    worker's solve) and a fit predicts often."""
     import copy
 
-    key = repr((float(diameter), float(indenter_diameter), [(str(n), float(t), int(k)) for n, t, k in layers],
-                int(n_inner), int(n_ring), float(grading), float(inner_grading), float(layer_grading),
-                bool(o_grid)))
-    mesh = _DISC_CACHE.get(key)
-    if mesh is None:
-        mesh = _disc_mesh(diameter, indenter_diameter, layers, n_inner, n_ring, grading, inner_grading,
-                          layer_grading, o_grid)
-        if len(_DISC_CACHE) >= 16:
-            _DISC_CACHE.pop(next(iter(_DISC_CACHE)))
-        _DISC_CACHE[key] = mesh
-    return copy.deepcopy(mesh)
+    layers = tuple((str(n), float(t), int(k)) for n, t, k in layers)
+    return copy.deepcopy(_disc_mesh(float(diameter), float(indenter_diameter), layers, int(n_inner),
+                                    int(n_ring), float(grading), float(inner_grading), float(layer_grading),
+                                    bool(o_grid)))
 
 
+@functools.lru_cache(maxsize=16)
 def _disc_mesh(diameter: float = 0.040, indenter_diameter: float = 0.004,
                layers: Sequence[tuple[str, float, int]] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2)),
                n_inner: int = 3, n_ring: int = 3, grading: float = 1.6, inner_grading: float = 1.0,
