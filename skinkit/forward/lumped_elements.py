@@ -211,7 +211,8 @@ def series_solve(t: np.ndarray, u_rec: np.ndarray, phi: Any, kind: str, p: Mappi
     QLV response of φ Fe(u). Newton per sample (vectorised over samples without relaxation)."""
     scale = float(np.max(np.abs(np.real(u_rec)))) + 1e-300
     phi = phi + 0 * u_rec
-    k_max = float(np.max(np.abs(phi * elastic_slope(kind, p, u_rec)))) if len(u_rec) else 0.0
+    slope = phi * elastic_slope(kind, p, u_rec)
+    k_max = float(np.max(np.abs(slope))) if len(u_rec) else 0.0
     if abs(c) * k_max <= LINEAR_COMPLIANCE:
         # a compliance whose deflection is far below the tip's motion (its null, or the complex
         # step that differentiates it there): to first order u = u_rec − c f0 and f = f0 − c ·
@@ -220,7 +221,7 @@ def series_solve(t: np.ndarray, u_rec: np.ndarray, phi: Any, kind: str, p: Mappi
         f0 = qlv(t, phi * elastic_force(kind, p, u_rec), g, tau)
         if isinstance(c, (int, float)) and c == 0:
             return u_rec * 1.0, f0
-        return u_rec - c * f0, f0 - c * qlv(t, phi * elastic_slope(kind, p, u_rec) * f0, g, tau)
+        return u_rec - c * f0, f0 - c * qlv(t, slope * f0, g, tau)
     if not len(g):
         u = u_rec * 1.0
         for _ in range(_NEWTON_MAX):
