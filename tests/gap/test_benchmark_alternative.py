@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 from scipy.integrate import quad
 
 from skinkit.bench import gap_alternative as ga
 from skinkit.lab import alt_forms as af
 from skinkit.lab import alt_noise as an
 from skinkit.lab import alternative as alt
+from tests.core._cli import in_process
 
 ROOT = Path(__file__).resolve().parents[2]
 #: the truth generator's modules
@@ -281,12 +281,10 @@ def test_every_form_is_clearly_visible_or_a_null() -> None:
 def _skinkit(*args: str, cwd: Path):
     """``skinkit ARGS`` run in this process from ``cwd`` (click's runner, the same ``cli.main``
     that ``python -m skinkit`` calls): the result's exit_code, stdout and stderr."""
-    from skinkit.cli import cli
-
     here = Path.cwd()
     os.chdir(cwd)
     try:
-        return CliRunner().invoke(cli, list(args))
+        return in_process(*args)
     finally:
         os.chdir(here)
 

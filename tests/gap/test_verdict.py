@@ -13,13 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from skinkit.cli import cli
 from skinkit.forward.observations import channels_from_record
 from skinkit.gap.diagnose import GapError, diagnose
 from skinkit.inverse.fit import FitError
 from skinkit.schemas import Observations, Protocol, ProtocolObservations, RobotRecord
+from tests.core._cli import in_process
 
 ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "docs" / "models" / "extension_relaxation_lumped.toml"
@@ -49,11 +48,6 @@ def _relaxing_session(g: float = 0.4, tau: float = 4.0, seed: int = 0) -> Observ
                       protocol=Protocol("extension", kind="trajectory"))
     return Observations({"extension": ProtocolObservations(rec.protocol, channels_from_record(rec))}, None,
                         "relaxing truth")
-
-
-def _skinkit(*args: str):
-    """``skinkit ARGS`` run in this process: the click result (exit_code, stdout, stderr)."""
-    return CliRunner().invoke(cli, list(args))
 
 
 @pytest.fixture(scope="module")
@@ -117,7 +111,7 @@ def test_a_refit_the_solver_gives_up_on_is_stated(monkeypatch):
 def test_min_share_outside_its_range_is_refused(bad):
     with pytest.raises(GapError, match=r"--min-share must be in \(0, 1\]"):
         diagnose(MODEL, _relaxing_session(), min_share=bad)
-    out = _skinkit("gap", "diagnose", str(MODEL), str(REAL), "--min-share", str(bad))
+    out = in_process("gap", "diagnose", str(MODEL), str(REAL), "--min-share", str(bad))
     assert out.exit_code != 0 and "--min-share must be in (0, 1]" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
 
@@ -130,14 +124,14 @@ def test_a_noise_model_that_cannot_be_estimated_says_how_many_samples(tmp_path):
     csv = tmp_path / "no_rest.csv"
     np.savetxt(csv, np.column_stack([t, 1e3 * u, f]), delimiter=",", header="time_s,displacement_mm,force_N",
                comments="")
-    out = _skinkit("gap", "diagnose", str(MODEL), str(csv), "--noise", "ar")
+    out = in_process("gap", "diagnose", str(MODEL), str(csv), "--noise", "ar")
     assert out.exit_code != 0
     assert "at least 200 are needed" in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
 @pytest.mark.skipif(not REAL.is_file(), reason="the real record is not beside the checkout")
 def test_real_record_verdict_agrees_in_json_stdout_and_html(tmp_path):
-    out = _skinkit("gap", "diagnose", str(MODEL), str(REAL), "--out", str(tmp_path / "gap"))
+    out = in_process("gap", "diagnose", str(MODEL), str(REAL), "--out", str(tmp_path / "gap"))
     assert out.exit_code == 0, out.stderr
     d = json.loads((tmp_path / "gap" / "gap.json").read_text())
     html = (tmp_path / "gap" / "gap.html").read_text()
