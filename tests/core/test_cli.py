@@ -42,7 +42,7 @@ def test_help_on_every_command():
 def test_plugins_json_has_all_groups(args, statuses):
     res = CliRunner().invoke(cli, ["plugins", "--json", *args])
     assert res.exit_code == 0, res.output
-    data = json.loads(res.output)
+    data = json.loads(res.stdout)
     assert set(data["groups"]) == set(GROUPS) and data["checked"] == bool(args)
     for entries in data["groups"].values():
         for e in entries:
@@ -63,7 +63,7 @@ def test_inspect_json_shape(tmp_path):
                                      protocol=Protocol("normal_indentation")))
     res = CliRunner().invoke(cli, ["inspect", str(path), "--json"])
     assert res.exit_code == 0, res.output
-    data = json.loads(res.output)
+    data = json.loads(res.stdout)
     assert data["schema_version"] == "1.0" and data["cameras"] == []
     (rec,) = data["records"]
     assert rec["protocol"] == "normal_indentation" and rec["samples"] == 200
@@ -95,7 +95,7 @@ def test_import_csv_then_inspect(tmp_path):
     res = runner.invoke(cli, ["import-csv", str(exp), str(csv), "--axis", "x"])
     assert res.exit_code == 0, res.output
     assert "imported 3 samples" in res.output
-    data = json.loads(runner.invoke(cli, ["inspect", str(exp), "--json"]).output)
+    data = json.loads(runner.invoke(cli, ["inspect", str(exp), "--json"]).stdout)
     assert data["records"][0]["protocol"] == "ext"
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,force_N\n0,1\n1,oops\n")

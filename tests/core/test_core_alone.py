@@ -25,7 +25,7 @@ pytestmark = pytest.mark.skipif(HAVE_PLUGINS or HAVE_HARDWARE,
 def test_plugins_lists_six_empty_groups():
     res = CliRunner().invoke(cli, ["plugins", "--json"])
     assert res.exit_code == 0
-    groups = json.loads(res.output)["groups"]
+    groups = json.loads(res.stdout)["groups"]
     assert set(groups) == set(GROUPS)
     assert all(not [e for e in v if e["dist"] in ("skinkit-plugins", "skinkit-hardware")]
                for v in groups.values())

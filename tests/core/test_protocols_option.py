@@ -59,15 +59,15 @@ def test_predict_and_fit_read_only_the_named_records(session, tmp_path):
     # stored as zeros, which this model does not read), though the model does not describe it
     res = run(cli, ["predict", str(model), str(s), "--json"])
     assert res.exit_code == 0, res.output
-    assert set(json.loads(res.output)["protocols"]) == {"preconditioning", "normal_indentation",
+    assert set(json.loads(res.stdout)["protocols"]) == {"preconditioning", "normal_indentation",
                                                         "stochastic_linear"}
     res = run(cli, ["predict", str(model), str(s), "--protocols", WANTED, "--json"])
     assert res.exit_code == 0, res.output
-    assert set(json.loads(res.output)["protocols"]) == {"preconditioning", "normal_indentation"}
+    assert set(json.loads(res.stdout)["protocols"]) == {"preconditioning", "normal_indentation"}
     res = run(cli, ["fit", str(model), str(s), "--protocols", WANTED, "--free", "lumped.a",
                     "--out", str(tmp_path / "fit"), "--name", "fit-a", "--json"])
     assert res.exit_code == 0, res.output
-    fit = json.loads(res.output)
+    fit = json.loads(res.stdout)
     # the model is the truth: chi2 per degree of freedom at the noise level (62,000 samples:
     # +-0.02 at 3 sigma, plus about 1 % from the recorded drive's own noise), and a = 15 mN to
     # within the bias that recorded drive leaves (errors in variables: a fraction of a percent)

@@ -241,7 +241,7 @@ def test_convergence_json_carries_the_estimate(tmp_path):
     r = CliRunner().invoke(cli, ["convergence", str(_tiny(tmp_path)), "--levels", "3",
                                  "--out", str(tmp_path / "conv"), "--json"])
     assert r.exit_code == 0, r.output
-    res = json.loads(r.output)
+    res = json.loads(r.stdout)
     rows = res["levels"]
     F = [np.array(x["tip_force_N"]) for x in rows]
     # the estimate is Richardson's over the three levels (checked against the function), the
@@ -317,7 +317,7 @@ def test_convergence_on_an_example_reports_the_estimate(tmp_path):
     r = CliRunner().invoke(cli, ["convergence", str(p), "--levels", "2", "--out", str(tmp_path / "c"),
                                  "--json"])
     assert r.exit_code == 0, r.output
-    res = json.loads(r.output)
+    res = json.loads(r.stdout)
     assert res["order"] == 1.0 and res["order_assumed"] and res["observed_order"] is None
     F1, F2 = (np.array(x["tip_force_N"]) for x in res["levels"])
     np.testing.assert_allclose(res["extrapolated"], 2 * F2 - F1, rtol=1e-12, atol=1e-15)
@@ -427,7 +427,7 @@ def test_convergence_at_the_peak_of_a_sinusoid_and_by_coarsened_factors(tmp_path
         r = CliRunner().invoke(cli, ["convergence", str(p), "--factors", "1/2,1", "--at", at,
                                      "--out", str(tmp_path / at), "--json"])
         assert r.exit_code == 0, r.output
-        runs[at] = json.loads(r.output)
+        runs[at] = json.loads(r.stdout)
     peak = runs["peak"]["levels"]
     assert [x["step"] for x in peak] == [0, 0] and [x["factor"] for x in peak] == ["1/2", "1"]
     assert peak[1]["dof"] > peak[0]["dof"]

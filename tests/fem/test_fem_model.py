@@ -125,7 +125,7 @@ def test_cli_solve_writes_outputs(tmp_path):
     r = CliRunner().invoke(cli, ["solve", str(MODELS / "phantom_membrane_gel.toml"), "--out", str(out),
                                  "--json"])
     assert r.exit_code == 0, r.output
-    info = json.loads(r.output)
+    info = json.loads(r.stdout)
     assert info["dof"] > 0 and len(info["steps"]) == 2
     st = info["steps"][-1]
     assert st["tip_force_N"][2] < 0 and st["newton_iterations"] >= 1
@@ -158,7 +158,7 @@ def test_cli_solve_bad_model_exits_2(tmp_path):
 def test_cli_verify_json():
     r = CliRunner().invoke(cli, ["verify", "--json", "--case", "patch-test", "--case", "qlv-relaxation"])
     assert r.exit_code == 0, r.output
-    res = json.loads(r.output)
+    res = json.loads(r.stdout)
     assert [c["name"] for c in res["cases"]] == ["patch-test", "qlv-relaxation"]
     assert all(c["passed"] and c["tolerance"] > 0 and "error" in c for c in res["cases"])
 
@@ -167,7 +167,7 @@ def test_cli_convergence(tmp_path):
     r = CliRunner().invoke(cli, ["convergence", str(MODELS / "phantom_membrane_gel.toml"), "--levels", "2",
                                  "--out", str(tmp_path), "--json"])
     assert r.exit_code == 0, r.output
-    res = json.loads(r.output)
+    res = json.loads(r.stdout)
     assert [x["level"] for x in res["levels"]] == [1, 2]
     assert res["levels"][1]["dof"] > res["levels"][0]["dof"]
     assert (tmp_path / "convergence.png").is_file()

@@ -18,7 +18,7 @@ from skinkit.store import open_experiment  # noqa: E402
 def test_protocols_json_lists_the_thesis_protocols() -> None:
     res = CliRunner().invoke(cli, ["robot", "protocols", "--json"])
     assert res.exit_code == 0, res.output
-    items = {p["name"]: p for p in json.loads(res.output)["protocols"]}
+    items = {p["name"]: p for p in json.loads(res.stdout)["protocols"]}
     assert len([n for n in items if n.startswith("in_plane_")]) == 12
     assert {
         "preconditioning",
@@ -54,7 +54,7 @@ def test_run_writes_the_record_and_refuses_with_one_line(tmp_path) -> None:
         ],
     )
     assert r.exit_code == 0, r.output
-    assert json.loads(r.output)["samples"] == 1000
+    assert json.loads(r.stdout)["samples"] == 1000
     assert open_experiment(out).read_record("in_plane_120").n_samples == 1000
     r = CliRunner().invoke(
         cli, ["robot", "run", "normal_indentation", "--param", "peak_to_peak=0.01", "--out", str(out)]

@@ -294,7 +294,7 @@ def test_cli_select_and_design_json(lab_session):
     base = [str(d / "model.toml"), str(d / "s.h5")]
     r = CliRunner().invoke(cli, ["select", *base, "--subsets", "lumped.c1;lumped.c1,lumped.c2", "--json"])
     assert r.exit_code == 0, r.output
-    res = json.loads(r.output)
+    res = json.loads(r.stdout)
     assert res["best"] == C12 and by_free(res, C1)["delta_aic"] > 100
     fitted = by_free(res, C12)["parameters"]
     fit_json = {"parameters": {n: {"value": v["value"], "free": True} for n, v in fitted.items()}}
@@ -302,7 +302,7 @@ def test_cli_select_and_design_json(lab_session):
     r = CliRunner().invoke(cli, ["design", *base, "--at", str(d / "fit.json"), "--candidates",
                                  "in_plane_090,in_plane_000", "--json"])
     assert r.exit_code == 0, r.output
-    res = json.loads(r.output)
+    res = json.loads(r.stdout)
     assert res["free"] == C12
     # the session is in_plane_000 + in_plane_180: repeating in_plane_000 adds, in_plane_090 cannot
     assert [x["protocol"] for x in res["ranking"]] == ["in_plane_000", "in_plane_090"]
