@@ -141,21 +141,29 @@ class Cameras:
     def views(self, fields: Sequence[Callable[[np.ndarray, np.ndarray], np.ndarray] | None],
               rng: np.random.Generator, progress: Callable[[float], None] | None = None) -> np.ndarray:
         """``(F, C, H, W)`` images of the skin under each displacement field (``None``: at rest);
-        the rest state is ray-cast once and exposed afresh per frame."""
+        the rest state, and a field repeated in consecutive frames, are ray-cast once and
+        exposed afresh per frame."""
         from skinkit.vision import scene
 
         cams = self.rig.cameras
         w, h = cams[0].image_size
         rest: dict[int, np.ndarray] = {}
+        # a field repeated in the next frame (a still skin, seen twice) is ray-cast once; only
+        # the sensor's noise differs between the two exposures
+        last: tuple[object, dict[int, np.ndarray]] = (object(), {})
         out = None
         for f, field in enumerate(fields):
+            if field is not last[0]:
+                last = (field, {})
             for c, cam in enumerate(cams):
                 if field is None:
                     if c not in rest:
                         rest[c] = scene.radiance(cam, [self.skin])
                     rad = rest[c]
                 else:
-                    rad = scene.radiance(cam, [self.skin.deformed(field)])  # type: ignore[attr-defined]
+                    if c not in last[1]:
+                        last[1][c] = scene.radiance(cam, [self.skin.deformed(field)])  # type: ignore[attr-defined]
+                    rad = last[1][c]
                 img = self.sensor.expose(rad, rng)  # type: ignore[attr-defined]
                 if out is None:
                     out = np.zeros((len(fields), len(cams), h, w), img.dtype)
