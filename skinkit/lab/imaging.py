@@ -138,40 +138,59 @@ class Cameras:
         views = boards.board_views(self.rig, poses, self.sensor, seed=int(rng.integers(2**31)))
         return ImageSequence("calibration", views, self.rig.names, np.arange(len(views), dtype=float))
 
+    def cast(self, field: Callable[[np.ndarray, np.ndarray], np.ndarray] | None) -> np.ndarray:
+        """``(C, H, W)`` radiance of the skin under the displacement ``field`` (``None``: at rest)
+        in each camera: the ray casting, the costly part of a view (seconds per camera)."""
+        from skinkit.vision import scene
+
+        skin = self.skin if field is None else self.skin.deformed(field)  # type: ignore[attr-defined]
+        return np.stack([scene.radiance(cam, [skin]) for cam in self.rig.cameras])
+
+    def expose(self, radiances: Sequence[np.ndarray], rng: np.random.Generator) -> np.ndarray:
+        """``(F, C, H, W)`` images: each frame's radiance ``(C, H, W)`` exposed by the sensor,
+        frame by frame and camera by camera from ``rng`` (a fresh noise draw per exposure)."""
+        out = None
+        for f, rad in enumerate(radiances):
+            for c in range(len(rad)):
+                img = self.sensor.expose(rad[c], rng)  # type: ignore[attr-defined]
+                if out is None:
+                    out = np.zeros((len(radiances), *rad.shape[:1], *img.shape), img.dtype)
+                out[f, c] = img
+        assert out is not None
+        return out
+
     def views(self, fields: Sequence[Callable[[np.ndarray, np.ndarray], np.ndarray] | None],
               rng: np.random.Generator, progress: Callable[[float], None] | None = None) -> np.ndarray:
         """``(F, C, H, W)`` images of the skin under each displacement field (``None``: at rest);
         the rest state, and a field repeated in consecutive frames, are ray-cast once and
         exposed afresh per frame."""
-        from skinkit.vision import scene
-
-        cams = self.rig.cameras
-        w, h = cams[0].image_size
-        rest: dict[int, np.ndarray] = {}
+        rest: np.ndarray | None = None
         # a field repeated in the next frame (a still skin, seen twice) is ray-cast once; only
         # the sensor's noise differs between the two exposures
-        last: tuple[object, dict[int, np.ndarray]] = (object(), {})
-        out = None
+        last: tuple[object, np.ndarray | None] = (object(), None)
+        rads = []
         for f, field in enumerate(fields):
-            if field is not last[0]:
-                last = (field, {})
-            for c, cam in enumerate(cams):
-                if field is None:
-                    if c not in rest:
-                        rest[c] = scene.radiance(cam, [self.skin])
-                    rad = rest[c]
-                else:
-                    if c not in last[1]:
-                        last[1][c] = scene.radiance(cam, [self.skin.deformed(field)])  # type: ignore[attr-defined]
-                    rad = last[1][c]
-                img = self.sensor.expose(rad, rng)  # type: ignore[attr-defined]
-                if out is None:
-                    out = np.zeros((len(fields), len(cams), h, w), img.dtype)
-                out[f, c] = img
-                if progress:
-                    progress((f * len(cams) + c + 1) / (len(fields) * len(cams)))
-        assert out is not None
-        return out
+            if field is None:
+                if rest is None:
+                    rest = self.cast(None)
+                rads.append(rest)
+            else:
+                if field is not last[0]:
+                    last = (field, self.cast(field))
+                rads.append(last[1])
+            if progress:
+                progress((f + 1) / len(fields))
+        return self.expose(rads, rng)
+
+
+def displacements(followed: np.ndarray, points: np.ndarray) -> list[np.ndarray | None]:
+    """The displacement ``(P, 3)`` [m] of the grid's ``points`` ``(P, 3)`` in each frame of
+    ``followed`` ``(P, F, 3)``; ``None`` where nothing has moved (an exact rest view)."""
+    out: list[np.ndarray | None] = []
+    for f in range(followed.shape[1]):
+        u = followed[:, f] - points
+        out.append(None if np.abs(u).max() < 1e-12 else u)
+    return out
 
 
 def protocol_images(cams: Cameras, name: str, times: np.ndarray, grid: np.ndarray, points: np.ndarray,
@@ -180,10 +199,8 @@ def protocol_images(cams: Cameras, name: str, times: np.ndarray, grid: np.ndarra
     """The image sequence ``name`` of one protocol: a frame per trigger time ``times`` ``(F,)`` [s],
     the skin displaced by ``followed - points`` (``followed``: ``(P, F, 3)`` [m] positions of the
     grid's ``points`` ``(P, 3)``); frames where nothing has moved are exact rest views."""
-    fields: list[Callable[[np.ndarray, np.ndarray], np.ndarray] | None] = []
-    for f in range(times.size):
-        u = followed[:, f] - points
-        fields.append(None if np.abs(u).max() < 1e-12 else displacement_field(grid, points, u))
+    fields = [None if u is None else displacement_field(grid, points, u)
+              for u in displacements(followed, points)]
     frames = cams.views(fields, rng, progress)
     return ImageSequence(name, frames, cams.rig.names, np.asarray(times, float))
 
@@ -201,4 +218,4 @@ def noise_pair(cams: Cameras, rng: np.random.Generator, grid: np.ndarray | None 
 
 
 __all__ = ["BOARD_INNER", "BOARD_ORIGIN_M", "BOARD_SQUARE_M", "Cameras", "displacement_field",
-           "followed_grid", "noise_pair", "protocol_images"]
+           "displacements", "followed_grid", "noise_pair", "protocol_images"]

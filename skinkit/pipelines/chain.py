@@ -23,6 +23,7 @@ and rig descriptions a lab would have); ``summary.json`` holds the closing table
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -46,26 +47,33 @@ def _quiet(step: str, fraction: float) -> None:
     pass
 
 
-def _render_job(job: tuple[Any, ...]) -> Any:
-    """One image sequence of the session (a worker process's task): the board views, the rest
-    pair, or a protocol's frames; every draw follows from the session's seed."""
-    from skinkit.lab.imaging import Cameras, noise_pair, protocol_images
+@functools.lru_cache(maxsize=2)
+def _cameras(seed: int) -> Any:
+    """The virtual rig over the speckled forearm of session ``seed``, one per process: its skin
+    keeps the undeformed skin's ray solutions, where every displaced state's casting starts."""
+    from skinkit.lab.imaging import Cameras
     from skinkit.lab.session import SURFACE_RADIUS_M
     from skinkit.vision import scene
 
+    return Cameras.make(scene.forearm(SURFACE_RADIUS_M), seed=seed + 7)
+
+
+def _render_job(job: tuple[Any, ...]) -> Any:
+    """A worker process's task: the board views (``("calibration", seed)``), or the radiance
+    ``(C, H, W)`` of the skin in one displaced state (``("cast", seed, grid, points, u)``, ``u``
+    ``(P, 3)`` [m] or None at rest); every draw follows from the session's seed."""
+    from skinkit.lab.imaging import displacement_field
+
     name, seed = job[0], int(job[1])
-    cams = Cameras.make(scene.forearm(SURFACE_RADIUS_M), seed=seed + 7)
+    cams = _cameras(seed)
     if name == "calibration":
         return cams.boards(seed + 13)
-    if name == "noise-floor":   # the skin at rest: in its pre-stressed state, as every protocol starts
-        grid, points, rest = job[2:]
-        return noise_pair(cams, np.random.default_rng([seed, 11]), grid, points, rest)
-    k, times, grid, points, followed = job[2:]
-    return protocol_images(cams, name, times, grid, points, followed, np.random.default_rng([seed, 12, k]))
+    grid, points, u = job[2:]
+    return cams.cast(None if u is None else displacement_field(grid, points, u))
 
 
 def _render(jobs: list[tuple[Any, ...]], workers: int, progress: Callable[[float], None]) -> list[Any]:
-    """The image sequences of ``jobs``, rendered by ``workers`` processes, in the jobs' order."""
+    """The results of ``jobs``, run by ``workers`` processes, in the jobs' order."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from multiprocessing import get_context
 
@@ -81,6 +89,42 @@ def _render(jobs: list[tuple[Any, ...]], workers: int, progress: Callable[[float
         for n, fut in enumerate(as_completed(futures)):
             out[futures[fut]] = fut.result()
             progress((n + 1) / len(jobs))
+    return out
+
+
+def _image_sequences(seed: int, grid: np.ndarray, points: np.ndarray, rest: np.ndarray,
+                     imaged: list[tuple[str, np.ndarray, np.ndarray]], workers: int,
+                     progress: Callable[[float], None]) -> list[Any]:
+    """The board views, the rest pair (``"noise-floor"``: the skin still at ``rest`` ``(P, 3)``
+    [m], in its pre-stressed state, as every protocol starts) and each imaged protocol's frames
+    (``imaged``: name, frame times ``(F,)`` [s], followed positions ``(P, F, 3)`` [m]).
+
+    Every distinct displaced state is ray-cast once, by the worker processes (a protocol's first
+    frame is the rest pair's state: casting it once saves a view per camera and protocol); the
+    frames are then exposed here, each sequence from its own stream of the session's seed."""
+    from skinkit.lab.imaging import displacements
+    from skinkit.schemas import ImageSequence
+
+    states: dict[bytes, int] = {}
+    jobs: list[tuple[Any, ...]] = [("calibration", seed)]
+
+    def state(u: np.ndarray | None) -> int:
+        key = b"rest" if u is None else np.ascontiguousarray(u).tobytes()
+        if key not in states:
+            states[key] = len(jobs)
+            jobs.append(("cast", seed, grid, points, u))
+        return states[key]
+
+    still = displacements(rest[:, None, :], points)[0]
+    seqs = [("noise-floor", np.array([0.0, 1.0]), [state(still)] * 2, [seed, 11])]
+    seqs += [(name, times, [state(u) for u in displacements(followed, points)], [seed, 12, k])
+             for k, (name, times, followed) in enumerate(imaged)]
+    done = _render(jobs, workers, progress)
+    cams = _cameras(seed)
+    out = [done[0]]
+    for name, times, idx, stream in seqs:
+        frames = cams.expose([done[i] for i in idx], np.random.default_rng(stream))
+        out.append(ImageSequence(name, frames, cams.rig.names, np.asarray(times, float)))
     return out
 
 
@@ -108,10 +152,10 @@ def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress 
     stream_records(session, records, block=1000, append=True)
     imaged = [p for p in vs.planned if p.frames.size]
     rest = vs.noiseless[imaged[0].protocol.name]["points"][:, 0]
-    jobs: list[tuple[Any, ...]] = [("calibration", seed), ("noise-floor", seed, grid, points, rest)]
-    jobs += [(p.protocol.name, seed, k, p.frames, grid, points, vs.noiseless[p.protocol.name]["points"])
-             for k, p in enumerate(imaged)]
-    sequences = _render(jobs, workers, lambda f: progress("acquire: render cameras", f))
+    sequences = _image_sequences(seed, grid, points, rest,
+                                 [(p.protocol.name, p.frames, vs.noiseless[p.protocol.name]["points"])
+                                  for p in imaged], workers,
+                                 lambda f: progress("acquire: render cameras", f))
     with open_experiment(session, "a") as exp:
         for seq in sequences:
             exp.write_images(seq)
