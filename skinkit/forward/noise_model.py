@@ -35,6 +35,9 @@ least-squares quantity becomes the generalised least-squares one (Aitken's estim
 
 from __future__ import annotations
 
+import functools
+import re
+
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import lfilter
@@ -145,6 +148,82 @@ def _stationary(phi: np.ndarray) -> bool:
     return bool(np.all(np.abs(roots) < 1.0))
 
 
+def ar_covariance(phi: np.ndarray, n: int) -> np.ndarray:
+    """``(p, p)`` covariance of the least-squares AR(p) coefficients ``phi`` ``(p,)`` fitted to
+    ``n`` samples: Γ_p⁻¹ σ_e²/n, Γ_p the process's autocovariance matrix at lags 0..p−1
+    (Brockwell & Davis, Time Series: Theory and Methods, Thm 8.1.1), evaluated at ``phi``
+    itself (the true coefficients are unknown). For AR(1) it is (1 − φ²)/n: on 500 rest
+    samples of φ = 0.9 a standard deviation of 0.02, which moves the prewhitened spectrum near
+    frequency 0, ((1 − φ̂)/(1 − φ))², by ±40 %."""
+    phi = np.asarray(phi, dtype=float).ravel()
+    p = phi.size
+    if not p or n <= p:
+        return np.zeros((p, p))
+    # autocovariances at unit innovation variance from the impulse response ψ of 1/A(q):
+    # γ_k = Σ_j ψ_j ψ_{j+k}; the response is truncated where it has decayed below 1e-12
+    length = 64
+    while True:
+        psi = lfilter([1.0], np.concatenate([[1.0], -phi]), np.r_[1.0, np.zeros(length - 1)])
+        if abs(psi[-1]) < 1e-12 * max(1.0, float(np.max(np.abs(psi)))) or length >= 2 ** 20:
+            break
+        length *= 4
+    gam = np.array([float(psi[: psi.size - k] @ psi[k:]) for k in range(p)])
+    G = gam[np.abs(np.subtract.outer(np.arange(p), np.arange(p)))]
+    return np.linalg.inv(G) / n
+
+
+#: simulated records behind :func:`ar_sampling`'s bias and covariance
+SAMPLING_REPS = 200
+
+
+@functools.lru_cache(maxsize=64)
+def _ar_sampling(phi: tuple[float, ...], n: int, reps: int) -> tuple[np.ndarray, np.ndarray]:
+    p = len(phi)
+    a = np.asarray(phi, float)
+    rng = np.random.default_rng([n, p, 20])          # fixed: the same record gets the same answer
+    burn = 10 * n
+    est = np.empty((reps, p))
+    for r in range(reps):
+        x = lfilter([1.0], np.concatenate([[1.0], -a]), rng.standard_normal(n + burn))[burn:]
+        est[r] = fit_ar(x, order=p)[0] if p else np.zeros(0)
+    return est.mean(axis=0) - a, np.atleast_2d(np.cov(est, rowvar=False))
+
+
+def ar_sampling(phi: np.ndarray, n: int, reps: int = SAMPLING_REPS) -> tuple[np.ndarray, np.ndarray]:
+    """``(bias (p,), cov (p, p))`` of :func:`fit_ar`'s coefficients at a fixed order when the
+    rest segment of ``n`` samples is AR(p) with coefficients ``phi`` ``(p,)``, from ``reps``
+    simulated segments fitted the same way (detrended by a line, least squares): a parametric
+    bootstrap at the estimate (Efron & Tibshirani, An Introduction to the Bootstrap, ch. 10).
+    The least-squares coefficients of a short segment are biased towards 0 — about
+    −(2 + 4φ)/n for AR(1) with a line removed, −0.012 on 500 samples of φ 0.9, half a standard
+    deviation — which under-whitens the slow part of the noise; their covariance is about
+    :func:`ar_covariance`'s. Cached per (``phi``, ``n``)."""
+    phi = np.asarray(phi, dtype=float).ravel()
+    if not phi.size or n <= 3 * phi.size + 2 or not _stationary(phi):
+        return np.zeros(phi.size), np.zeros((phi.size, phi.size))
+    bias, cov = _ar_sampling(tuple(float(x) for x in phi), int(n), int(reps))
+    return bias.copy(), cov.copy()
+
+
+def log_gain_gradient(phi: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """``(F, p)``: ∂ log|A(e^{iω})|² / ∂φ_k at the frequencies ``omega`` ``(F,)`` [rad/sample],
+    A(z) = 1 − Σ φ_k z^{−k}. A coloured noise prewhitened by coefficients off by δ keeps the
+    spectrum |A_φ̂|²/|A_φ|² ≈ 1 + δ · this gradient (relative, first order)."""
+    phi = np.asarray(phi, dtype=float).ravel()
+    omega = np.asarray(omega, dtype=float).ravel()
+    k = np.arange(1, phi.size + 1)
+    ek = np.exp(-1j * np.outer(omega, k))                          # (F, p)
+    A = 1.0 - ek @ phi                                             # (F,)
+    return -2.0 * np.real(ek * np.conj(A)[:, None]) / (np.abs(A) ** 2)[:, None]
+
+
+def rest_samples(source: str) -> int | None:
+    """The rest samples an AR noise model was fitted to, read from its source text
+    (:func:`describe`); None when the text names none."""
+    got = re.search(r"rest segment \((\d+) samples\), AR\(\d+\)", source or "")
+    return int(got.group(1)) if got else None
+
+
 def rest_length(position: np.ndarray, noise: np.ndarray, resolution: np.ndarray) -> int:
     """Samples before the drive first moves: every component of ``position`` ``(T, k)`` within
     five noise levels (or 1.5 resolution steps) of its starting median."""
@@ -200,6 +279,6 @@ def describe(order: int, n_rest: int) -> str:
     return f"rest segment ({n_rest} samples), AR({order})"
 
 
-__all__ = ["HIGH_PASS", "LOCAL_WINDOW", "MAX_ORDER", "MIN_AR_SAMPLES", "MIN_SCALE", "SPIKE_LEVEL",
-           "SPIKE_RUN", "SPIKE_WINDOW", "describe", "fit_ar", "local_scale", "rest_length", "samples_needed",
-           "spikes"]
+__all__ = ["HIGH_PASS", "LOCAL_WINDOW", "MAX_ORDER", "MIN_AR_SAMPLES", "MIN_SCALE", "SAMPLING_REPS",
+           "SPIKE_LEVEL", "SPIKE_RUN", "SPIKE_WINDOW", "ar_covariance", "ar_sampling", "describe", "fit_ar",
+           "local_scale", "log_gain_gradient", "rest_length", "rest_samples", "samples_needed", "spikes"]

@@ -102,6 +102,19 @@ class EffectColumns:
 
 
 @dataclass
+class Colour:
+    """Where the residual space holds series prewhitened by an AR noise model fitted to a rest
+    segment: per block of ``Objective.residual`` (``sl``), the channel's ``mask`` ``(T, k)``
+    (the block's entries are ``full[mask]``) and per component ``(φ (p,), bias (p,), cov (p, p))``
+    (:func:`skinkit.gap.where.ar_uncertainty`), and ``n_rest`` the rest samples the noise level
+    came from. A direction of the residual space then carries noise of level 1 only up to the
+    coefficients' error: its variance is 1 + h·δ, h the gradient of log|A|² averaged over the
+    direction's spectrum (:func:`colour_variance`)."""
+
+    blocks: list[tuple[slice, np.ndarray, tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...], int]]
+
+
+@dataclass
 class Sensitivities:
     """What one round of the score step measured: z and J_θ of the calibrated model, the
     columns of every candidate, the candidates that could not be added, and the cost."""
@@ -114,6 +127,7 @@ class Sensitivities:
     prediction: Prediction
     n_forward: int = 0
     notes: list[str] = field(default_factory=list)
+    colour: Colour | None = None
 
 
 def _repeatable(effect: str) -> bool:
@@ -236,7 +250,79 @@ def collect(spec: Mapping[str, Any], observations: Observations, values: Mapping
         results.append(([], model, pred, names))
     n_forward = len(results)
     z0, J_theta, base_pred, columns, n_sec = _columns(results, fitted, theta, values, say)
-    return Sensitivities(z0, J_theta, list(theta), columns, skipped, base_pred, n_forward + n_sec, notes)
+    colour = colour_of(fitted, base_pred)
+    if colour is not None and colour.blocks[-1][0].stop != z0.size:
+        colour = None          # not the residual's layout: test as if the coefficients were known
+    return Sensitivities(z0, J_theta, list(theta), columns, skipped, base_pred, n_forward + n_sec, notes,
+                         colour)
+
+
+def colour_of(fitted: Observations, prediction: Prediction) -> Colour | None:
+    """The :class:`Colour` of the residual space of ``prediction`` on ``fitted`` (``"noise"``
+    weighting); None when no block is prewhitened by a rest segment's AR model, or when a model
+    error's covariance mixes the blocks (its whitening is not per series)."""
+    from skinkit.forward import noise_model as nm
+    from skinkit.gap.where import ar_uncertainty
+    from skinkit.inverse.objective import Objective
+
+    if fitted.model_error is not None:
+        return None
+    obj = Objective(None, fitted, [], "noise")
+    blocks, start, any_ar = [], 0, False
+    for proto, cname, cp in prediction.items():
+        if proto not in fitted.names:
+            continue
+        ch = fitted[proto].channels[cname]
+        _, keep = obj._weights(proto, cname, ch)
+        m = cp.mask(ch) & keep
+        n = int(m.sum())
+        if not n:
+            continue
+        ar = ar_uncertainty(ch)
+        any_ar = any_ar or any(a[0].size for a in ar)
+        blocks.append((slice(start, start + n), m, ar, nm.rest_samples(ch.noise_source or "") or 0))
+        start += n
+    return Colour(blocks) if any_ar else None
+
+
+def colour_variance(colour: Colour | None, direction: np.ndarray) -> tuple[float, float]:
+    """``(m, v)``: the mean and relative variance of the noise's level along ``direction``
+    ``(m,)`` of the residual space that the AR noise models' estimation brings:
+    m = 1 + Σ_g w_g h_g·bias_g, v = Σ_g w_g² (h_gᵀ cov_g h_g + 2/n_rest), w_g the share of the
+    direction's energy in series g, h_g the mean of ∂ log|A_g|²/∂φ over the series' spectrum
+    weighted by the direction's power there ((1, 0) without a :class:`Colour`)."""
+    from skinkit.forward import noise_model as nm
+
+    if colour is None:
+        return 1.0, 0.0
+    d = np.asarray(direction, float)
+    total = float(d @ d)
+    if not total > 0:
+        return 1.0, 0.0
+    m, v = 1.0, 0.0
+    for sl, mask, ar, n_rest in colour.blocks:
+        if not ar:
+            continue
+        full = np.zeros(mask.shape)
+        full[mask] = d[sl]
+        power = np.abs(np.fft.rfft(full, axis=0)) ** 2                   # (F, k)
+        w = np.full(power.shape[0], 2.0)
+        w[0] = 1.0
+        if mask.shape[0] % 2 == 0:
+            w[-1] = 1.0
+        power = power * w[:, None]
+        omega = 2 * np.pi * np.fft.rfftfreq(mask.shape[0])
+        for j, (phi, bias, cov) in enumerate(ar):
+            pw = power[:, j]
+            e = float(pw.sum())
+            if not (phi.size and e > 0):
+                continue
+            h = (pw / e) @ nm.log_gain_gradient(phi, omega)              # (p,)
+            share = e / mask.shape[0] / total            # Parseval: the series' Σ d² over the whole
+            m += share * float(h @ bias)
+            v += share ** 2 * (float(h @ cov @ h) + (2.0 / n_rest if n_rest > 3 else 0.0))
+    return m, v
+
 
 
 def _predict_group(spec: Mapping[str, Any], group: list[str], load: Callable[..., Any],
@@ -464,8 +550,24 @@ def _qp(G: np.ndarray, g: np.ndarray, sides: np.ndarray) -> np.ndarray:
     return best
 
 
-def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns) -> ScoreTest:
-    """The score test of ``cols`` against the residual ``z`` with span ``U`` projected out."""
+def _tail(lm: float, q: int, level: tuple[float, float]) -> tuple[float, float]:
+    """(p, log p) of LM against χ²_q, or, when the noise's level along the tested direction has
+    the mean m and relative variance v > 0 (``level``, :func:`colour_variance`), of LM/q against
+    m·F(q, ν) with 2/(ν − 4) = v/m²: matched as :func:`skinkit.gap.where._noise_dof_of` does."""
+    m, v = max(level[0], 1.0), level[1]    # a level shifted down is not credited (as in where)
+    if v > 0:
+        nu = 4.0 + 2.0 * m ** 2 / v
+        return float(stats.f.sf(lm / q / m, q, nu)), float(stats.f.logsf(lm / q / m, q, nu))
+    return float(stats.chi2.sf(lm / m, q)), float(stats.chi2.logsf(lm / m, q))
+
+
+def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns, colour: Colour | None = None) -> ScoreTest:
+    """The score test of ``cols`` against the residual ``z`` with span ``U`` projected out.
+
+    ``colour``: where the noise is prewhitened by AR models fitted to rest segments; the
+    statistic is then referred to an F distribution that allows for the error of their
+    coefficients along the effect's signature (a slow signature meets the prewhitened noise
+    where a coefficient's error moves its level most: ((1 − φ̂)/(1 − φ))² near frequency 0)."""
     Jp = _project(U, cols.J)
     raw = np.linalg.norm(cols.J, axis=0)
     nrm = np.linalg.norm(Jp, axis=0)
@@ -484,13 +586,13 @@ def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns) -> ScoreTest:
     d = _qp(G, g, sides)
     lm = max(float(2 * g @ d - d @ G @ d), 0.0)
     one_sided = bool(np.any(sides != 0))
+    level = colour_variance(colour, A @ d) if lm > 0 else (1.0, 0.0)
     if one_sided and q == 1:
         # Chernoff: ½χ²₀ + ½χ²₁; an explanation outside the admissible range has LM = 0, p = 1
-        p = 0.5 * float(stats.chi2.sf(lm, 1)) if lm > 0 else 1.0
-        logp = math.log(0.5) + float(stats.chi2.logsf(lm, 1)) if lm > 0 else 0.0
+        p, logp = _tail(lm, 1, level) if lm > 0 else (2.0, 0.0)
+        p, logp = (0.5 * p, math.log(0.5) + logp) if lm > 0 else (1.0, 0.0)
     else:
-        p = float(stats.chi2.sf(lm, max(q, 1))) if q else 1.0
-        logp = float(stats.chi2.logsf(lm, max(q, 1))) if q else 0.0
+        p, logp = _tail(lm, max(q, 1), level) if q else (1.0, 0.0)
     step = {n: float(d[j] / nrm[keep[j]]) for j, n in enumerate(tested)}
     return ScoreTest(cols.effect, lm, q, min(max(p, 0.0), 1.0), min(logp, 0.0), step, A @ d, tested,
                      dict(cols.held), absorbed, {n: cols.methods[n] for n in tested}, one_sided)
@@ -504,7 +606,7 @@ def score_all(sens: Sensitivities, nuisance: np.ndarray | None = None) -> list[S
     along it, a finer mesh would explain too)."""
     J = sens.J_theta if nuisance is None else np.column_stack([sens.J_theta, nuisance])
     U = fitted_basis(J)
-    out = [score_test(sens.z, U, c) for c in sens.columns.values()]
+    out = [score_test(sens.z, U, c, sens.colour) for c in sens.columns.values()]
     return sorted(out, key=lambda t: (t.log_p, -t.statistic))
 
 
@@ -547,7 +649,7 @@ def conditional_test(sens: Sensitivities, a: str, given: str) -> ScoreTest:
     """The score test of effect ``a`` with J_θ *and* effect ``given``'s columns projected out:
     what ``a`` explains that ``given`` cannot."""
     J = np.hstack([sens.J_theta, sens.columns[given].J])
-    return score_test(sens.z, fitted_basis(J), sens.columns[a])
+    return score_test(sens.z, fitted_basis(J), sens.columns[a], sens.colour)
 
 
 def separability(sens: Sensitivities, tests: Sequence[ScoreTest], alpha: float,
@@ -634,7 +736,8 @@ def separating_protocol(spec: Mapping[str, Any], observations: Observations, val
     return {"protocol": rows[0]["protocol"], "cosine": rows[0]["cosine"], "ranking": rows}
 
 
-__all__ = ["COS_NOT_SEPARABLE", "EffectColumns", "ScoreTest", "Sensitivities", "collect", "conditional_test",
-           "corrected", "cosine", "directed_p", "effect_of", "effect_table", "fitted_basis",
+__all__ = ["COS_NOT_SEPARABLE", "Colour", "EffectColumns", "ScoreTest", "Sensitivities", "collect",
+           "colour_of", "colour_variance", "conditional_test", "corrected", "cosine", "directed_p",
+           "effect_of", "effect_table", "fitted_basis",
            "repeat_candidates", "score_all", "score_test", "separability", "separating_protocol",
            "with_effects"]

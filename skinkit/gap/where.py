@@ -31,6 +31,7 @@ from scipy import stats
 
 from skinkit.errors import SchemaError
 from skinkit.fem.threads import single_threaded_blas
+from skinkit.forward import noise_model as nm
 from skinkit.inverse.objective import WEIGHTINGS, Objective
 from skinkit.schemas import Channel, Observations, Prediction, ProtocolObservations
 
@@ -254,7 +255,10 @@ class Samples:
     drive), ``cycle``. ``noise_dof``, ``noise_shared`` ``(k,)``: how each component's noise
     level was estimated (:func:`noise_dof`). ``dt`` [s]: the channel's median sample interval; ``drive``: the
     protocol's :class:`Drive` (None when it has none); ``series_time_s`` ``(T,)``: the channel's
-    time base.
+    time base. ``noise_ar``: per component ``(φ (p,), bias (p,), cov (p, p))``, the AR noise
+    model's coefficients and their estimate's bias and covariance
+    (:func:`skinkit.forward.noise_model.ar_sampling`; p = 0: white), empty for a channel
+    without one or whose coefficients were given.
     """
 
     protocol: str
@@ -273,6 +277,7 @@ class Samples:
     dt: float
     drive: Drive | None = None
     series_time_s: np.ndarray | None = None
+    noise_ar: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...] = ()
 
     @property
     def is_points(self) -> bool:
@@ -286,6 +291,19 @@ class Samples:
         if self.is_points:
             return [f"surface {'xyz'[j]}" for j in range(k)]
         return [self.channel] * k
+
+
+def ar_uncertainty(ch: Channel) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
+    """Per component of a tip channel with an AR noise model fitted to a rest segment, its
+    coefficients with their estimate's bias and covariance ``(φ (p,), bias (p,), cov (p, p))``
+    (:attr:`Samples.noise_ar`); empty when the channel has no AR model or its source names no
+    rest segment (coefficients given)."""
+    if ch.is_points or ch.noise_ar is None:
+        return ()
+    n = nm.rest_samples(ch.noise_source or "")
+    if n is None:
+        return ()
+    return tuple((np.asarray(a, float), *nm.ar_sampling(a, n)) for a in ch.noise_ar)
 
 
 def noise_dof(ch: Channel) -> tuple[np.ndarray, np.ndarray]:
@@ -403,7 +421,7 @@ def samples(observations: Observations, prediction: Prediction, *, weighting: st
             dts = np.diff(ch.time_s)
             dt = float(np.median(dts[dts > 0])) if np.any(dts > 0) else 0.0
             out.append(Samples(proto, cname, full, m, full[m], ch.time_s[ti], comp, pt, reference,
-                               phase, cycle, *noise_dof(ch), dt, drive, ch.time_s))
+                               phase, cycle, *noise_dof(ch), dt, drive, ch.time_s, ar_uncertainty(ch)))
     if not out:
         raise SchemaError("prediction", "covers no observed sample (does the session have the channels "
                           "the model predicts?)")
@@ -419,6 +437,13 @@ class _Partition:
     chi2: np.ndarray          # (L,)
     nmat: np.ndarray          # (L, G) samples of each noise group in each cell
     gmat: np.ndarray          # (L, G) the same weighted by the second-difference gain |1 - e^{iω}|⁴
+    # (L, G) relative variance of each noise group's prewhitened level in each cell that the
+    # uncertainty of its AR coefficients brings (None: 0), and (bmat) the relative shift of that
+    # level their bias brings. A white cell in time holds every frequency alike, where the
+    # coefficients' error averages out to first order (the mean of ∂ log|A|²/∂φ over all
+    # frequencies is 0); a band of the spectrum does not.
+    qmat: np.ndarray | None = None
+    bmat: np.ndarray | None = None
 
 
 class _Table:
@@ -493,6 +518,7 @@ class _Table:
         """χ² per band via Parseval, per series (tip channel component, or point and component)."""
         L, G = len(BANDS), self.G
         chi2, nmat, gmat = np.zeros(L), np.zeros((L, G)), np.zeros((L, G))
+        qmat, bmat = np.zeros((L, G)), np.zeros((L, G))
         for i, s in enumerate(self.ss):
             if s.drive is None or s.dt <= 0:
                 continue
@@ -518,11 +544,28 @@ class _Table:
             nval = nval.sum(axis=0) if s.is_points else nval                     # (k,)
             nmat[:, self.offset[i]: self.offset[i + 1]] += frac[:, None] * nval[None, :]
             gmat[:, self.offset[i]: self.offset[i + 1]] += gfrac[:, None] * nval[None, :]
-        return _Partition("frequency", "frequency", list(BANDS), chi2, nmat, gmat)
+            for j, (phi, bias, cov) in enumerate(s.noise_ar):
+                if not phi.size:
+                    continue
+                # the band's mean relative gain error, h·δ with δ ~ (bias, cov): mean h·bias,
+                # variance h cov hᵀ
+                grad = nm.log_gain_gradient(phi, 2 * np.pi * f * s.dt) * wb[:, None]      # (nb, p)
+                h = np.stack([grad[b == c].sum(axis=0) for c in range(L)])             # (L, p)
+                cnt = np.bincount(b, weights=wb, minlength=L)
+                h = h / np.where(cnt > 0, cnt, 1.0)[:, None]
+                q = np.einsum("lp,pq,lq->l", h, cov, h)
+                # several series in one group: their shares of the group's samples in the cell
+                qmat[:, self.offset[i] + j] += q * frac * nval[j]
+                bmat[:, self.offset[i] + j] += (h @ bias) * frac * nval[j]
+        # the group's figures as the sample-weighted means over its series
+        qmat = np.where(nmat > 0, qmat / np.where(nmat > 0, nmat, 1.0), 0.0)
+        bmat = np.where(nmat > 0, bmat / np.where(nmat > 0, nmat, 1.0), 0.0)
+        return _Partition("frequency", "frequency", list(BANDS), chi2, nmat, gmat, qmat, bmat)
 
 
 # ------------------------------------------------------------------------------------------- tests
-def _noise_dof_of(table: _Table, nmat: np.ndarray, gmat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _noise_dof_of(table: _Table, nmat: np.ndarray, gmat: np.ndarray, qmat: np.ndarray | None = None,
+                  bmat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(m, ν)`` per cell: under the null, χ²/dof of the cell is m·F(dof, ν) (docs/guide/gap-diagnosis.md).
 
     A cell's statistic is Σ_g w_g a_g / b_g: w_g its share of samples of noise group g (one
@@ -531,7 +574,11 @@ def _noise_dof_of(table: _Table, nmat: np.ndarray, gmat: np.ndarray) -> tuple[np
     When σ̂_g comes from second differences over the whole record, a_g and b_g share noise:
     Cov = (2/n_shared)·ḡ/6, ḡ the cell's mean gain of the second differences (6 in time,
     16 sin⁴(πf·dt) at frequency f). The mean m and relative variance v of the denominator's
-    inverse, Σ w_g/b_g, are matched by m·ν/χ²_ν with 2/(ν−4) = v/m²."""
+    inverse, Σ w_g/b_g, are matched by m·ν/χ²_ν with 2/(ν−4) = v/m².
+
+    ``qmat``, ``bmat`` ``(L, G)``: a further relative variance and shift of the prewhitened
+    noise's level per cell, independent of the level's estimate (:attr:`_Partition.qmat`: the
+    AR coefficients' uncertainty and bias in a band of the spectrum)."""
     nd, sh = table.noise_dof, table.noise_shared
     fin = np.isfinite(nd) & (nd > 4.5)
     nu = np.where(fin, nd, np.inf)
@@ -542,6 +589,10 @@ def _noise_dof_of(table: _Table, nmat: np.ndarray, gmat: np.ndarray) -> tuple[np
         n = nmat.sum(axis=1)
         m = 1.0 + (nmat @ mean1 - (gmat * 1.0) @ covu) / n
         v = (nmat ** 2 @ var1 - 2.0 * (nmat * gmat) @ covu) / n ** 2
+        if qmat is not None:
+            v = v + np.sum(nmat ** 2 * qmat, axis=1) / n ** 2
+        if bmat is not None:
+            m = m + np.sum(nmat * bmat, axis=1) / n
         m = np.maximum(m, 1.0)           # never credit the shared noise with a smaller mean
         dof = np.where(v > 0, 4.0 + 2.0 * m ** 2 / v, np.inf)
     return m, dof
@@ -591,10 +642,12 @@ def _cells(table: _Table, n_params: int, alpha: float,
         if not keep.any():
             continue
         chi2, nmat, gmat = part.chi2[keep], part.nmat[keep], part.gmat[keep]
+        qmat = None if part.qmat is None else part.qmat[keep]
+        bmat = None if part.bmat is None else part.bmat[keep]
         labels = [lab for lab, k in zip(part.labels, keep, strict=True) if k]
         n = n[keep]
         dof = n - n_params * n / table.N
-        scale, ndof = _noise_dof_of(table, nmat, gmat)
+        scale, ndof = _noise_dof_of(table, nmat, gmat, qmat, bmat)
         p, pf = _p_values(chi2, dof, scale, ndof)
         excess = np.maximum(chi2 - dof, 0.0)
         tot = excess.sum()
