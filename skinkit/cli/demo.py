@@ -55,6 +55,7 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, shared_mesh: bool,
     four rendered cameras, stochastic records) into one experiment file, identify the lumped
     models, calibrate-profile-track, identify the thesis's finite-element model, diagnose the
     sim-to-real gap, write the report; only then compare every step with the truth."""
+    from skinkit.cli._paths import check_out_dir
     from skinkit.cli._progress import progress
     from skinkit.errors import SkinkitError
     from skinkit.pipelines.chain import missing_plugins, run_chain
@@ -65,6 +66,9 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, shared_mesh: bool,
                            "(install skinkit-plugins: `make demo` does)")
     if out_dir.exists() and not out_dir.is_dir():
         raise SkinkitError(f"--out {out_dir}: exists and is not a folder")
+    # a folder that cannot be made (under a file, on a read-only file system) is refused
+    # naming --out before the chain starts, not by the first write minutes later
+    check_out_dir(out_dir, "--out")
     # on stderr, also with --json: stdout carries only the summary
     with progress() as bar:
         summary = run_chain(out_dir, seed=seed, quick=quick, workers=workers,

@@ -11,6 +11,8 @@ shows as a one-line error when it is run and does not stop the other commands.
 Every group and every command it hands out takes ``-q/--quiet`` and ``-v/--verbose``
 (:func:`skinkit.cli._progress.add_output_options`): the flags are added here, once, so that
 ``skinkit --quiet CMD`` and ``skinkit CMD --quiet`` both work for any command, an extension's too.
+Every text option and argument of a command it hands out refuses an empty value
+(:func:`refuse_empty_text`): ``''`` is never taken as the default or as "nothing".
 """
 
 from __future__ import annotations
@@ -46,6 +48,37 @@ def load_target(target: str) -> click.Command:
     """Import ``"module:attribute"`` and return the attribute (a click command)."""
     module, _, attr = target.partition(":")
     return getattr(importlib.import_module(module), attr)
+
+
+def _refusing_empty(param: click.Parameter) -> Callable[..., Any]:
+    """The click callback of ``param``: its own (whose more precise refusal wins), then the
+    refusal of an empty value naming ``param``."""
+    own = param.callback
+
+    def callback(ctx: click.Context, p: click.Parameter, value: Any) -> Any:
+        out = own(ctx, p, value) if own is not None else value
+        given = value if isinstance(value, tuple) else (value,)
+        if any(isinstance(v, str) and v == "" for v in given):
+            hint = ", or leave the option out for its default" if isinstance(p, click.Option) else ""
+            raise click.BadParameter(f"an empty value; give one{hint}", ctx=ctx, param=p)
+        return out
+
+    callback.refuses_empty = True  # type: ignore[attr-defined]
+    return callback
+
+
+def refuse_empty_text(cmd: click.Command) -> click.Command:
+    """Make every text option and argument of ``cmd`` (not a group's) refuse ``''`` while the
+    command line is parsed, before any work: an empty name, list or choice would otherwise be
+    taken as the default, as "none", or fail later on a message that does not name the option.
+    Idempotent; returns ``cmd``."""
+    if isinstance(cmd, click.Group):
+        return cmd
+    for p in cmd.params:
+        if (isinstance(p.type, click.types.StringParamType) and not getattr(p, "is_flag", False)
+                and not getattr(p.callback, "refuses_empty", False)):
+            p.callback = _refusing_empty(p)
+    return cmd
 
 
 def _broken(name: str, ep: EntryPoint, exc: Exception) -> click.Command:
@@ -102,10 +135,10 @@ class LazyGroup(click.Group):
         add_output_options(self)
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        """The command ``name``, importing its module now, with ``--quiet``/``--verbose``; None
-        when there is none."""
+        """The command ``name``, importing its module now, with ``--quiet``/``--verbose`` and its
+        text parameters refusing ``''``; None when there is none."""
         cmd = self._get_command(ctx, name)
-        return add_output_options(cmd) if cmd is not None else None
+        return refuse_empty_text(add_output_options(cmd)) if cmd is not None else None
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         """Every visible command name, sorted (deprecated aliases are left out)."""

@@ -10,6 +10,7 @@ from typing import Any
 import click
 
 from skinkit import jsonio
+from skinkit.cli._paths import check_out_dir
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 
@@ -52,6 +53,16 @@ def _clean(obj: Any) -> Any:
 
 #: the figures --plot writes (refused if present without --overwrite)
 PLOT_FILES = ("sysid.png", "sysid_residuals.png", "sysid_comparison.png", "incremental.png")
+
+
+def _check_plot_dir(plot_dir: Path, overwrite: bool) -> None:
+    """Refuse ``--plot`` before any work: a folder that cannot be made (under a file, on a
+    read-only file system), or earlier figures that would be replaced silently."""
+    check_out_dir(plot_dir, "--plot")
+    earlier = sorted(f for f in PLOT_FILES if (plot_dir / f).exists())
+    if earlier and not overwrite:
+        raise SkinkitError(f"--plot {plot_dir}: already holds {', '.join(earlier)} (an earlier result); "
+                           "give another folder, or --overwrite to replace them")
 
 
 @click.command()
@@ -113,11 +124,8 @@ def sysid(record: Path, model: str, memory_s: float | None, protocol: str | None
     from skinkit.sysid.record import record_signals
     from skinkit.sysid.wiener import identify_wiener_signals
 
-    if plot_dir is not None and not overwrite:   # before any work: earlier figures are not replaced silently
-        earlier = sorted(f for f in PLOT_FILES if (plot_dir / f).exists())
-        if earlier:
-            raise SkinkitError(f"--plot {plot_dir}: already holds {', '.join(earlier)} (an earlier result); "
-                               "give another folder, or --overwrite to replace them")
+    if plot_dir is not None:
+        _check_plot_dir(plot_dir, overwrite)
     rec = _load(record, protocol, axis)
     robot = None
     if robot_mass or robot_damping or robot_stiffness:

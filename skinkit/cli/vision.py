@@ -143,16 +143,18 @@ def calibrate_cmd(experiment: str, images_name: str | None, target: str | None, 
     target = "charuco" if charuco else (target or "checkerboard")
     size = _parse_board(board_text)
     grid = _dot_grid(size, square_mm, fiducials_text, asymmetric) if target == "dotgrid" else None
-    with open_experiment(experiment) as exp:   # refused before calibrating, not after
+    if target == "charuco" and not hasattr(cv2.aruco, dictionary):
+        raise SkinkitError(f"--dictionary {dictionary!r} is not an OpenCV ArUco dictionary")
+    # refused before calibrating, and before the file is opened to write (which would touch it)
+    with open_experiment(experiment) as exp:
         if exp.camera_names() and not overwrite:
             raise SkinkitError(f"{experiment} already holds a rig ({', '.join(exp.camera_names())}); "
                                "--overwrite to replace it")
+        _images(exp, images_name)
     with open_experiment(experiment, mode="a") as exp:
         seq = _images(exp, images_name)
         names = seq.camera_names  # type: ignore[attr-defined]
         if target == "charuco":
-            if not hasattr(cv2.aruco, dictionary):
-                raise SkinkitError(f"--dictionary {dictionary!r} is not an OpenCV ArUco dictionary")
             marker = (marker_mm if marker_mm is not None else 0.75 * square_mm) * 1e-3
             board = CharucoTarget(size, square_mm * 1e-3, marker, dictionary)
             cal = calibrate_charuco(seq.frames, board, camera_names=names,  # type: ignore[attr-defined]

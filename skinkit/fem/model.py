@@ -122,9 +122,13 @@ def read_model(path: str | Path) -> dict[str, Any]:
         raise ModelError(str(p), f"not a UTF-8 text file (byte 0x{raw[exc.start]:02x} at offset "
                          f"{exc.start}); a model file is TOML, which is UTF-8") from None
     try:
-        return tomllib.loads(body)
+        spec = tomllib.loads(body)
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(str(p), f"not valid TOML: {exc}") from None
+    if not spec:  # else refused later for its first missing table, without naming the file
+        raise ModelError(str(p), "is empty (no TOML tables); a model file holds [model], "
+                         "[[layers]] and the other tables of a model description")
+    return spec
 
 
 def load_model(path: str | Path) -> Model:

@@ -49,21 +49,25 @@ def test_import_tracks_takes_0_and_1(tmp_path):
         assert e.read_track("dic").valid.tolist() == [[True, False, True]]
 
 
-@pytest.mark.parametrize(("value", "got"), [("", "got an empty string"), ("  ", "got only blanks")])
+@pytest.mark.parametrize(("value", "got"), [("", "an empty value"), ("  ", "got only blanks")])
 def test_empty_protocol_and_name_options_are_named(tmp_path, value, got):
+    def expected(option: str, what: str) -> str:
+        # an empty value is refused while the command line is parsed; blanks as a bad name
+        return f"'{option}'" if not value else f"{option}: expected {what}"
+
     folder = tmp_path / "raw"
     folder.mkdir()
     exp = tmp_path / "s.h5"
     one_error(_run("import-extensometer", str(exp), str(folder), "--protocol", value),
-              "--protocol: expected a protocol name", got)
+              expected("--protocol", "a protocol name"), got)
     csv = tmp_path / "rec.csv"
     csv.write_text("time_s,force_N\n0,0\n0.01,0.1\n")
     one_error(_run("import-csv", str(exp), str(csv), "--protocol", value),
-              "--protocol: expected a protocol name", got)
+              expected("--protocol", "a protocol name"), got)
     tracks = tmp_path / "dic.csv"
     tracks.write_text("frame,point,x_mm,y_mm\n0,1,0,0\n")
     one_error(_run("import-tracks", str(exp), str(tracks), "--name", value),
-              "--name: expected a track name", got)
+              expected("--name", "a track name"), got)
     one_error(_run("import-images", str(exp), "--name", value, "--camera", "c0", str(folder)),
-              "--name: expected an image sequence name", got)
+              expected("--name", "an image sequence name"), got)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dic.csv", "raw", "rec.csv"]
