@@ -1,11 +1,14 @@
 """What the CLI tests share: a command run in this process, the contract of a refused command
-(exit 2, one ``error:`` line), and a small one-axis extension record to feed the model commands."""
+(exit 2, one ``error:`` line), the walk over every command of the command line, and a small
+one-axis extension record to feed the model commands."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import click
 import numpy as np
 
 
@@ -36,6 +39,38 @@ def one_error(r: Any, *needles: str, warnings_ok: bool = False) -> str:
     for n in needles:
         assert n in lines[0], (n, lines[0])
     return lines[0]
+
+
+def commands(group: click.Group, ctx: click.Context,
+             prefix: tuple[str, ...] = ()) -> Iterator[tuple[tuple[str, ...], click.Command]]:
+    """Every command under ``group`` (groups walked, not yielded): its words after ``skinkit``
+    and the click command."""
+    for name in group.list_commands(ctx):
+        cmd = group.get_command(ctx, name)
+        if cmd is None:
+            continue
+        if isinstance(cmd, click.Group):
+            yield from commands(cmd, click.Context(cmd, parent=ctx), (*prefix, name))
+        else:
+            yield (*prefix, name), cmd
+
+
+def tree(root: Path) -> dict[str, int]:
+    """Every path under ``root`` with its modification time [ns]: equal before and after a
+    command when it left nothing behind and changed nothing."""
+    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in sorted(root.rglob("*"))}
+
+
+def check(result: Any, root: Path, before: dict[str, int], names: tuple[str, ...]) -> None:
+    """The contract: exit 0, or exit 2 with one ``error:`` line naming one of ``names`` and
+    the folder ``root`` as it was (``before``, a :func:`tree`)."""
+    assert result.exit_code in (0, 2), (result.exit_code, result.output)
+    assert "Traceback" not in result.output
+    if result.exit_code == 2:
+        lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+        assert any(n in lines[0] for n in names), (names, lines[0])
+        assert tree(root) == before, "a refused command changed or left files"
 
 
 def extension_record(path: Path, displacement_mm: np.ndarray) -> str:

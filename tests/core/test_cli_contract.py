@@ -29,23 +29,15 @@ from skinkit.cli._types import FiniteFloat
 from skinkit.schemas import Protocol, RobotRecord
 from skinkit.store import create_experiment
 
+from ._cli import check as _check
+from ._cli import commands as _commands
+from ._cli import tree as _tree
 from ._model_files import base_spec, to_toml
 
 pytestmark = pytest.mark.needs_plugins
 
 BUDGET = settings(max_examples=120, deadline=None, derandomize=True, database=None,
                   suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
-
-
-def _commands(group: click.Group, ctx: click.Context, prefix: tuple[str, ...] = ()):
-    for name in group.list_commands(ctx):
-        cmd = group.get_command(ctx, name)
-        if cmd is None:
-            continue
-        if isinstance(cmd, click.Group):
-            yield from _commands(cmd, click.Context(cmd, parent=ctx), (*prefix, name))
-        else:
-            yield (*prefix, name), cmd
 
 
 def _bad_values(p: click.Option) -> list[str]:
@@ -92,22 +84,6 @@ def _option_cases() -> list[tuple[tuple[str, ...], str, str, list[str]]]:
 
 
 OPTION_CASES = _option_cases()
-
-
-def _tree(root: Path) -> dict[str, int]:
-    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in sorted(root.rglob("*"))}
-
-
-def _check(result, root: Path, before: dict[str, int], names: tuple[str, ...]) -> None:
-    """The contract: exit 0, or exit 2 with one ``error:`` line naming one of ``names`` and
-    the folder as it was."""
-    assert result.exit_code in (0, 2), (result.exit_code, result.output)
-    assert "Traceback" not in result.output
-    if result.exit_code == 2:
-        lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
-        assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
-        assert any(n in lines[0] for n in names), (names, lines[0])
-        assert _tree(root) == before, "a refused command changed or left files"
 
 
 def test_every_ranged_option_has_invalid_values():
