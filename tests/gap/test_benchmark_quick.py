@@ -1,7 +1,7 @@
 """``skinkit gap benchmark --quick --json`` through the command line, and its figures.
 
 The quick run is four effects at moderate magnitude on ``docs/models/invivo_quick.toml``'s
-coarse in vivo case and two null sessions: about 9 minutes on the 2 cores, which would double the
+coarse in vivo case and two null sessions: about 11 minutes on the 2 cores, which would double the
 suite's wall time (kept under 10 minutes), so it runs when ``SKINKIT_GAP_QUICK=1``
 (``make test-gap-quick``), which CI (``.ci/run``) does after the suite; the lumped run of
 ``test_benchmark.py`` covers the same code in every suite. Thresholds, from the sample size:
@@ -27,7 +27,7 @@ pytestmark = [
     pytest.mark.needs_plugins,
     pytest.mark.slow,
     pytest.mark.skipif(os.environ.get("SKINKIT_GAP_QUICK") != "1",
-                       reason="the quick FE benchmark takes ~9 min on 2 cores: SKINKIT_GAP_QUICK=1 runs it"),
+                       reason="the quick FE benchmark takes ~11 min on 2 cores: SKINKIT_GAP_QUICK=1 runs it"),
 ]
 
 
