@@ -11,7 +11,8 @@ import pytest
 
 from skinkit.forward.residuals import chi2_range
 
-pytestmark = pytest.mark.needs_plugins
+# one worker solves the round trip (a module fixture) and runs every test on it
+pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("round_trip")]
 
 PROTOCOLS = ("normal_indentation", "in_plane_000", "in_plane_090", "out_of_plane_330")
 

@@ -23,7 +23,8 @@ GUIDE = ROOT / "docs" / "guide" / "writing-plugins.md"
 PACKAGE = "skinkit-extra-effects"
 RECORD = ROOT.parent / "shared" / "data" / "real" / "healthy_skin_extension_relaxation.csv"
 
-pytestmark = [pytest.mark.slow, pytest.mark.needs_plugins]
+# one worker builds the throw-away environment (a module fixture) and runs every test on it
+pytestmark = [pytest.mark.slow, pytest.mark.needs_plugins, pytest.mark.xdist_group("guide_effects")]
 
 
 def _write_package(root: Path) -> Path:
