@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.needs_plugins
+# one worker runs the tour (a module fixture of minutes) and every test on it
+pytestmark = [pytest.mark.needs_plugins, pytest.mark.xdist_group("readme_tour")]
 
 ROOT = Path(__file__).resolve().parents[2]
 RTOL = 1e-10
