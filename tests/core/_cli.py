@@ -41,16 +41,18 @@ def one_error(r: Any, *needles: str, warnings_ok: bool = False) -> str:
     return lines[0]
 
 
-def commands(group: click.Group, ctx: click.Context,
-             prefix: tuple[str, ...] = ()) -> Iterator[tuple[tuple[str, ...], click.Command]]:
-    """Every command under ``group`` (groups walked, not yielded): its words after ``skinkit``
-    and the click command."""
+def commands(group: click.Group, ctx: click.Context, prefix: tuple[str, ...] = (), *,
+             groups: bool = False) -> Iterator[tuple[tuple[str, ...], click.Command]]:
+    """Every command under ``group``: its words after ``skinkit`` and the click command; the
+    groups are walked, and yielded too (``group`` itself first) when ``groups``."""
+    if groups:
+        yield prefix, group
     for name in group.list_commands(ctx):
         cmd = group.get_command(ctx, name)
         if cmd is None:
             continue
         if isinstance(cmd, click.Group):
-            yield from commands(cmd, click.Context(cmd, parent=ctx), (*prefix, name))
+            yield from commands(cmd, click.Context(cmd, parent=ctx), (*prefix, name), groups=groups)
         else:
             yield (*prefix, name), cmd
 

@@ -23,7 +23,7 @@ from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SchemaError, SkinkitError
 from skinkit.schemas import CameraModel, CameraRig, ImageSequence, Protocol, RobotRecord, SurfaceProfile
 from skinkit.store import create_experiment, open_experiment
-from tests.core._cli import one_error
+from tests.core._cli import commands, one_error
 
 from ._model_files import base_spec, write
 
@@ -189,23 +189,12 @@ def test_fractional_protocol_count_is_refused_not_truncated(tmp_path):
 
 # ---- float options refuse NaN and infinities -------------------------------------------------
 
-def _commands(group, ctx, prefix=()):
-    import click
-
-    for name in group.list_commands(ctx):
-        cmd = group.get_command(ctx, name)
-        if isinstance(cmd, click.Group):
-            yield from _commands(cmd, click.Context(cmd, parent=ctx), (*prefix, name))
-        elif cmd is not None:
-            yield (*prefix, name), cmd
-
-
 def test_every_float_option_is_finite_only():
     """click's FloatRange compares NaN false with every bound and lets it through: every float
     option of every command is a FiniteFloat (the contract test then tries nan and inf on each)."""
     import click
 
-    floats = [(path, p.opts[0], p.type) for path, cmd in _commands(cli, click.Context(cli))
+    floats = [(path, p.opts[0], p.type) for path, cmd in commands(cli, click.Context(cli))
               for p in cmd.params if isinstance(p.type, click.types.FloatParamType)]
     assert len(floats) >= 15
     assert [f for f in floats if not isinstance(f[2], FiniteFloat)] == []

@@ -308,17 +308,7 @@ def test_a_refusal_leaves_a_valid_experiment_as_it_was(tmp_path, path):
         _refused(r, tmp_path, before, tuple(argv[len(path):]))
 
 
-def _groups(group: click.Group, ctx: click.Context, prefix: tuple[str, ...] = ()):
-    yield prefix, group
-    for name in group.list_commands(ctx):
-        cmd = group.get_command(ctx, name)
-        if isinstance(cmd, click.Group):
-            yield from _groups(cmd, click.Context(cmd, parent=ctx), (*prefix, name))
-        elif cmd is not None:
-            yield (*prefix, name), cmd
-
-
-@pytest.mark.parametrize("path", [p for p, _ in _groups(cli, click.Context(cli))], ids=" ".join)
+@pytest.mark.parametrize("path", [p for p, _ in commands(cli, click.Context(cli), groups=True)], ids=" ".join)
 def test_help_of_every_group_and_command(path):
     r = CliRunner().invoke(cli, [*path, "--help"])
     assert r.exit_code == 0 and r.exception is None, r.output
