@@ -144,8 +144,13 @@ class NewtonSolver:
         self.problem.t = t
         u_old = u
         if guess is not None:
-            u, r, ref = self._extrapolated(u, guess, t, dt)
-        else:
+            try:
+                u, r, ref = self._extrapolated(u, guess, t, dt)
+            except InvertedElementError:
+                # the extrapolation overshot a small element (at an indenter's edge): the
+                # tangent predictor starts from the converged state instead of cutting the step
+                guess = None
+        if guess is None:
             u, r, ref = self._predict(u, t, dt)
         norm = float(np.linalg.norm(r))
         tol = max(o.rtol * ref, o.atol)

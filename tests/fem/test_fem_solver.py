@@ -76,6 +76,24 @@ def test_step_cutting_recovers():
     assert np.isclose(sol.u[-1].reshape(-1, 3)[s["top"], 2], -0.006).all()
 
 
+def test_an_extrapolated_start_that_inverts_an_element_falls_back_to_the_predictor():
+    """An extrapolation that overshoots (here: a guess of random centimetres) costs
+    the increment its start, not a cut: the tangent predictor takes over and Newton converges
+    to the equilibrium it reaches without a guess."""
+    prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.0003])
+    solver = NewtonSolver(prob, bc, SolverOptions(rtol=1e-10))
+    u0 = np.zeros(prob.n_dof)
+    plain, _, _ = solver.increment(u0, 1.0, None)
+    # a centimetre of random motion per node on millimetre elements: many invert
+    wild = 0.01 * np.random.default_rng(0).standard_normal(prob.n_dof)
+    with pytest.raises(InvertedElementError):
+        prob.evaluate(wild, False, None)
+    u, its, _ = solver.increment(u0, 1.0, None, guess=wild)
+    # the same equilibrium to the Newton tolerance, amplified by the tangent's condition
+    np.testing.assert_allclose(u, plain, atol=1e-7 * 3e-4)
+    assert its >= 1
+
+
 def test_inverted_element_error_names_the_element():
     m = block_mesh((1, 1, 1), (1, 1, 1))
     prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 10.0})])
