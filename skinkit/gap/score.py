@@ -273,7 +273,7 @@ def colour_of(fitted: Observations, prediction: Prediction) -> Colour | None:
         if proto not in fitted.names:
             continue
         ch = fitted[proto].channels[cname]
-        _, keep = obj._weights(proto, cname, ch)
+        _, keep = obj.weights(proto, cname, ch)
         m = cp.mask(ch) & keep
         n = int(m.sum())
         if not n:

@@ -293,7 +293,7 @@ def samples(observations: Observations, prediction: Prediction, *, weighting: st
         drive = make_drive(po.channels[dname]) if dname else None
         for cname, cp in chans.items():
             ch = po.channel(cname)
-            _, keep = obj._weights(proto, cname, ch)
+            _, keep = obj.weights(proto, cname, ch)
             m = cp.mask(ch) & keep
             if not m.any():
                 continue

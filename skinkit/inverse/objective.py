@@ -96,8 +96,9 @@ class Objective:
         self.n_sensitivity = 0
         self._scales: dict[tuple[str, str], np.ndarray | None] = {}
 
-    def _weights(self, proto: str, cname: str, ch: Channel) -> tuple[np.ndarray, np.ndarray]:
-        """``(weight, keep)`` arrays of the channel's shape."""
+    def weights(self, proto: str, cname: str, ch: Channel) -> tuple[np.ndarray, np.ndarray]:
+        """``(weight, keep)`` arrays of channel ``ch``'s shape (protocol ``proto``, name ``cname``):
+        each entry's weight in the residual [1/unit] and whether it enters at all."""
         if self.weighting == "robot-only" and ch.is_points:
             return np.zeros(ch.values.shape), np.zeros(ch.values.shape, bool)
         w = np.ones(ch.values.shape) if self.weighting == "unweighted" else \
@@ -118,7 +119,7 @@ class Objective:
         err = self.observations.model_error
         for proto, cname, cp in prediction.items():
             ch = self.observations[proto].channels[cname]
-            w, keep = self._weights(proto, cname, ch)
+            w, keep = self.weights(proto, cname, ch)
             m = cp.mask(ch) & keep
             if not m.any():
                 continue
