@@ -4,9 +4,12 @@ Each entry has one main parameter (``parameter``, value ``value``; 0 is no effec
 linear in it but for a lag's shift in time, and applies to one channel (``docs/guide/effects.md``):
 
 * ``bias``: recorded = true + value · b(t) on ``component`` of ``channel``, b = 1
-  (``basis = "constant"``), t [s] (``"time"``) or 1 − exp(−t/τ) (``"warmup"``: a sensor's
+  (``basis = "constant"``), t [s] (``"time"``), 1 − exp(−t/τ) (``"warmup"``: a sensor's
   zero settling to ``value`` with time constant ``tau`` [s] > 0, a second parameter when
-  ``tau_parameter`` names it). On the channel that drives a model the model is driven by
+  ``tau_parameter`` names it) or B(t/τ − k) − B(−k) (``"spline"``: the uniform cubic
+  B-spline centred on knot ``knot`` = k ≥ 1 of a grid with spacing ``tau`` [s] > 0 from the
+  record's start; a sum of them is a smooth wander through 0 at t = 0 with no feature
+  faster than about 2τ). On the channel that drives a model the model is driven by
   recorded − value · b(t). t is the channel's sample time, counted from its protocol's
   start (``Channel.time_s``): a time basis restarts at 0 with every protocol, as for a
   sensor zeroed at the start of each record.
@@ -78,7 +81,9 @@ KINDS = ("bias", "series", "similarity", "tilt", "lag")
 _CHANNELS = ("tip_force", "tip_position", "points", "points_2d")
 _TIP = ("tip_force", "tip_position")
 _POINTS = ("points", "points_2d")
-_BASES = ("constant", "time", "warmup")
+_BASES = ("constant", "time", "warmup", "spline")
+#: bases with a time scale ``tau`` [s]
+_SCALED = ("warmup", "spline")
 #: largest |lag| [s]: a skew between acquisition chains is milliseconds; half a second is a
 #: misaligned record, not a lag
 MAX_LAG_S = 0.5
@@ -100,6 +105,7 @@ class Entry:
     azimuth_parameter: str = ""
     tau: float = 0.0
     tau_parameter: str = ""
+    knot: int = 0
 
 
 def parse(entries: Any) -> list[Entry]:
@@ -112,7 +118,7 @@ def parse(entries: Any) -> list[Entry]:
 
 
 _KEYS = {"kind", "parameter", "value", "channel", "component", "basis", "source", "mode", "azimuth",
-         "azimuth_parameter", "tau", "tau_parameter"}
+         "azimuth_parameter", "tau", "tau_parameter", "knot"}
 
 
 def _entry(w: str, e: Any) -> Entry:
@@ -135,8 +141,12 @@ def _entry(w: str, e: Any) -> Entry:
     basis = str(e.get("basis", "constant"))
     if basis not in _BASES:
         raise ForwardError(f"{w}.basis", f"must be one of {list(_BASES)}, got {basis!r}")
-    if ("tau" in e or "tau_parameter" in e) and not (kind == "bias" and basis == "warmup"):
-        raise ForwardError(f"{w}.tau", "a time constant belongs to a bias with basis = 'warmup' only")
+    if "tau" in e and not (kind == "bias" and basis in _SCALED):
+        raise ForwardError(f"{w}.tau",
+                           "a time scale belongs to a bias with basis = 'warmup' or 'spline' only")
+    if "tau_parameter" in e and not (kind == "bias" and basis == "warmup"):
+        raise ForwardError(f"{w}.tau_parameter", "only a warm-up's time constant can be a parameter")
+    knot = _knot(e, kind, basis, w)
     mode = str(e.get("mode", "scale" if kind == "similarity" else ""))
     if kind == "similarity" and mode not in ("scale", "rotation"):
         raise ForwardError(f"{w}.mode", f"must be 'scale' or 'rotation', got {mode!r}")
@@ -149,7 +159,7 @@ def _entry(w: str, e: Any) -> Entry:
     if kind == "lag" and not abs(value) <= MAX_LAG_S:
         raise ForwardError(f"{w}.value", f"a lag of {value:g} s is outside ±{MAX_LAG_S:g} s")
     az = _number(e.get("azimuth", 0.0), "rad", f"{w}.azimuth")
-    return replace(entry, value=value, azimuth=az, tau=_tau(e, basis, w))
+    return replace(entry, value=value, azimuth=az, tau=_tau(e, basis, w), knot=knot)
 
 
 def _channel(w: str, kind: str, e: Mapping[str, Any]) -> str:
@@ -166,15 +176,30 @@ def _channel(w: str, kind: str, e: Mapping[str, Any]) -> str:
 
 
 def _tau(e: Mapping[str, Any], basis: str, where: str) -> float:
-    """A warm-up's time constant [s] (> 0, required); 0 for the other bases."""
-    if basis != "warmup":
+    """A warm-up's time constant or a spline's knot spacing [s] (> 0, required); 0 for the
+    other bases."""
+    if basis not in _SCALED:
         return 0.0
+    what = "time constant" if basis == "warmup" else "knot spacing"
     if "tau" not in e:
-        raise ForwardError(f"{where}.tau", "a bias with basis = 'warmup' needs a time constant tau [s]")
+        raise ForwardError(f"{where}.tau", f"a bias with basis = {basis!r} needs a {what} tau [s]")
     tau = _number(e["tau"], "s", f"{where}.tau")
     if not tau > 0:
-        raise ForwardError(f"{where}.tau", f"a warm-up time constant must be positive, got {tau:g} s")
+        raise ForwardError(f"{where}.tau", f"a {what} must be positive, got {tau:g} s")
     return tau
+
+
+def _knot(e: Mapping[str, Any], kind: str, basis: str, where: str) -> int:
+    """A spline basis's knot (a whole number >= 1, required); 0 for the other bases."""
+    if basis != "spline" or kind != "bias":
+        if "knot" in e:
+            raise ForwardError(f"{where}.knot", "a knot belongs to a bias with basis = 'spline' only")
+        return 0
+    k = e.get("knot")
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ForwardError(f"{where}.knot", f"must be a whole number >= 1 (the knot the B-spline is "
+                           f"centred on, counted from the record's start), got {k!r}")
+    return int(k)
 
 
 def _number(value: Any, unit: str, where: str) -> float:
@@ -233,13 +258,24 @@ def _bounds(e: Entry, name: str, value: float) -> tuple[float, float]:
     return (0.0 if e.kind == "series" and value >= 0 else -math.inf), math.inf
 
 
+def cubic_bspline(u: np.ndarray) -> np.ndarray:
+    """The uniform cubic B-spline B(u) ``(T,)`` [1] (knots at the integers, support |u| < 2,
+    B(0) = 2/3, B(±1) = 1/6; twice continuously differentiable)."""
+    a = np.abs(np.asarray(u, dtype=float))
+    return np.where(a < 1.0, (4.0 - 6.0 * a**2 + 3.0 * a**3) / 6.0,
+                    np.where(a < 2.0, (2.0 - a) ** 3 / 6.0, 0.0))
+
+
 def _basis(e: Entry, t: np.ndarray) -> np.ndarray:
-    """b(t) ``(T,)`` of a bias: 1, t [s] or 1 − exp(−t/τ) (by ``expm1``: exact for t ≪ τ)."""
+    """b(t) ``(T,)`` of a bias: 1, t [s], 1 − exp(−t/τ) (by ``expm1``: exact for t ≪ τ) or
+    B(t/τ − k) − B(−k)."""
     t = np.asarray(t, dtype=float)
     if e.basis == "constant":
         return np.ones_like(t)
     if e.basis == "time":
         return t
+    if e.basis == "spline":
+        return cubic_bspline(t / e.tau - e.knot) - cubic_bspline(np.array(-float(e.knot)))
     return -np.expm1(-t / e.tau)
 
 
@@ -267,8 +303,9 @@ def _tilt(angle: float, azimuth: float) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 #: SI unit of an entry's parameter, by kind (bias: by channel and basis)
 _BIAS_UNITS = {("tip_force", "constant"): "N", ("tip_force", "time"): "N/s", ("tip_force", "warmup"): "N",
-               ("tip_position", "constant"): "m", ("tip_position", "time"): "m/s",
-               ("tip_position", "warmup"): "m"}
+               ("tip_force", "spline"): "N", ("tip_position", "constant"): "m",
+               ("tip_position", "time"): "m/s", ("tip_position", "warmup"): "m",
+               ("tip_position", "spline"): "m"}
 
 
 def parameter_unit(entry: Entry) -> str:

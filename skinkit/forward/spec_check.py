@@ -26,7 +26,7 @@ from skinkit.errors import EffectError, ForwardError
 MAX_DRIVE_STEP_S = 1e4
 #: ``[[instrument]]`` keys
 INSTRUMENT_KEYS = ("kind", "parameter", "value", "channel", "component", "basis", "tau", "tau_parameter",
-                   "source", "mode", "azimuth", "azimuth_parameter")
+                   "knot", "source", "mode", "azimuth", "azimuth_parameter")
 #: ``[[fields]]`` keys besides each kind's parameters
 FIELD_KEYS = ("name", "kind", "layers")
 

@@ -77,8 +77,12 @@ class Form:
     @property
     def accepted(self) -> tuple[str, ...]:
         """The effects a right answer may name: ``effect`` and the ones that describe the same
-        phenomenon in another shape (``also``: a drifting zero is a drift or a warm-up)."""
+        phenomenon in another shape (``also``: a drifting zero is a drift, a warm-up or a wander)."""
         return ((self.effect,) if self.effect else ()) + self.also
+
+
+#: the effects that describe a force zero moving with time, each in its own shape
+DRIFTING_ZERO = ("force-warmup", "force-wander")
 
 
 def _white(core: Callable[[af.Programme, np.ndarray], np.ndarray]) -> Builder:
@@ -135,10 +139,10 @@ FORMS: tuple[Form, ...] = (
     Form("effect", "warmup-drift", "force-drift",
          "warm-up with two time constants, 5 mN (1 − e^(−t/20 s)) + 8 mN (1 − e^(−t/200 s))",
          _white(lambda p, fe: fe + af.warmup_drift(p.t, (0.005, 0.008), (20.0, 200.0))),
-         also=("force-warmup",)),
+         also=DRIFTING_ZERO),
     Form("effect", "thermal-drift", "force-drift",
          "thermal swing 4 mN sin(2π t/150 s + 0.7)",
-         _white(lambda p, fe: fe + af.thermal_drift(p.t, 0.004, 150.0, 0.7)), also=("force-warmup",)),
+         _white(lambda p, fe: fe + af.thermal_drift(p.t, 0.004, 150.0, 0.7)), also=DRIFTING_ZERO),
     Form("effect", "clock-skew", "channel-lag",
          "force clock running slow: lag growing from 0 to 0.25 s over the record",
          _white(lambda p, fe: af.clock_skew(p.t, fe, 0.25))),

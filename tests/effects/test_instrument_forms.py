@@ -1,6 +1,7 @@
 """The instrument effects in the forms a lab meets them: a force sensor's zero settling after it
 was switched on or tared (``force-warmup``: ``bias`` entries with ``basis = "warmup"``) and the
-force channel sampled late relative to the position (``channel-lag``: a ``lag`` entry).
+force channel sampled late relative to the position (``channel-lag``: a ``lag`` entry), and its zero
+wandering slowly (``force-wander``: ``bias`` entries with ``basis = "spline"``).
 
 Closed forms on a lumped model, analytic sensitivities against central differences (lumped
 models driven by position and by force, and the finite-element testbed), exact nulls, and
@@ -76,6 +77,46 @@ def test_warmup_is_the_true_force_plus_a_settling_zero_per_axis():
     for i, a in enumerate("xyz"):
         expect[:, i] += WARMUP[a] * (1 - np.exp(-T / WARMUP["tau"]))
     np.testing.assert_allclose(got, expect, rtol=0, atol=1e-14)
+
+
+def test_the_cubic_bspline_has_its_textbook_values_and_sums_to_one():
+    """B(0) = 2/3, B(±1) = 1/6, B(±2) = 0, and the shifted B-splines of a uniform grid are a
+    partition of unity (de Boor, A Practical Guide to Splines, ch. IX)."""
+    assert inst.cubic_bspline(np.array([0.0, 1.0, -1.0, 2.0, -2.5])).tolist() == pytest.approx(
+        [2 / 3, 1 / 6, 1 / 6, 0.0, 0.0], abs=1e-15)
+    u = np.linspace(0.0, 5.0, 501)
+    total = sum(inst.cubic_bspline(u - k) for k in range(-2, 8))
+    np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-14)
+
+
+def test_wander_is_the_true_force_plus_a_spline_through_zero_at_the_start():
+    """w(t) = Σ_k c_k [B(t/S − k) − B(−k)] per axis, written here from the B-spline's pieces."""
+    def b(u: np.ndarray) -> np.ndarray:   # the uniform cubic B-spline, piece by piece
+        a = np.abs(u)
+        out = np.zeros_like(a)
+        inner, outer = a < 1, (a >= 1) & (a < 2)
+        out[inner] = 2 / 3 - a[inner] ** 2 + a[inner] ** 3 / 2
+        out[outer] = (2 - a[outer]) ** 3 / 6
+        return out
+
+    eff = registry.create("skinkit.effects", "force-wander")
+    S, n = eff.SPACING, eff.KNOTS
+    rng = np.random.default_rng(5)
+    coef = {f"{a}{k}": float(rng.normal(0, 0.004)) for a in "xyz" for k in range(1, n + 1)}
+    obs = session()
+    got = channel(predict(lumped([{"name": "force-wander", **coef}]), obs), "tip_force").values
+    expect = np.zeros((T.size, 3))
+    expect[:, 0] = K * position(T)
+    for i, a in enumerate("xyz"):
+        for k in range(1, n + 1):
+            expect[:, i] += coef[f"{a}{k}"] * (b(T / S - k) - b(np.array([-float(k)])))
+    np.testing.assert_allclose(got, expect, rtol=0, atol=1e-14)
+    assert np.all(got[0] == 0)                       # tared: nothing at the record's start
+    # linear in every coefficient: the analytic derivative is the basis itself
+    pred = predict(lumped([{"name": "force-wander", **coef}]), obs, names=["force-wander.y2"])
+    d = channel(pred, "tip_force").d["force-wander.y2"]
+    np.testing.assert_allclose(d[:, 1], b(T / S - 2) - b(np.array([-2.0])), rtol=0, atol=1e-15)
+    assert np.all(d[:, [0, 2]] == 0)
 
 
 def spline_error_bound() -> float:
@@ -242,6 +283,12 @@ def one_line(exc: Exception) -> bool:
     ({"basis": "warmup", "tau": "-2 s"}, "instrument[0].tau"),
     ({"basis": "warmup"}, "instrument[0].tau"),
     ({"basis": "constant", "tau": 2.0}, "instrument[0].tau"),
+    ({"basis": "spline", "knot": 1}, "instrument[0].tau"),
+    ({"basis": "spline", "tau": 50.0}, "instrument[0].knot"),
+    ({"basis": "spline", "tau": 50.0, "knot": 0}, "instrument[0].knot"),
+    ({"basis": "spline", "tau": 50.0, "knot": 1.5}, "instrument[0].knot"),
+    ({"basis": "spline", "tau": 50.0, "knot": 1, "tau_parameter": "s"}, "instrument[0].tau_parameter"),
+    ({"basis": "time", "knot": 1}, "instrument[0].knot"),
     ({"kind": "lag", "value": 0.6}, "instrument[0].value"),
     ({"kind": "lag", "value": "-600 ms"}, "instrument[0].value"),
     ({"kind": "lag", "value": 0.01, "channel": "points"}, "instrument[0].channel"),

@@ -3,8 +3,8 @@
 model. Each entry's ``parameter`` is the effect parameter itself, value 0 is no effect exactly.
 
 ``indenter-tilt`` and ``tracking-bias`` apply to finite-element models (a probe axis and 3D
-points exist only there); ``force-offset``, ``force-drift``, ``force-warmup``, ``channel-lag`` and
-``robot-compliance`` to any model.
+points exist only there); ``force-offset``, ``force-drift``, ``force-warmup``, ``force-wander``,
+``channel-lag`` and ``robot-compliance`` to any model.
 
 Time t in these effects is each record's own, from its protocol's start (``Channel.time_s``): a
 drift or a warm-up restarts at every protocol, as for a sensor zeroed (tared) at the start of
@@ -124,6 +124,51 @@ class ForceWarmup(_ForceBias):
 
     def _entries(self, v: dict[str, float]) -> list[dict[str, Any]]:
         return [{**e, "tau": v["tau"], "tau_parameter": f"{self.name}.tau"} for e in super()._entries(v)]
+
+
+class ForceWander(_ForceBias):
+    """The force sensor's zero wandering slowly with temperature: recorded = true + w(t) per
+    axis, w a cubic spline through 0 at t = 0, smooth on the scale of minutes:
+    w(t) = Σ_k c_k [B(t/S − k) − B(−k)], k = 1 … :attr:`KNOTS`, B the uniform cubic B-spline,
+    S = :attr:`SPACING` (100 s); coefficients ``x1`` … ``z3`` [N] (null 0), t the record's time
+    from its protocol's start.
+
+    Phenomenon: a strain-gauge load cell's zero moves with the temperature of its bridge, its
+    adhesive and its amplifier (the manufacturer's "temperature effect on zero", in % of full
+    scale per kelvin); in a room whose air conditioning cycles, near a window, a lamp or a
+    person, that temperature swings over minutes, and the recorded force follows it with the
+    sensor's thermal lag. The form assumes nothing of the swing's shape but its slowness: a
+    spline with knots every S seconds holds wander whose features are slower than about 2S
+    (a sinusoidal swing of period 150 s to 86 % of its variance over 243 s) and cannot follow
+    a protocol's own loading, cycle by cycle (seconds to a minute): a softening that steps
+    from one loading cycle to the next is not taken for a wandering zero.
+
+    Not covered: wander with features faster than about 2S (it meets the protocol's own time
+    scales and cannot be told from the tissue's response), wander after 3S = 300 s of a record
+    (the last knot: the spline returns to a constant by 500 s), a zero that depends on the load
+    (creep, hysteresis). ``force-drift`` (linear) and ``force-warmup`` (one exponential) are the
+    shapes with one parameter per axis: over a short protocol the wander's first knot looks
+    like either, and the diagnosis reports them as not separable.
+
+    Three times :attr:`KNOTS` ``bias`` entries with ``basis = "spline"`` (``knot``, ``tau`` = S);
+    linear in every coefficient."""
+
+    name = "force-wander"
+    touches = {"fe": frozenset({"instrument"}), "lumped": frozenset({"instrument"})}
+    basis = "spline"
+    #: knots of the spline (centred at S, 2S, … from the record's start)
+    KNOTS = 3
+    #: knot spacing S [s]
+    SPACING = 100.0
+
+    def _declared(self) -> list[Declared]:
+        return [declare(f"{a}{k}", 2.0, 0.0, "mN", -1000.0, 1000.0)
+                for a in _AXES for k in range(1, self.KNOTS + 1)]
+
+    def _entries(self, v: dict[str, float]) -> list[dict[str, Any]]:
+        return [{"kind": "bias", "parameter": f"{self.name}.{a}{k}", "value": v[f"{a}{k}"],
+                 "channel": "tip_force", "component": i, "basis": self.basis, "knot": k, "tau": self.SPACING}
+                for i, a in enumerate(_AXES) for k in range(1, self.KNOTS + 1)]
 
 
 class ChannelLag(BaseEffect):
