@@ -34,6 +34,19 @@ def closing_table(summary: dict[str, Any]) -> list[str]:
     return lines
 
 
+#: the diagnosis's per-sample and per-point arrays: kept in the summary and the gap report's
+#: JSON (``gap/gap.json``), left off the results page, which carries figures
+PER_SAMPLE = ("series", "points", "point_map_after")
+
+
+def page_figures(summary: dict[str, Any]) -> dict[str, Any]:
+    """The demo's summary for its results page: the diagnosis without :data:`PER_SAMPLE`."""
+    diag = summary.get("diagnose")
+    if not isinstance(diag, dict):
+        return summary
+    return {**summary, "diagnose": {k: v for k, v in diag.items() if k not in PER_SAMPLE}}
+
+
 @click.command()
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("demo-output"),
               show_default=True, help="Folder for the experiment file, truth file, reports and summary.")
@@ -75,7 +88,7 @@ def demo(out_dir: Path, seed: int, quick: bool, workers: int, shared_mesh: bool,
                             progress=lambda step, f: _advance(bar, step, f),
                             mesh="shared" if shared_mesh else "own")
     lines = _summary_lines(summary, out_dir)
-    write_page(page, "The main job on the virtual lab", summary, lines)
+    write_page(page, "The main job on the virtual lab", page_figures(summary), lines)
     if as_json:
         click.echo(jsonio.dumps(summary, indent=1, default=float))
         return
