@@ -564,7 +564,10 @@ def _gate(loc: Any, tests: Sequence[ScoreTest], alpha: float) -> dict[str, Any]:
     score test is the more powerful test against that alternative; :func:`directed_p`) — two
     families, each at ``alpha``/2 (Bonferroni). When there is none, the located cells lose their
     flags, so that a report never shows a significant cell beside "no significant gap" (a cell
-    claims its place only once the gate has opened: gatekeeping keeps the family-wise level)."""
+    claims its place only once the gate has opened: gatekeeping keeps the family-wise level).
+    A periodic component above the drive's band opens it too (a tone is a gap the noise model
+    hid, whatever the χ² says): the line test belongs to the residual's family at
+    :data:`skinkit.gap.lines.ALPHA_SHARE` of its level (``loc.family_p``)."""
     half = alpha / 2
     omnibus_p, score_p = float(loc.family_p), directed_p(tests)
     omnibus = bool(omnibus_p <= half)

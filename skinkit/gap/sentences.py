@@ -169,6 +169,20 @@ def model_error_messages(err: Mapping[str, Any] | None) -> list[str]:
     return out
 
 
+def periodic_sentence(lines: Sequence[Any], chi2_per_dof: float, elsewhere: bool) -> str:
+    """The periodic components of the residual (:class:`skinkit.gap.lines.Line`) in words;
+    ``elsewhere``: whether the residual's χ² shows a gap besides them."""
+    from skinkit.gap.lines import describe
+
+    text = (f"Periodic component{'s' if len(lines) > 1 else ''} above ten times the drive's band, which "
+            f"the noise model does not hold: {describe(list(lines))} — a tone from outside the skin "
+            "(mains pick-up, a vibration)? No installed effect models a tone")
+    if not elsewhere:
+        text += (f"; the residual's χ²/ν ({chi2_per_dof:.3g}) does not show it because the noise "
+                 "model, estimated on the rest segment, took the tone in")
+    return text + "."
+
+
 def messages(
     report: Mapping[str, Any],
     loc: Any,
@@ -195,6 +209,9 @@ def messages(
         out.append(f"No significant gap: χ²/ν {chi2_per_dof:.3g} is at the noise level; no effect named.")
         return out + [f"Warning: {w['message']}." for w in report.get("warnings", [])]
     ranked = [c for c in loc.ranked() if c.share > 0]
+    lines = list(getattr(loc, "lines", []) or [])
+    if lines:
+        out.append(periodic_sentence(lines, chi2_per_dof, bool(ranked)))
     if not gap.get("omnibus_significant", True) and not ranked:
         top = next((c for c in report["candidates"] if c["effect"] in gap.get("directed", [])), None)
         out.append(
@@ -202,7 +219,7 @@ def messages(
             f"score test finds one along {top['effect'] if top else 'a candidate'}'s signature"
             + (f" (LM {top['score']:.3g}, p {top['p_value']:.2g})." if top else ".")
         )
-    else:
+    elif ranked or not lines:
         where = _location(loc)
         out.append(
             f"Significant gap: χ²/ν {chi2_per_dof:.3g}"

@@ -242,6 +242,7 @@ def remaining(
         "unexplained_share": share,
         "cells": cells,
         "noise_factor": kappa,
+        "lines": [ln.to_dict() for ln in getattr(loc, "lines", []) or []],
     }
 
 
@@ -253,6 +254,12 @@ def remaining_sentence(rem: Mapping[str, Any], added: Sequence[str]) -> str:
         )
     where = ", ".join(f"{c['label']} ({c['axis']}, χ²/ν {c['chi2_per_dof']:.3g})" for c in rem["cells"][:4])
     at = f" in {where}" if where else ""
+    if rem.get("lines") and not rem["cells"]:
+        from skinkit.gap.lines import Line, describe
+
+        tones = describe([Line(**ln) for ln in rem["lines"]])
+        return ("Part of the gap is not explained by any installed effect: the periodic components "
+                f"({tones}) remain.")
     if rem["unexplained_share"] < SMALL_REMAINDER:
         return (
             f"The remainder is still significant{at}, but holds "

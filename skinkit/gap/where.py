@@ -33,6 +33,7 @@ from skinkit.errors import SchemaError
 from skinkit.fem.threads import single_threaded_blas
 from skinkit.forward import noise_model as nm
 from skinkit.gap.drive import Drive, _drive_channel, make_drive
+from skinkit.gap.lines import ALPHA_SHARE, Line, search
 from skinkit.inverse.objective import WEIGHTINGS, Objective
 from skinkit.schemas import Channel, Observations, Prediction
 
@@ -91,8 +92,10 @@ class GapLocation:
     ``whiteness`` / ``cross_correlation``: ``"<protocol>/<channel>"`` -> test figures.
     ``input_band``: protocol -> ``(f_lo, f_hi)`` [Hz] holding 95 % of the drive's power.
     ``family_p``: the family's p-value — the smallest ``alpha`` at which ``significant`` would
-    hold (the smallest Holm-adjusted p of a member above its dof), for a caller that combines
-    this family with other tests.
+    hold (the smallest Holm-adjusted p of a member above its dof, or of the line family scaled by
+    its share of the level), for a caller that combines this family with other tests.
+    ``lines``: periodic components above ten times the drive's band (:mod:`skinkit.gap.lines`);
+    one makes the gap significant on its own.
     """
 
     chi2: float
@@ -107,6 +110,7 @@ class GapLocation:
     noise_dof: float = float("inf")
     input_band: dict[str, tuple[float, float]] = field(default_factory=dict)
     family_p: float = float("nan")
+    lines: list[Line] = field(default_factory=list)
 
     def ranked(self) -> list[Cell]:
         """The significant cells, largest share of their partition's excess first."""
@@ -127,7 +131,8 @@ class GapLocation:
                               for k, v in self.whiteness.items()},
                 "cross_correlation": {k: {a: _json_float(b) for a, b in v.items()}
                                       for k, v in self.cross_correlation.items()},
-                "input_band": {k: list(v) for k, v in self.input_band.items()}}
+                "input_band": {k: list(v) for k, v in self.input_band.items()},
+                "lines": [ln.to_dict() for ln in self.lines]}
 
 
 def _json_float(x: Any) -> Any:
@@ -154,7 +159,8 @@ class Samples:
     time base. ``noise_ar``: per component ``(φ (p,), bias (p,), cov (p, p))``, the AR noise
     model's coefficients and their estimate's bias and covariance
     (:func:`skinkit.forward.noise_model.ar_sampling`; p = 0: white), empty for a channel
-    without one or whose coefficients were given.
+    without one or whose coefficients were given. ``raw``: a tip channel's residual, prediction
+    minus record [unit], 0 off ``mask`` (None for points).
     """
 
     protocol: str
@@ -174,6 +180,7 @@ class Samples:
     drive: Drive | None = None
     series_time_s: np.ndarray | None = None
     noise_ar: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...] = ()
+    raw: np.ndarray | None = None
 
     @property
     def is_points(self) -> bool:
@@ -316,8 +323,9 @@ def samples(observations: Observations, prediction: Prediction, *, weighting: st
                 phase, cycle = np.full(ti.size, -1, np.int8), np.zeros(ti.size, int)
             dts = np.diff(ch.time_s)
             dt = float(np.median(dts[dts > 0])) if np.any(dts > 0) else 0.0
+            raw = None if ch.is_points else np.where(m, np.asarray(cp.values, float) - ch.values, 0.0)
             out.append(Samples(proto, cname, full, m, full[m], ch.time_s[ti], comp, pt, reference,
-                               phase, cycle, *noise_dof(ch), dt, drive, ch.time_s, ar_uncertainty(ch)))
+                               phase, cycle, *noise_dof(ch), dt, drive, ch.time_s, ar_uncertainty(ch), raw))
     if not out:
         raise SchemaError("prediction", "covers no observed sample (does the session have the channels "
                           "the model predicts?)")
@@ -707,9 +715,26 @@ def _locate(observations: Observations, prediction: Prediction, n_params: int, a
     cells, whole, family_p = _cells(table, n_params, alpha, (chi2, dof, float(pf[0])))
     # a gap: the whole residual or any cell, one Holm family, so that pure noise raises at most
     # alpha false alarms whichever the reader looks at
-    gap = whole or any(c.significant for c in cells)
+    periodic, p_line = _lines(ss, alpha)
+    gap = whole or any(c.significant for c in cells) or bool(periodic)
+    # the line family is tested at ALPHA_SHARE·alpha: it rejects at any level above p/ALPHA_SHARE
+    family_p = min(family_p, p_line / ALPHA_SHARE)
     return GapLocation(chi2, dof, chi2 / dof, float(p[0]), gap, cells, _point_map(ss, n_params, table.N),
-                       white, cross, float(ndof[0]), bands, family_p)
+                       white, cross, float(ndof[0]), bands, family_p, periodic)
+
+
+def _lines(ss: list[Samples], alpha: float) -> tuple[list[Line], float]:
+    """Periodic components of the tip channels' residuals above ten times their drive's band,
+    and the line family's smallest corrected p-value."""
+    series = []
+    for s in ss:
+        if s.is_points or s.raw is None or s.drive is None or s.series_time_s is None:
+            continue
+        for j, label in enumerate(s.labels):
+            name = f"{s.protocol}/{label} {'xyz'[j]}"
+            series.append((name, s.full[:, j], s.raw[:, j], s.mask[:, j], s.series_time_s, s.dt,
+                           10 * s.drive.band[1]))
+    return search(series, alpha)
 
 
 def cell_chi2(observations: Observations, prediction: Prediction, cells: Sequence[tuple[str, str]],
