@@ -93,13 +93,30 @@ def iso_I4(C: np.ndarray, Cinv: np.ndarray, J: np.ndarray, a: np.ndarray):
     return Jm23 * I4, Jm23[..., None, None] * (A - (I4 / 3.0)[..., None, None] * Cinv)
 
 
-def iso_hessian(Cinv: np.ndarray, J: np.ndarray, A: np.ndarray, IA: np.ndarray) -> np.ndarray:
+def iso_hessian(Cinv: np.ndarray, J: np.ndarray, A: np.ndarray, IA: np.ndarray,
+                outer_extra: Any = None, sym_extra: Any = None) -> np.ndarray:
     """``∂²Ī/∂C∂C`` of an isochoric invariant ``Ī = J^(-2/3) A:C`` (A = I for Ī1, a⊗a for Ī4).
 
     ``= J^(-2/3) [-(A⊗C⁻¹ + C⁻¹⊗A)/3 + IA/9 C⁻¹⊗C⁻¹ + IA/3 C⁻¹⊙C⁻¹]`` with ``IA = A:C``.
+    It is linear in ``(A, IA)``: a weighted sum of such Hessians is the Hessian of the weighted
+    sums. ``outer_extra`` and ``sym_extra`` (batched scalars) are added to the coefficients of
+    ``C⁻¹⊗C⁻¹`` and ``C⁻¹⊙C⁻¹`` (e.g. :func:`volumetric_coefficients`), so that a law's whole
+    tangent but its rank-one terms takes one set of fourth-order products.
     """
+    j = J ** (-2.0 / 3.0)
     A = np.broadcast_to(A, Cinv.shape)
     X = outer(A, Cinv)
     X = X + np.swapaxes(np.swapaxes(X, -4, -2), -3, -1)
-    return b4(J ** (-2.0 / 3.0)) * (-X / 3.0 + b4(IA / 9.0) * outer(Cinv, Cinv)
-                                    + b4(IA / 3.0) * sym_product(Cinv))
+    a = j * IA / 9.0 + (0 if outer_extra is None else outer_extra)
+    b = j * IA / 3.0 + (0 if sym_extra is None else sym_extra)
+    H = b4(b) * sym_product(Cinv)
+    H += b4(a) * outer(Cinv, Cinv)
+    H -= b4(j / 3.0) * X
+    return H
+
+
+def volumetric_coefficients(kind: str, K: Any, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(J p*, −2 J p)``: the coefficients of ``C⁻¹⊗C⁻¹`` and ``C⁻¹⊙C⁻¹`` in
+    :func:`volumetric_tangent` (``p = U'``, ``p* = p + J U''``)."""
+    d1, d2 = _dU(kind, K, J)
+    return J * (d1 + J * d2), -2 * J * d1

@@ -48,6 +48,7 @@ from skinkit.fem.hyper import (
     iso_I2,
     iso_I4,
     kinematics,
+    volumetric_coefficients,
     volumetric_energy,
     volumetric_stress,
     volumetric_tangent,
@@ -330,5 +331,6 @@ __all__ = [
     "kinematics",
     "volumetric_energy",
     "volumetric_stress",
+    "volumetric_coefficients",
     "volumetric_tangent",
 ]

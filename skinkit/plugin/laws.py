@@ -22,7 +22,8 @@ Tensors: :data:`I3`, :data:`VOIGT`, :func:`det3`, :func:`inv3`, :func:`trace`, :
 Hyperelastic blocks: :func:`kinematics`, the isochoric invariants :func:`iso_I1`,
 :func:`iso_I2`, :func:`iso_I4` and :func:`iso_hessian`, :func:`b2`, :func:`b4`, and the
 volumetric energies :data:`VOLUMETRIC_KINDS`, :func:`check_volumetric`,
-:func:`volumetric_energy`, :func:`volumetric_stress`, :func:`volumetric_tangent`.
+:func:`volumetric_energy`, :func:`volumetric_stress`, :func:`volumetric_tangent` (and its
+:func:`volumetric_coefficients`, to fold into :func:`iso_hessian`).
 
 A law is checked with :func:`skinkit.plugin.conformance.laws.check_law`.
 """
@@ -63,6 +64,7 @@ from skinkit.fem.lawkit import (
     tangent,
     tangent_from_stress,
     trace,
+    volumetric_coefficients,
     volumetric_energy,
     volumetric_stress,
     volumetric_tangent,
@@ -107,5 +109,6 @@ __all__ = [
     "kinematics",
     "volumetric_energy",
     "volumetric_stress",
+    "volumetric_coefficients",
     "volumetric_tangent",
 ]
