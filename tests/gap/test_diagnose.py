@@ -217,3 +217,23 @@ def test_the_gap_gate_is_one_level_over_both_families():
     g = _gate(l := loc(0.5), [_score_test("a", 0.01), _score_test("b", 0.5)], 0.05)   # the score tests
     assert g["significant"] and not g["omnibus"] and g["score_p"] == pytest.approx(0.02)
     assert l.cells[0].significant          # open: each cell keeps its own Holm verdict
+
+
+def test_a_nearly_absorbed_signature_does_not_open_the_gate_alone():
+    """A candidate whose signature keeps under KEPT_GATE of its norm once the fitted parameters are
+    projected out (variance inflation above 1000) is tested along what the model's curvature
+    dominates: it does not open the gate alone, but stays in the naming correction."""
+    import dataclasses
+
+    from skinkit.gap.diagnose import _gate
+    from skinkit.gap.score import KEPT_GATE, corrected
+    from skinkit.gap.where import GapLocation
+
+    weak = dataclasses.replace(_score_test("a", 1e-4), kept=0.5 * KEPT_GATE)
+    tests = [weak, _score_test("b", 0.5)]
+    g = _gate(GapLocation(100.0, 100.0, 1.0, 0.5, False, [], family_p=0.9), tests, 0.05)
+    assert not g["significant"] and g["score_p"] == 1.0
+    assert corrected(tests, 0.05)["a"]
+    sound = dataclasses.replace(weak, kept=2 * KEPT_GATE)
+    g = _gate(GapLocation(100.0, 100.0, 1.0, 0.5, False, [], family_p=0.9), [sound, tests[1]], 0.05)
+    assert g["significant"] and g["score_p"] == pytest.approx(2e-4)
