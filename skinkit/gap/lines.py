@@ -50,19 +50,21 @@ MIN_SAMPLES = 256
 
 @dataclass
 class Line:
-    """A periodic component of one series: ``frequency_hz``, ``amplitude`` [the channel's
-    unit], ``f_statistic`` and ``p_value`` (Bonferroni-corrected over the frequencies searched)."""
+    """A periodic component of one series: ``frequency_hz``, ``amplitude`` [``unit``, the
+    channel's SI unit], ``f_statistic`` and ``p_value`` (Bonferroni-corrected over the
+    frequencies searched)."""
 
     series: str
     frequency_hz: float
     amplitude: float
     f_statistic: float
     p_value: float
+    unit: str = "N"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
         return {"series": self.series, "frequency_hz": self.frequency_hz, "amplitude": self.amplitude,
-                "f_statistic": self.f_statistic, "p_value": self.p_value}
+                "f_statistic": self.f_statistic, "p_value": self.p_value, "unit": self.unit}
 
 
 def harmonic_f(z: np.ndarray, nw: float = NW, pad: int = PAD) -> tuple[np.ndarray, np.ndarray, int]:
@@ -90,16 +92,16 @@ def _amplitude(raw: np.ndarray, valid: np.ndarray, t: np.ndarray, f_hz: float) -
     return float(np.hypot(c[0], c[1]))
 
 
-def search(series: list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]],
+def search(series: list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float, str]],
            alpha: float) -> tuple[list[Line], float]:
     """Lines in ``series``: each ``(name, z (n,) prewhitened, raw (n,) [unit], valid (n,) bool,
-    t (n,) [s], dt [s] the median sample interval, f_min [Hz])`` (z is 0 off ``valid``);
+    t (n,) [s], dt [s] the median sample interval, f_min [Hz], unit)`` (z is 0 off ``valid``);
     frequencies above ``f_min`` are searched.
     Returns the lines whose corrected p-value is below ``ALPHA_SHARE · alpha``, strongest first,
     and the smallest corrected p-value of any frequency searched (1 when none was)."""
     tested: list[tuple[Any, ...]] = []
     m = 0
-    for name, z, raw, valid, t, dt, f_min in series:
+    for name, z, raw, valid, t, dt, f_min, unit in series:
         n = z.size
         if n < MIN_SAMPLES or dt <= 0 or valid.sum() < MIN_SAMPLES:
             continue
@@ -109,14 +111,13 @@ def search(series: list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarra
         if not band.any():
             continue
         m += int(band.sum())
-        tested.append((name, f, F, band, raw, valid, t, dt))
+        tested.append((name, f, F, k, w, band, raw, valid, t, dt, unit))
     if not m:
         return [], 1.0
     level = ALPHA_SHARE * alpha
     out: list[Line] = []
     p_min = 1.0
-    for name, f, F, band, raw, valid, t, dt in tested:
-        k = int(round(2 * NW)) - 1
+    for name, f, F, k, w, band, raw, valid, t, dt, unit in tested:
         p = np.minimum(1.0, m * stats.f.sf(F, 2, 2 * k - 2))
         p_min = min(p_min, float(p[band].min()))
         hit = band & (p < level)
@@ -124,7 +125,6 @@ def search(series: list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarra
         peaks = [i for i in np.flatnonzero(hit)
                  if F[i] >= F[max(i - 1, 0)] and F[i] >= F[min(i + 1, F.size - 1)]]
         peaks.sort(key=lambda i: -F[i])
-        w = NW / raw.size
         kept: list[int] = []
         for i in peaks:
             if all(abs(f[i] - f[j]) > 2 * w for j in kept):
@@ -133,15 +133,15 @@ def search(series: list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarra
                 break
         for i in kept:
             f_hz = float(f[i] / dt)
-            out.append(Line(name, f_hz, _amplitude(raw, valid, t, f_hz), float(F[i]), float(p[i])))
+            out.append(Line(name, f_hz, _amplitude(raw, valid, t, f_hz), float(F[i]), float(p[i]), unit))
     return sorted(out, key=lambda ln: ln.p_value), p_min
 
 
-def describe(lines: list[Line], unit: str = "N") -> str:
-    """One phrase: ``"49.8 Hz (3.5 mN) and 49.4 Hz (1.1 mN) in tip_force x"``."""
-    scale, u = (1e3, "m" + unit) if unit in ("N", "m") else (1.0, unit)
+def describe(lines: list[Line]) -> str:
+    """One phrase: ``"49.8 Hz (3.5 mN) and 49.4 Hz (1.1 mN) in tip_force x"`` (N and m in milli-)."""
     by: dict[str, list[str]] = {}
     for ln in lines:
+        scale, u = (1e3, "m" + ln.unit) if ln.unit in ("N", "m") else (1.0, ln.unit)
         by.setdefault(ln.series, []).append(f"{ln.frequency_hz:.4g} Hz ({scale * ln.amplitude:.3g} {u})")
     return "; ".join(f"{' and '.join(v)} in {k}" for k, v in by.items())
 

@@ -36,6 +36,7 @@ from skinkit.gap.drive import Drive, _drive_channel, make_drive
 from skinkit.gap.lines import ALPHA_SHARE, Line, search
 from skinkit.inverse.objective import WEIGHTINGS, Objective
 from skinkit.schemas import Channel, Observations, Prediction
+from skinkit.schemas.observations import CHANNELS
 
 AXES = ("protocol", "channel", "phase", "region", "frequency")
 PHASES = ("loading", "unloading", "hold")
@@ -728,12 +729,12 @@ def _lines(ss: list[Samples], alpha: float) -> tuple[list[Line], float]:
     and the line family's smallest corrected p-value."""
     series = []
     for s in ss:
-        if s.is_points or s.raw is None or s.drive is None or s.series_time_s is None:
+        if s.raw is None or s.drive is None or s.series_time_s is None:
             continue
         for j, label in enumerate(s.labels):
             name = f"{s.protocol}/{label} {'xyz'[j]}"
             series.append((name, s.full[:, j], s.raw[:, j], s.mask[:, j], s.series_time_s, s.dt,
-                           10 * s.drive.band[1]))
+                           10 * s.drive.band[1], CHANNELS[s.channel][0]))
     return search(series, alpha)
 
 

@@ -26,7 +26,8 @@ def _ar1(rng: np.random.Generator, n: int, phi: float) -> np.ndarray:
 
 def _series(z: np.ndarray, raw: np.ndarray | None = None, dt: float = 0.01, f_min: float = 1.0):
     n = z.size
-    return ("proto/tip_force x", z, z if raw is None else raw, np.ones(n, bool), np.arange(n) * dt, dt, f_min)
+    return ("proto/tip_force x", z, z if raw is None else raw, np.ones(n, bool), np.arange(n) * dt, dt, f_min,
+            "N")
 
 
 @pytest.mark.parametrize("phi", [0.0, 0.9, 0.95])
@@ -61,6 +62,9 @@ def test_a_tone_below_the_searched_band_is_not_reported() -> None:
 def test_describe_names_frequency_amplitude_and_series() -> None:
     ln = gl.Line("p/tip_force x", 49.8, 0.0035, 200.0, 1e-6)
     assert gl.describe([ln]) == "49.8 Hz (3.5 mN) in p/tip_force x"
+    pos = gl.Line("p/tip_position z", 12.5, 2e-5, 90.0, 1e-4, "m")     # each line in its own unit
+    assert gl.describe([ln, pos]) == ("49.8 Hz (3.5 mN) in p/tip_force x; "
+                                      "12.5 Hz (0.02 mm) in p/tip_position z")
 
 
 @pytest.mark.needs_plugins          # the fit's optimiser is a built-in plugin
