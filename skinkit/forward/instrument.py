@@ -23,6 +23,14 @@ linear in it but for a lag's shift in time, and applies to one channel (``docs/g
   it records acts along turned directions on the skin, and the tip channels it records
   are the skin-frame ones turned back (points, seen by the cameras, are not). ``azimuth``
   is a second parameter when ``azimuth_parameter`` names it.
+* ``friction``: recorded = true + value · tanh(v(t)/``velocity``) on ``component`` of ``channel``
+  (``tip_force``), v [m/s] the velocity of the same component of the ``source`` channel
+  (``tip_position``), estimated by a Savitzky–Golay derivative (local quadratic) over
+  ``window`` [s] (default 0.1 s) so that the position sensor's noise does not flip the sign at
+  rest; ``velocity`` [m/s] (default 0.1 mm/s) smooths the sign. A rate-independent friction
+  (Coulomb's law, regularised) read by the force sensor; linear in ``value``. The source's own
+  derivatives are carried through (∂/∂θ = value · sech²(v/v_s) ∂v/∂θ / v_s). Refused on the
+  driving channel (the drive would depend on the prediction, as for a series entry).
 * ``lag``: the ``channel`` (``tip_force``, the default, or ``tip_position``) is sampled
   ``value`` [s] late relative to the others (two acquisition chains whose clocks are skewed):
   recorded(t) = c(t − value), c what the channel's chain put out (the true channel with the
@@ -73,17 +81,21 @@ from typing import Any
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.signal import savgol_filter
 
 from skinkit.errors import ForwardError
 from skinkit.schemas import Parameter
 
-KINDS = ("bias", "series", "similarity", "tilt", "lag")
+KINDS = ("bias", "series", "similarity", "tilt", "lag", "friction")
 _CHANNELS = ("tip_force", "tip_position", "points", "points_2d")
 _TIP = ("tip_force", "tip_position")
 _POINTS = ("points", "points_2d")
 _BASES = ("constant", "time", "warmup", "spline")
 #: bases with a time scale ``tau`` [s]
 _SCALED = ("warmup", "spline")
+#: a friction's default sign-smoothing velocity [m/s] and velocity-estimate window [s]
+FRICTION_VELOCITY_M_S = 1e-4
+FRICTION_WINDOW_S = 0.1
 #: largest |lag| [s]: a skew between acquisition chains is milliseconds; half a second is a
 #: misaligned record, not a lag
 MAX_LAG_S = 0.5
@@ -106,6 +118,8 @@ class Entry:
     tau: float = 0.0
     tau_parameter: str = ""
     knot: int = 0
+    velocity: float = 0.0
+    window: float = 0.0
 
 
 def parse(entries: Any) -> list[Entry]:
@@ -118,7 +132,7 @@ def parse(entries: Any) -> list[Entry]:
 
 
 _KEYS = {"kind", "parameter", "value", "channel", "component", "basis", "source", "mode", "azimuth",
-         "azimuth_parameter", "tau", "tau_parameter", "knot"}
+         "azimuth_parameter", "tau", "tau_parameter", "knot", "velocity", "window"}
 
 
 def _entry(w: str, e: Any) -> Entry:
@@ -136,7 +150,7 @@ def _entry(w: str, e: Any) -> Entry:
         raise ForwardError(f"{w}.parameter", "needs a parameter name")
     ch = _channel(w, kind, e)
     comp = e.get("component", 0)
-    if kind == "bias" and comp not in (0, 1, 2):
+    if kind in ("bias", "friction") and comp not in (0, 1, 2):
         raise ForwardError(f"{w}.component", f"must be 0, 1 or 2, got {comp!r}")
     basis = str(e.get("basis", "constant"))
     if basis not in _BASES:
@@ -150,23 +164,47 @@ def _entry(w: str, e: Any) -> Entry:
     mode = str(e.get("mode", "scale" if kind == "similarity" else ""))
     if kind == "similarity" and mode not in ("scale", "rotation"):
         raise ForwardError(f"{w}.mode", f"must be 'scale' or 'rotation', got {mode!r}")
-    src = str(e.get("source", "tip_force" if kind == "series" else ""))
-    if kind == "series" and src not in ("tip_force", "tip_position"):
+    src = str(e.get("source", {"series": "tip_force", "friction": "tip_position"}.get(kind, "")))
+    if kind in ("series", "friction") and src not in _TIP:
         raise ForwardError(f"{w}.source", f"must be 'tip_force' or 'tip_position', got {src!r}")
+    if kind == "friction" and src == ch:
+        raise ForwardError(f"{w}.source", "a friction reads the velocity of another channel than the one "
+                           f"it acts on, got {src!r} for both")
     entry = Entry(kind, par, 0.0, ch, int(comp), basis, src, mode, 0.0, str(e.get("azimuth_parameter", "")),
                   0.0, str(e.get("tau_parameter", "")))
     value = _number(e.get("value", 0.0), parameter_unit(entry), f"{w}.value")
     if kind == "lag" and not abs(value) <= MAX_LAG_S:
         raise ForwardError(f"{w}.value", f"a lag of {value:g} s is outside ±{MAX_LAG_S:g} s")
     az = _number(e.get("azimuth", 0.0), "rad", f"{w}.azimuth")
-    return replace(entry, value=value, azimuth=az, tau=_tau(e, basis, w), knot=knot)
+    vel, win = _friction_scales(e, kind, w)
+    return replace(entry, value=value, azimuth=az, tau=_tau(e, basis, w), knot=knot, velocity=vel, window=win)
+
+
+def _friction_scales(e: Mapping[str, Any], kind: str, where: str) -> tuple[float, float]:
+    """A friction's sign-smoothing velocity [m/s] and velocity window [s] (both > 0); 0, 0 for
+    the other kinds (which refuse the keys)."""
+    if kind != "friction":
+        for k in ("velocity", "window"):
+            if k in e:
+                raise ForwardError(f"{where}.{k}", "belongs to a friction entry only")
+        return 0.0, 0.0
+    vel = _number(e.get("velocity", FRICTION_VELOCITY_M_S), "m/s", f"{where}.velocity")
+    win = _number(e.get("window", FRICTION_WINDOW_S), "s", f"{where}.window")
+    for k, x, u in (("velocity", vel, "m/s"), ("window", win, "s")):
+        if not x > 0:
+            raise ForwardError(f"{where}.{k}", f"must be positive, got {x:g} {u}")
+    return vel, win
 
 
 def _channel(w: str, kind: str, e: Mapping[str, Any]) -> str:
     """The channel an entry acts on (``""`` for a tilt: both tip channels)."""
     if kind == "tilt":
         return ""
-    ch = str(e.get("channel", {"series": "tip_position", "lag": "tip_force"}.get(kind, "")))
+    ch = str(e.get("channel", {"series": "tip_position", "lag": "tip_force",
+                               "friction": "tip_force"}.get(kind, "")))
+    if kind == "friction" and ch not in _TIP:
+        raise ForwardError(f"{w}.channel", f"a friction acts on a tip channel: must be one of "
+                           f"{list(_TIP)}, got {ch!r}")
     if kind == "lag" and ch not in _TIP:
         raise ForwardError(f"{w}.channel", f"a lag shifts a tip channel in time: must be one of "
                            f"{list(_TIP)}, got {ch!r}")
@@ -314,6 +352,8 @@ def parameter_unit(entry: Entry) -> str:
         return _BIAS_UNITS.get((entry.channel, entry.basis), "m/s" if entry.basis == "time" else "m")
     if entry.kind == "lag":
         return "s"
+    if entry.kind == "friction":
+        return "N" if entry.channel == "tip_force" else "m"
     if entry.kind == "series":
         return "m/N" if (entry.channel, entry.source) == ("tip_position", "tip_force") else "1"
     if entry.kind == "tilt" or entry.mode == "rotation":
@@ -330,6 +370,10 @@ def check_drive(entries: Sequence[Entry], channel: str) -> None:
                                f"a series compliance on the driving channel {channel!r} makes the drive "
                                "depend on the predicted force; drive the model by the tip force "
                                "([indenter] mode = \"force\") to include it")
+        if e.kind == "friction" and e.channel == channel:
+            raise ForwardError(f"instrument ({e.parameter})",
+                               f"a friction on the driving channel {channel!r} makes the drive depend on "
+                               f"the predicted {e.source!r}; drive the model by {e.source!r} to include it")
 
 
 def drive(entries: Sequence[Entry], channel: str, time_s: np.ndarray, recorded: np.ndarray,
@@ -381,6 +425,8 @@ def measure(entries: Sequence[Entry], channel: str, time_s: np.ndarray, values: 
             v = _bias(e, time_s, v, out, names)
         elif e.kind == "series" and e.channel == channel:
             v = _series(e, channels, v, out, names)
+        elif e.kind == "friction" and e.channel == channel:
+            v = _friction(e, time_s, channels, v, out, names)
         elif e.kind == "similarity" and channel in _POINTS and e.channel in _POINTS:
             v = _similarity(e, v, out, names)
         elif e.kind == "tilt" and channel in _TIP:
@@ -499,6 +545,41 @@ def _series(e: Entry, channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.n
     return v
 
 
+def velocity(time_s: np.ndarray, y: np.ndarray, window: float) -> np.ndarray:
+    """d``y``/dt ``(T, ...)`` of ``y`` ``(T, ...)`` sampled at ``time_s`` ``(T,)`` [s]: the
+    Savitzky–Golay derivative (a local quadratic by least squares) over ``window`` [s], at least
+    5 samples, on the median sampling step (the robot's channels are uniform). Linear in ``y``,
+    exact for quadratics; the ends use the polynomial fitted to the first and last windows."""
+    y = np.asarray(y, dtype=float)
+    t = np.asarray(time_s, dtype=float)
+    if t.size < 5:
+        return np.gradient(y, t, axis=0) if t.size > 1 else np.zeros_like(y)
+    dt = float(np.median(np.diff(t)))
+    n = max(5, 2 * int(round(0.5 * window / dt)) + 1)
+    n = min(n, t.size if t.size % 2 else t.size - 1)
+    return savgol_filter(np.nan_to_num(y), n, 2, deriv=1, delta=dt, axis=0, mode="interp")
+
+
+def _friction(e: Entry, time_s: np.ndarray, channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
+              v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
+    """value · tanh(velocity of the source's component / v_s) added to the same component."""
+    if e.source not in channels:
+        raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")
+    sv, sd = channels[e.source]
+    c = e.component
+    vel = velocity(time_s, np.asarray(sv, dtype=float)[:, c], e.window)
+    b = np.tanh(vel / e.velocity)
+    v[:, c] += e.value * b
+    if e.value != 0.0:
+        gain = e.value * (1.0 - b**2) / e.velocity
+        for k, a in sd.items():
+            dd = out.setdefault(k, np.zeros_like(v))
+            dd[:, c] += gain * velocity(time_s, np.asarray(a, dtype=float)[:, c], e.window)
+    if e.parameter in names:
+        out.setdefault(e.parameter, np.zeros_like(v))[:, c] += b
+    return v
+
+
 def _similarity(e: Entry, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
     """Points scaled by ``1 + value``, or rotated in-plane by ``value`` [rad]."""
     if e.mode == "scale":
@@ -536,4 +617,4 @@ def _tilted(e: Entry, v: np.ndarray, out: dict[str, np.ndarray], names: Sequence
 
 __all__ = ["KINDS", "MAX_LAG_S", "Entry", "check_drive", "drive", "measure", "parameter_names",
            "parameter_unit", "parameters", "parse", "shift", "similarity_parameters", "unrecord_points",
-           "with_values"]
+           "velocity", "with_values"]

@@ -4,8 +4,8 @@ Every function here is plain NumPy on arrays: the drive programme, the exponenti
 element and, for each effect a lumped model can lack, forms of it that the candidate effects
 do not share (the plugins' forms are Prony terms by their exact recurrence, a softening that
 develops along the loading strokes or follows the largest load, a force drift linear in time,
-a one-exponential warm-up, a constant channel delay and a linear series compliance solved with
-the element; ``docs/guide/gap-benchmark.md`` sets each truth against them). Nothing is imported
+a one-exponential warm-up, a constant channel delay, a linear series compliance solved with
+the element and a regularised Coulomb friction that follows the velocity; ``docs/guide/gap-benchmark.md`` sets each truth against them). Nothing is imported
 from the plugins or from the forward
 model's relaxation, preconditioning or instrument code: a truth made here checks the diagnosis
 against forms it did not make (``tests/gap/test_benchmark_alternative.py`` parses the imports).
@@ -15,6 +15,7 @@ Units are SI throughout: time [s], displacement [m], force [N].
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -196,14 +197,42 @@ def mains_interference(t: np.ndarray, amplitude: float, mains_hz: float = 49.8,
     return amplitude * (np.sin(2 * np.pi * mains_hz * t) + third * np.sin(2 * np.pi * 3 * mains_hz * t + 1.0))
 
 
-def coulomb_friction(prog: Programme, level: float, v_smooth: float = 1e-4) -> np.ndarray:
-    """A Coulomb-like friction in the robot's guide, read by the force sensor [N]: +``level``
-    while the pads separate, −``level`` while they close, 0 at rest, smoothed over velocities
-    ``v_smooth`` [m/s] (well below the ramps' speed)."""
-    return level * np.tanh(prog.velocity / v_smooth)
+def cable_tugs(t: np.ndarray, rng: np.random.Generator, amplitude: float, count: int,
+               duration: float, margin: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+    """The sensor's cable tugged now and then (brushed by an arm, caught on the table's edge): ``count``
+    raised-cosine bumps of height ±``amplitude`` [N] (sign drawn) lasting ``duration`` [s], at times
+    drawn uniformly over the record but ``margin`` [s] at each end. Returns the force ``(T,)`` [N]
+    and the bumps' centres [s] (sorted)."""
+    t = np.asarray(t, float)
+    centres = np.sort(rng.uniform(t[0] + margin, t[-1] - margin, count))
+    signs = rng.choice((-1.0, 1.0), count)
+    out = np.zeros_like(t)
+    for c, s in zip(centres, signs, strict=True):
+        x = (t - c) / duration
+        inside = np.abs(x) < 0.5
+        out[inside] += s * amplitude * 0.5 * (1 + np.cos(2 * np.pi * x[inside]))
+    return out, centres
 
 
-__all__ = ["Programme", "clipped", "clock_skew", "coulomb_friction", "cycle_count_softening",
+# -- guide-friction forms ------------------------------------------------------------------------------
+def dahl_friction(u: np.ndarray, level: float, presliding: float) -> np.ndarray:
+    """Dahl's friction along a stroke ``u`` ``(T,)`` [m] [N]: dF/du = (level − F sign(du)) / x₀ with
+    x₀ = ``presliding`` [m], a rate-independent friction with a presliding stiffness level/x₀ that
+    holds its last value when the motion stops. Per step, exactly for a constant direction:
+    z ← s + (z − s) e^(−|Δu|/x₀), F = level · z, z = 0 at the start."""
+    u = np.asarray(u, float)
+    du = np.diff(u, prepend=u[0])
+    z = np.zeros_like(u)
+    zi = 0.0
+    for i, d in enumerate(du):
+        if d != 0.0:
+            s = 1.0 if d > 0 else -1.0
+            zi = s + (zi - s) * math.exp(-abs(d) / presliding)
+        z[i] = zi
+    return level * z
+
+
+__all__ = ["Programme", "cable_tugs", "clipped", "clock_skew", "cycle_count_softening", "dahl_friction",
            "exponential_force", "hereditary", "mains_interference", "power_law_antiderivative",
            "prony_antiderivative", "ramp_hold_return", "series_nonlinear_spring", "step_softening",
            "stretch_dependent_relaxation", "thermal_drift", "warmup_drift"]

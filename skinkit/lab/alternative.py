@@ -116,6 +116,13 @@ def _clipping(prog: af.Programme, fe: np.ndarray, rng: np.random.Generator, sigm
     return rec, {"clipped_samples": int(np.sum(rec >= upper))}
 
 
+def _tugged(prog: af.Programme, fe: np.ndarray, rng: np.random.Generator, sigma: float
+            ) -> tuple[np.ndarray, dict[str, Any]]:
+    tugs, centres = af.cable_tugs(prog.t, rng, 0.030, 6, 1.0)
+    return fe + TRUE_ZERO_N + tugs + an.white(rng, fe.size, sigma), {"tugs_s": [round(float(c), 2)
+                                                                              for c in centres]}
+
+
 def _dt(prog: af.Programme) -> float:
     return prog.dt
 
@@ -146,6 +153,9 @@ FORMS: tuple[Form, ...] = (
     Form("effect", "clock-skew", "channel-lag",
          "force clock running slow: lag growing from 0 to 0.25 s over the record",
          _white(lambda p, fe: af.clock_skew(p.t, fe, 0.25))),
+    Form("effect", "dahl-friction", "guide-friction",
+         "Dahl friction in the robot's guide, ±5 mN with 0.1 mm presliding, held when the motion stops",
+         _white(lambda p, fe: fe + af.dahl_friction(p.u, 0.005, 1e-4))),
     Form("null", "white", None, "white Gaussian noise at σ", _noise(an.white)),
     Form("null", "ar1-0.5", None, "AR(1) noise, φ 0.5, marginal σ",
          _noise(lambda r, n, s: an.ar1(r, n, 0.5, s))),
@@ -157,8 +167,9 @@ FORMS: tuple[Form, ...] = (
     Form("out-of-library", "mains", None,
          "mains pick-up 3.5 mN at 49.8 Hz and its third harmonic, sampled at 100 Hz",
          _white(lambda p, fe: fe + af.mains_interference(p.t, 0.0035))),
-    Form("out-of-library", "coulomb-friction", None, "Coulomb friction ±5 mN flipping with the velocity",
-         _white(lambda p, fe: fe + af.coulomb_friction(p, 0.005))),
+    Form("out-of-library", "cable-tug", None,
+         "the sensor's cable tugged six times: ±30 mN raised-cosine bumps of 1 s at random times",
+         _tugged),
 )
 
 #: installed effects for lumped models with no truth here, and why: no form of them is visible

@@ -124,14 +124,27 @@ def test_drifts_and_skew_closed_forms() -> None:
     np.testing.assert_allclose(af.clock_skew(t, t, 2.0), t - 2.0 * t / 200.0, atol=1e-12)
 
 
-def test_friction_flips_with_velocity_and_rests_at_zero() -> None:
-    p = alt.programme()
-    fr = af.coulomb_friction(p, 0.005)
-    v = p.velocity
-    # on the ramps' interiors |v| = 1 mm/s, ten smoothing velocities: tanh(10) = 1 − 4e-9
-    ramp = np.abs(np.abs(v) - 1e-3) < 1e-9
-    assert np.allclose(fr[ramp], 0.005 * np.sign(v[ramp]), rtol=1e-8)
-    assert np.all(fr[v == 0] == 0)
+def test_dahl_friction_follows_its_closed_form_and_holds_at_rest() -> None:
+    # from z = 0 a stroke Δ in one direction gives z = 1 − e^(−Δ/x₀); a reversal from z₀ gives
+    # −1 + (z₀ + 1) e^(−Δ/x₀); no motion, no change
+    x0 = 1e-4
+    u = np.concatenate([np.linspace(0, 5e-4, 51), np.full(20, 5e-4), np.linspace(5e-4, 3e-4, 21)])
+    f = af.dahl_friction(u, 0.005, x0)
+    z1 = 1 - math.exp(-5e-4 / x0)
+    assert f[50] == pytest.approx(0.005 * z1, rel=1e-12)
+    assert np.all(f[50:71] == f[50])
+    assert f[-1] == pytest.approx(0.005 * (-1 + (z1 + 1) * math.exp(-2e-4 / x0)), rel=1e-12)
+
+
+def test_cable_tugs_are_bumps_of_the_given_height_and_length() -> None:
+    t = np.arange(0, 300, 0.01)
+    f, centres = af.cable_tugs(t, np.random.default_rng(2), 0.03, 6, 1.0)
+    assert centres.size == 6 and np.all((centres >= 5) & (centres <= 295))
+    for c in centres:
+        i = int(np.argmin(np.abs(t - c)))
+        assert abs(f[i]) == pytest.approx(0.03, rel=2e-3) or np.any(np.abs(centres - c) < 1.0 - 1e-9)
+    far = np.min(np.abs(t[:, None] - centres[None, :]), axis=1) >= 0.5
+    assert np.all(f[far] == 0)
 
 
 # -- noise -----------------------------------------------------------------------------------------------

@@ -4,7 +4,8 @@ model. Each entry's ``parameter`` is the effect parameter itself, value 0 is no 
 
 ``indenter-tilt`` and ``tracking-bias`` apply to finite-element models (a probe axis and 3D
 points exist only there); ``force-offset``, ``force-drift``, ``force-warmup``, ``force-wander``,
-``channel-lag`` and ``robot-compliance`` to any model.
+``channel-lag`` and ``robot-compliance`` to any model; ``guide-friction`` to models driven by the
+tip position (the lumped models).
 
 Time t in these effects is each record's own, from its protocol's start (``Channel.time_s``): a
 drift or a warm-up restarts at every protocol, as for a sensor zeroed (tared) at the start of
@@ -232,6 +233,53 @@ class RobotCompliance(BaseEffect):
         self.add_instrument(model, self._entries(v))
 
 
+class GuideFriction(BaseEffect):
+    """Friction in a guide between the force sensor and the skin, read by the force sensor:
+    recorded force = true + f · tanh(v/v_s) per axis, levels ``x``, ``y``, ``z`` [N] (null 0), v
+    the tip's velocity along that axis.
+
+    Phenomenon: the probe's arm runs in linear guides or slides, and a linear potentiometer's
+    wiper rubs on its track; where such a contact lies between the force sensor and the skin, the
+    sensor reads the skin's force plus a friction that opposes the motion and hardly depends on
+    its speed. The thesis this project follows found friction in its robot's linear guides and
+    potentiometers, different from motor to motor (worn bearings raised it; the guides were
+    redesigned to reduce it), and tangential stretches recruit the moving platform's slides,
+    which normal indentation leaves idle. At one rate it draws a loop in force against stretch
+    whose height (2f) does not grow with the rate: a relaxation's loop does.
+
+    Form: Coulomb's law, regularised: sign(v) smoothed over v_s = :attr:`VELOCITY` (0.1 mm/s, a
+    tenth of a slow ramp's speed) and v estimated from the recorded tip position by a
+    Savitzky–Golay derivative over :attr:`WINDOW` (0.1 s; the encoder's noise, about 1.6 µm,
+    gives a velocity noise of about 15 µm/s there, so the sign does not flicker at rest). Three
+    ``friction`` instrument entries on ``tip_force``, linear in each level.
+
+    Not covered: a static friction above the kinetic one or a force that falls with speed
+    (Stribeck), a presliding stiffness (Dahl, LuGre: over a transition shorter than about
+    v_s times the window this form is the same), a viscous part (a damper: taken by the model's
+    own damping or relaxation), friction that depends on the normal load. Applies to models
+    driven by the tip position (the lumped models); a finite-element model driven by the
+    recorded force would need the drive solved with the friction (refused there, as a series
+    compliance on the driving channel is)."""
+
+    name = "guide-friction"
+    kinds = ("lumped",)
+    touches = {"lumped": frozenset({"instrument"})}
+    #: sign-smoothing velocity v_s [m/s] and velocity-estimate window [s]
+    VELOCITY = 1e-4
+    WINDOW = 0.1
+
+    def _declared(self) -> list[Declared]:
+        return [declare(a, 5.0, 0.0, "mN", -1000.0, 1000.0) for a in _AXES]
+
+    def _entries(self, v: dict[str, float]) -> list[dict[str, Any]]:
+        return [{"kind": "friction", "parameter": f"{self.name}.{a}", "value": v[a], "channel": "tip_force",
+                 "component": i, "source": "tip_position", "velocity": self.VELOCITY, "window": self.WINDOW}
+                for i, a in enumerate(_AXES)]
+
+    def _apply_lumped(self, model: dict[str, Any], v: dict[str, float]) -> None:
+        self.add_instrument(model, self._entries(v))
+
+
 class TrackingBias(BaseEffect):
     """A calibration error of the 3D points: a relative ``scale`` error [1] and a ``rotation`` [rad]
     about the normal through the session origin (both null 0). Two ``similarity`` entries on
@@ -251,5 +299,5 @@ class TrackingBias(BaseEffect):
              "mode": mode} for m, mode in (("scale", "scale"), ("rotation", "rotation"))])
 
 
-__all__ = ["ChannelLag", "ForceDrift", "ForceOffset", "ForceWarmup", "IndenterTilt", "RobotCompliance",
-           "TrackingBias"]
+__all__ = ["ChannelLag", "ForceDrift", "ForceOffset", "ForceWarmup", "ForceWander", "GuideFriction",
+           "IndenterTilt", "RobotCompliance", "TrackingBias"]
