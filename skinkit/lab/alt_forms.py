@@ -5,9 +5,9 @@ element and, for each effect a lumped model can lack, forms of it that the candi
 do not share (the plugins' forms are Prony terms by their exact recurrence, a softening that
 develops along the loading strokes or follows the largest load, a force drift linear in time,
 a one-exponential warm-up, a constant channel delay, a linear series compliance solved with
-the element and a regularised Coulomb friction that follows the velocity; ``docs/guide/gap-benchmark.md`` sets each truth against them). Nothing is imported
-from the plugins or from the forward
-model's relaxation, preconditioning or instrument code: a truth made here checks the diagnosis
+the element and a regularised Coulomb friction that follows the velocity;
+``docs/guide/gap-benchmark.md`` sets each truth against them). Nothing is imported from the
+plugins or from the forward model's relaxation, preconditioning or instrument code: a truth made here checks the diagnosis
 against forms it did not make (``tests/gap/test_benchmark_alternative.py`` parses the imports).
 
 Units are SI throughout: time [s], displacement [m], force [N].
