@@ -561,7 +561,8 @@ def velocity(time_s: np.ndarray, y: np.ndarray, window: float) -> np.ndarray:
 
 
 def _friction(e: Entry, time_s: np.ndarray,
-              channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]], v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
+              channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]], v: np.ndarray,
+              out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
     """value · tanh(velocity of the source's component / v_s) added to the same component."""
     if e.source not in channels:
         raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")

@@ -7,8 +7,9 @@ develops along the loading strokes or follows the largest load, a force drift li
 a one-exponential warm-up, a constant channel delay, a linear series compliance solved with
 the element and a regularised Coulomb friction that follows the velocity;
 ``docs/guide/gap-benchmark.md`` sets each truth against them). Nothing is imported from the
-plugins or from the forward model's relaxation, preconditioning or instrument code: a truth made here checks the diagnosis
-against forms it did not make (``tests/gap/test_benchmark_alternative.py`` parses the imports).
+plugins or from the forward model's relaxation, preconditioning or instrument code: a truth
+made here checks the diagnosis against forms it did not make
+(``tests/gap/test_benchmark_alternative.py`` parses the imports).
 
 Units are SI throughout: time [s], displacement [m], force [N].
 """
