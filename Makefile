@@ -16,7 +16,7 @@ TEST_REQS  := -e ".[fast,test,dev,bench,cluster,table]" -e ./plugins -e ./hardwa
 INSTALL = if [ -x $(BIN)/uv ]; then $(BIN)/uv pip install --compile-bytecode --python $(BIN)/python $(1); \
           else $(BIN)/python -m pip install --progress-bar on $(1); fi
 
-.PHONY: venv venv-test demo test test-gap-quick lint tox clean
+.PHONY: venv venv-test demo test test-e2e test-gap-quick lint tox clean
 
 venv: $(RUN_STAMP)
 venv-test: $(TEST_STAMP)
@@ -46,7 +46,12 @@ TEST_THREADS := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 test: venv-test
 	@$(BIN)/python -m compileall -q -j 2 skinkit plugins hardware > /dev/null || true
-	$(TEST_THREADS) $(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+	$(TEST_THREADS) $(BIN)/python -m pytest -n 2 --dist loadgroup -q --durations=15 -m "not e2e"; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; exit 0; fi; exit $$rc
+
+# the main job end to end (the quick demo's chain, its checks of every step): a fifth of the
+# suite's processor time on its own, so kept out of `make test`; CI (.ci/run) runs it after the suite
+test-e2e: venv-test
+	$(TEST_THREADS) $(BIN)/python -m pytest -q -m e2e --durations=5 tests/pipelines
 
 # the quick FE gap benchmark and its figures: kept out of `make test` (which stays under
 # 10 minutes); CI (.ci/run) runs it after the suite

@@ -25,7 +25,9 @@ pytestmark = [pytest.mark.skipif(
                                                   ("skinkit.effects", "prestress"))),
     reason="needs the built-in plugins (skinkit-plugins)"),
     # one worker runs the whole module (its fixture is the demo: minutes), started first
-    pytest.mark.xdist_group("chain")]
+    pytest.mark.xdist_group("chain"),
+    # a fifth of the suite's processor time: `make test-e2e` runs it, CI after `make test`
+    pytest.mark.e2e]
 
 _OPENED: list[tuple[str, str]] = []
 _PHASE = ["before"]
