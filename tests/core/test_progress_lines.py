@@ -127,8 +127,10 @@ def test_fe_predict_reports_its_solve_and_quiet_reports_nothing(folder, session)
 
 @pytest.mark.needs_plugins
 def test_effects_visibility_reports_each_prediction(folder, session):
+    # a heartbeat of 0.1 s: each of the three predictions takes about a second, so every one is
+    # named by some line (at 1 s a prediction that ends within a second of the last line is not)
     p, err, wall = _run(["effects", "visibility", "one.toml", "--session", "s.h5", "--effects", "prestress",
-                         "--workers", "1"], folder, "visibility")
+                         "--workers", "1"], folder, "visibility", interval=0.1)
     assert p.returncode == 0, err
     assert "prestress" in p.stdout and "progress" not in p.stdout
     lines = _check_gaps(err, wall)
