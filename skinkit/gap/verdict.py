@@ -351,7 +351,36 @@ def rest_warnings(observations: Observations, prediction: Prediction) -> list[di
     return out
 
 
+def colour_warnings(observations: Observations, prediction: Prediction,
+                    significant: bool) -> list[dict[str, Any]]:
+    """A significant gap on a tip channel whose noise level came from second differences alone
+    (no rest segment before the motion to estimate the noise's colour from): that estimate assumes
+    white noise, and a coloured sensor noise reads low there (AR(1) with φ 0.9: a quarter of its
+    marginal level), so what is reported as a gap may be the sensor's own noise. One warning per
+    predicted channel (a drive is not in the residual), naming its protocols."""
+    from skinkit.forward.noise_model import samples_needed
+
+    if not significant:
+        return []
+    where: dict[str, list[str]] = {}
+    for po in observations:
+        predicted = prediction.protocols.get(po.protocol.name, {})
+        for ch in po.channels.values():
+            if ch.name not in predicted or ch.is_points or ch.noise_ar is not None \
+                    or ch.noise_source != "second differences":
+                continue
+            where.setdefault(ch.name, []).append(po.protocol.name)
+    return [_warn("noise-colour-unknown",
+                  f"{name}: no rest segment in {', '.join(protos)} to estimate the noise's colour from; its "
+                  "level comes from second differences, which assume white noise, and a coloured sensor "
+                  "noise reads low there (AR(1) with φ 0.9: a quarter of its level), so part of the gap "
+                  f"may be the sensor's own noise: record at least {samples_needed(1)} samples at rest "
+                  "before the motion", where=name)
+            for name, protos in where.items()]
+
+
 __all__ = [
+    "colour_warnings",
     "noise_factor",
     "MIN_SHARE",
     "ON_BOUND",

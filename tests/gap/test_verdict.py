@@ -50,6 +50,44 @@ def _relaxing_session(g: float = 0.4, tau: float = 4.0, seed: int = 0) -> Observ
                         "relaxing truth")
 
 
+def _coloured_session(rest_s: float, seed: int = 3) -> Observations:
+    """The model's own response (no effect) to ramp-hold-return cycles after ``rest_s`` of rest,
+    100 Hz, with AR(1) force noise (φ 0.9, marginal σ 4 mN) made by scipy's lfilter."""
+    from scipy.signal import lfilter
+
+    rate, peak, v, phi, sigma = 100.0, 9e-3, 1e-3, 0.9, 4e-3
+    ramp = np.arange(0, peak / v, 1 / rate) * v
+    cycle = np.concatenate([ramp, np.full(int(20 * rate), peak), ramp[::-1]])
+    u = np.concatenate([np.zeros(int(rest_s * rate)), cycle, cycle])
+    t = np.arange(u.size) / rate
+    rng = np.random.default_rng(seed)
+    pos = 1e-6 * rng.standard_normal((t.size, 3))
+    pos[:, 0] += u
+    e = sigma * np.sqrt(1 - phi**2) * rng.standard_normal((t.size + 500, 3))
+    force = lfilter([1.0], [1.0, -phi], e, axis=0)[500:]
+    force[:, 0] += 0.015 * (np.exp(320.0 * u) - 1) - 0.077
+    rec = RobotRecord(time_s=t, tip_position=pos, tip_force=force,
+                      protocol=Protocol("extension", kind="trajectory"))
+    return Observations({"extension": ProtocolObservations(rec.protocol, channels_from_record(rec))}, None,
+                        "coloured noise")
+
+
+def test_coloured_noise_without_a_rest_segment_is_warned_of():
+    """Without a rest segment the force noise's level comes from second differences, which read an
+    AR(1) φ 0.9 noise at √((6 − 8φ + 2φ²)/6) = 0.26 of its level: the gap is then the noise's own,
+    and the report must say so. With 5 s of rest the colour is estimated there and no such warning
+    is given (nor a gap: the model is the truth's)."""
+    bare = diagnose(MODEL, _coloured_session(0.0), max_effects=0).to_dict()
+    assert bare["noise"]["tip_force"]["source"] == "second differences"
+    assert bare["remaining"]["significant"]
+    (w,) = [w for w in bare["warnings"] if w["kind"] == "noise-colour-unknown"]
+    assert w["where"] == "tip_force" and "rest" in w["message"]
+    assert any("noise's colour" in m for m in bare["messages"])
+    rested = diagnose(MODEL, _coloured_session(5.0), max_effects=0).to_dict()
+    assert rested["noise"]["tip_force"]["kind"] == "AR"
+    assert not [w for w in rested["warnings"] if w["kind"] == "noise-colour-unknown"]
+
+
 @pytest.fixture(scope="module")
 def without_refits():
     """The relaxing session diagnosed with ``max_effects=0`` (located and scored, nothing refitted):
