@@ -71,12 +71,11 @@ from skinkit.gap.verdict import (
     MIN_SHARE,
     SMALL_REMAINDER,
     assign_roles,
-    colour_warnings,
     fit_warnings,
     noise_factor,
     noise_summary,
+    record_warnings,
     remaining,
-    rest_warnings,
 )
 from skinkit.inverse.discretisation import has_mesh
 from skinkit.schemas import EffectScore, FitResult, GapReport, Observations, Prediction
@@ -698,8 +697,7 @@ def _verdict(run: _Run, cal: Mapping[str, Any], loc_final: Any) -> dict[str, Any
         c.extra.update({k: d[k] for k in ("role", "share", "role_reason") if k in d})
     rem = remaining(loc_final, final, run.state0, kappa)
     warns = fit_warnings(cal["result"], "the calibration", cal["theta"]) + list(run.warnings)
-    warns += rest_warnings(run.observations, final["prediction"])
-    warns += colour_warnings(run.observations, final["prediction"], bool(rem["significant"]))
+    warns += record_warnings(run.observations, final["prediction"], bool(rem["significant"]))
     if rem["significant"] and rem["unexplained_share"] >= SMALL_REMAINDER and run.max_effects \
             and len(added) >= run.max_effects:
         warns.append({"kind": "max-effects-reached", "where": "diagnosis", "message":

@@ -379,6 +379,13 @@ def colour_warnings(observations: Observations, prediction: Prediction,
             for name, protos in where.items()]
 
 
+def record_warnings(observations: Observations, prediction: Prediction,
+                    significant: bool) -> list[dict[str, Any]]:
+    """What the records themselves put in doubt: :func:`rest_warnings` and, when the remainder is
+    ``significant``, :func:`colour_warnings`."""
+    return rest_warnings(observations, prediction) + colour_warnings(observations, prediction, significant)
+
+
 __all__ = [
     "colour_warnings",
     "noise_factor",
@@ -393,5 +400,6 @@ __all__ = [
     "noise_summary",
     "remaining",
     "remaining_sentence",
+    "record_warnings",
     "rest_warnings",
 ]
