@@ -141,8 +141,11 @@ def test_cable_tugs_are_bumps_of_the_given_height_and_length() -> None:
     f, centres = af.cable_tugs(t, np.random.default_rng(2), 0.03, 6, 1.0)
     assert centres.size == 6 and np.all((centres >= 5) & (centres <= 295))
     for c in centres:
+        # a bump's peak is its height unless another bump overlaps it (centres closer than 1 s)
+        if np.sum(np.abs(centres - c) < 1.0) > 1:
+            continue
         i = int(np.argmin(np.abs(t - c)))
-        assert abs(f[i]) == pytest.approx(0.03, rel=2e-3) or np.any(np.abs(centres - c) < 1.0 - 1e-9)
+        assert abs(f[i]) == pytest.approx(0.03, rel=2e-3)
     far = np.min(np.abs(t[:, None] - centres[None, :]), axis=1) >= 0.5
     assert np.all(f[far] == 0)
 
