@@ -8,7 +8,9 @@ Sources (reference text):
   ``normal_retraction``, ``out_of_plane_330/285/240`` (45 deg from the skin plane) -- 7.2.1 and
   Table 12: 1.5 mm peak-to-peak sinusoid at 0.1 Hz for three periods. The sinusoid is
   one-sided, ``pp/2 (1 - cos 2 pi f t)``, so each direction is a stretch from the zero
-  position and back (retraction is the normal direction pulled out of the skin).
+  position and back (retraction is the normal direction pulled out of the skin). ``rest``
+  (default 0 s) holds the zero position first: a reader estimates the sensors' noise and its
+  colour from those samples (at least 200 for an autoregressive model).
 * ``stochastic_preconditioning`` -- 4.1.3: 0.5 Hz sinusoidal ramp from zero to full force for
   three periods, 10 s at full force, then 100 s of the stochastic input.
 * ``stochastic_full_scale`` -- 4.1.3: Gaussian force, low-passed at 200 Hz, up to 3.5 N per
@@ -54,7 +56,7 @@ def _n(seconds: Any, p: dict[str, Any]) -> int:
 
 
 def _sine_length(p: dict[str, Any]) -> int:
-    return _n(float(p["periods"]) / float(p["frequency"]), p) + 1
+    return _n(float(p.get("rest", 0.0)), p) + _n(float(p["periods"]) / float(p["frequency"]), p) + 1
 
 
 def _precondition_length(p: dict[str, Any]) -> int:
@@ -80,6 +82,7 @@ _SINE_UNITS = {
     "peak_to_peak": "m",
     "frequency": "Hz",
     "periods": "1",
+    "rest": "s",
     "setpoint_rate": "Hz",
     "camera_rate": "Hz",
 }
@@ -87,9 +90,14 @@ _SINE_UNITS = {
 
 def _sine(p: dict[str, Any]) -> Programme:
     rate = float(p["setpoint_rate"])
+    rest = float(p.get("rest", 0.0))
+    if not rest >= 0:
+        raise ProtocolError(f"parameter 'rest' must be >= 0 s, got {rest}")
     duration = float(p["periods"]) / float(p["frequency"])
     t = np.arange(int(round(duration * rate)) + 1) / rate
-    s = one_sided_sine(t, float(p["peak_to_peak"]), float(p["frequency"]))
+    # a rest at zero first: the samples a reader estimates the sensors' noise and its colour from
+    s = np.concatenate([np.zeros(_n(rest, p)), one_sided_sine(t, float(p["peak_to_peak"]),
+                                                               float(p["frequency"]))])
     return Programme(
         "trajectory",
         rate,
@@ -181,6 +189,7 @@ def _trajectory_entries() -> dict[str, _Entry]:
         "peak_to_peak": 1.5e-3,
         "frequency": 0.1,
         "periods": 3,
+        "rest": 0.0,
         "setpoint_rate": 100.0,
         "camera_rate": 1.0,
     }

@@ -44,6 +44,10 @@ from skinkit.errors import SkinkitError
 
 #: the diagnosed model's free parameters: the element's a, b and the force zero
 FREE = ("lumped.a", "lumped.b", "offset.x")
+#: the models the alternative truths are written for, and the lab modules that write them
+PRESETS = {"lumped": "skinkit.lab.alternative", "quick": "skinkit.lab.alternative_fe"}
+#: the kind of model of each preset
+KINDS = {"lumped": "lumped", "quick": "fe"}
 FULL_SEEDS = 5
 QUICK_SEEDS = 1
 #: version of these definitions a journal's cases were made under
@@ -53,9 +57,15 @@ QUICK_DIAGNOSE = {"max_effects": 1, "candidates": 2}
 FULL_DIAGNOSE = {"max_effects": 2, "candidates": 3}
 
 
-def model_spec() -> dict[str, Any]:
-    """``docs/models/extension_relaxation_lumped.toml``: the exponential element and the force
-    zero, no effect (the model every truth is diagnosed with)."""
+def model_spec(preset: str = "lumped") -> dict[str, Any]:
+    """The model every truth of ``preset`` is diagnosed with: for ``"lumped"``,
+    ``docs/models/extension_relaxation_lumped.toml`` (the exponential element and the force zero,
+    no effect); for ``"quick"``, the quick finite-element preset with a rest before each protocol
+    (:func:`skinkit.lab.alternative_fe.model_spec`)."""
+    if _check(preset) == "quick":
+        from skinkit.lab.alternative_fe import model_spec as fe_spec
+
+        return fe_spec()[0]
     from skinkit.examples import example_model
     from skinkit.fem.model import read_model
 
@@ -65,37 +75,62 @@ def model_spec() -> dict[str, Any]:
     return spec
 
 
-def forms(names: Sequence[str] | None = None) -> list[Any]:
-    """The truth forms (:data:`skinkit.lab.alternative.FORMS`), or those ``names``
-    (:class:`BenchmarkError` naming the known ones for an unknown name)."""
-    from skinkit.lab.alternative import FORMS
+def free(preset: str = "lumped") -> list[str]:
+    """The diagnosed model's free parameters (:data:`FREE` for the lumped preset; c, k1, κ, g1
+    for the finite-element one)."""
+    if _check(preset) == "quick":
+        from skinkit.lab.alternative_fe import model_spec as fe_spec
 
+        return fe_spec()[1]
+    return list(FREE)
+
+
+def _check(preset: str) -> str:
+    if preset not in PRESETS:
+        raise BenchmarkError(f"--model: the alternative benchmark runs on {' or '.join(PRESETS)}, "
+                             f"got {preset!r}")
+    return preset
+
+
+def _module(preset: str) -> Any:
+    """The lab module of ``preset``'s truths (:data:`PRESETS`)."""
+    import importlib
+
+    return importlib.import_module(PRESETS[_check(preset)])
+
+
+def forms(names: Sequence[str] | None = None, preset: str = "lumped") -> list[Any]:
+    """The truth forms of ``preset`` (its lab module's ``FORMS``), or those ``names``
+    (:class:`BenchmarkError` naming the known ones for an unknown name)."""
+    all_forms = _module(preset).FORMS
     if names is None:
-        return list(FORMS)
-    known = {f.name: f for f in FORMS}
+        return list(all_forms)
+    known = {f.name: f for f in all_forms}
     bad = [n for n in names if n not in known]
     if bad:
         raise BenchmarkError(f"--forms: unknown {', '.join(bad)} (forms: {', '.join(known)})")
     return [known[n] for n in dict.fromkeys(names)]
 
 
-def coverage(selected: Sequence[Any], applicable: Sequence[str]) -> tuple[list[Any], dict[str, str]]:
+def coverage(selected: Sequence[Any], applicable: Sequence[str], preset: str = "lumped"
+             ) -> tuple[list[Any], dict[str, str]]:
     """The forms that can run (an effect form needs one of its accepted effects among the
     ``applicable`` ones: otherwise no answer could be right) and why the others, and the
     applicable effects no form stands for, are left out."""
-    from skinkit.lab.alternative import SKIPPED_EFFECTS
-
+    skipped_effects = _module(preset).SKIPPED_EFFECTS
+    reason = getattr(_module(preset), "skipped_reason", None)
     ok, skipped = [], {}
     for f in selected:
         if f.family == "effect" and not set(f.accepted) & set(applicable):
             skipped[f"form {f.name}"] = (f"{' or '.join(f.accepted)} is not installed or does not apply to "
-                                         "lumped models: no answer could be right")
+                                         f"{KINDS[preset]} models: no answer could be right")
         else:
             ok.append(f)
     covered = {e for f in ok for e in f.accepted}
     for e in applicable:
         if e not in covered:
-            skipped[e] = SKIPPED_EFFECTS.get(e, "no truth form stands for it (none written, or none chosen)")
+            skipped[e] = (skipped_effects[e] if e in skipped_effects else reason(e) if reason is not None
+                          else "no truth form stands for it (none written, or none chosen)")
     return ok, skipped
 
 
@@ -109,7 +144,7 @@ def plan(selected: Sequence[Any], seeds: int) -> list[dict[str, Any]]:
 
 # -- one case ---------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=32)
-def visible_excess(name: str) -> dict[str, float]:
+def visible_excess(name: str, preset: str = "lumped") -> dict[str, float]:
     """What form ``name`` shows beyond noise: the χ² (noise variances) the model leaves when fitted
     to the noiseless truth, its degrees of freedom and its multiple of the global χ² test's
     critical excess at α = 0.05 (the detection threshold)."""
@@ -118,11 +153,16 @@ def visible_excess(name: str) -> dict[str, float]:
     from skinkit.forward import load
     from skinkit.inverse.fit import fit
 
-    obs = session(name, None)
-    with load(model_spec()) as model:
-        r = fit(model, obs, list(FREE))
-    n = sum(int(np.asarray(po.channels["tip_force"].values).shape[0]) for po in obs)
-    dof = n - len(FREE)
+    obs = session(name, None, preset)
+    names = free(preset)
+    # one process: this runs inside a benchmark's worker
+    with load(model_spec(preset), workers=1) as model:
+        r = fit(model, obs, names)
+    if preset == "lumped":
+        dof = sum(int(np.asarray(po.channels["tip_force"].values).shape[0]) for po in obs) - len(names)
+    else:
+        # every channel counts: the fit's χ² over its χ²/ν
+        dof = int(round(sum(r.residual_by_channel.values()) / float(r.chi2_per_dof)))
     excess = float(r.chi2_per_dof) * dof
     threshold = float(chi2.ppf(1 - ALPHA, dof) - dof)
     return {"chi2": excess, "dof": dof, "threshold": threshold, "multiple": excess / threshold}
@@ -131,7 +171,7 @@ def visible_excess(name: str) -> dict[str, float]:
 _INSTANCE = re.compile(r"^(?P<effect>.+)-(?P<k>\d+)$")
 
 
-def session(name: str, seed: int | None) -> Any:
+def session(name: str, seed: int | None, preset: str = "lumped") -> Any:
     """The virtual session of form ``name`` and ``seed`` (None: noiseless), read as any robot
     record is (:func:`skinkit.forward.observations.channels_from_record`): the noise level, its
     colour and the spikes are estimated from the record, not told to the diagnosis."""
@@ -139,6 +179,8 @@ def session(name: str, seed: int | None) -> Any:
     from skinkit.lab import alternative as alt
     from skinkit.schemas import Observations, ProtocolObservations
 
+    if _check(preset) != "lumped":
+        return _module(preset).session(name, seed)
     if seed is None:
         return alt.noiseless(name)
     chans = channels_from_record(alt.record(name, seed), f"alternative truth {name}")
@@ -190,21 +232,24 @@ def reading(rep: Mapping[str, Any]) -> dict[str, Any]:
 
 def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
     """One case (a task): ``payload`` has ``id``, ``family``, ``form``, ``effect``, ``seed`` and
-    ``diagnose`` (options). Returns the JSON-ready record :func:`score` reads."""
+    ``diagnose`` (options) and ``preset`` (default lumped). Returns the JSON-ready record
+    :func:`score` reads."""
     from skinkit.gap.diagnose import diagnose
-    from skinkit.lab.alternative import truth
 
     t0 = time.perf_counter()
     rec: dict[str, Any] = {k: payload[k] for k in ("id", "family", "form", "effect", "accepted", "seed")}
     rec["name"] = payload["id"]
+    preset = str(payload.get("preset", "lumped"))
     try:
-
-        rec["visible_excess"] = visible_excess(payload["form"])
-        rec["truth_info"] = truth(payload["form"], int(payload["seed"]))["info"]
-        obs = session(payload["form"], int(payload["seed"]))
+        rec["visible_excess"] = visible_excess(payload["form"], preset)
+        rec["truth_info"] = _module(preset).truth(payload["form"], int(payload["seed"]))["info"]
+        obs = session(payload["form"], int(payload["seed"]), preset)
         td = time.perf_counter()
         opts = {"error_estimate": False, **dict(payload.get("diagnose", {}))}
-        rep = diagnose(model_spec(), obs, free=list(FREE), workers=1, **opts).to_dict()
+        if KINDS[preset] == "fe":
+            # the discretisation check would refine the mesh the truth shares with the model
+            opts.setdefault("model_error", False)
+        rep = diagnose(model_spec(preset), obs, free=free(preset), workers=1, **opts).to_dict()
         rec["diagnose_s"] = time.perf_counter() - td
         rec.update(reading(rep))
         rec["messages"] = list(rep.get("messages", []) or [])
@@ -276,7 +321,7 @@ def run(quick: bool, *, seeds: int | None = None, forms_: Sequence[str] | None =
         parallel: int | None = None, scheduler: str | None = None,
         journal: str | os.PathLike[str] | None = None, recorded_only: bool = False,
         progress: Callable[[str], None] | None = None, max_effects: int | None = None,
-        candidates: int | None = None) -> dict[str, Any]:
+        candidates: int | None = None, preset: str = "lumped") -> dict[str, Any]:
     """Run the alternative benchmark and score it (JSON-ready; keys in :func:`score`, plus
     ``cases``, ``forms``, ``skipped``, ``wall_s``).
 
@@ -285,12 +330,16 @@ def run(quick: bool, *, seeds: int | None = None, forms_: Sequence[str] | None =
     these forms. ``parallel`` worker processes (default 2; 1 runs here) or a Dask ``scheduler``;
     ``journal``: record each case as it finishes and skip those it holds (as the withheld-effect
     benchmark's, :mod:`skinkit.bench.gap_journal`); ``recorded_only``: score the planned cases the
-    journal holds, run nothing. ``progress(line)``: one line per case."""
+    journal holds, run nothing. ``progress(line)``: one line per case. ``preset``: the model the
+    truths are written for (:data:`PRESETS`: ``"lumped"``, or ``"quick"``, the finite-element
+    one, :mod:`skinkit.lab.alternative_fe`)."""
     from skinkit.forward.visibility import applicable_effects
 
     t0 = time.perf_counter()
     say = progress or (lambda line: None)
-    selected, skipped = coverage(forms(forms_), applicable_effects("lumped"))
+    kind = KINDS[_check(preset)]
+    spec, names = model_spec(preset), free(preset)
+    selected, skipped = coverage(forms(forms_, preset), applicable_effects(kind), preset)
     seeds = (QUICK_SEEDS if quick else FULL_SEEDS) if seeds is None else int(seeds)
     base_opts = QUICK_DIAGNOSE if quick else FULL_DIAGNOSE
     opts = {"max_effects": base_opts["max_effects"] if max_effects is None else int(max_effects),
@@ -299,14 +348,13 @@ def run(quick: bool, *, seeds: int | None = None, forms_: Sequence[str] | None =
         raise BenchmarkError("--recorded-only scores a journal's cases: give --journal FILE")
     if recorded_only and not Path(journal).is_file():
         raise BenchmarkError(f"--recorded-only: journal {journal} does not exist")
-    spec = model_spec()
     described = {f.name: {"family": f.family, "accepted": list(f.accepted), "description": f.description}
                  for f in selected}
-    settings = {"benchmark": "alternative", "definitions": DEFINITIONS, "model": spec, "free": list(FREE),
+    settings = {"benchmark": "alternative", "definitions": DEFINITIONS, "model": spec, "free": names,
                 "diagnose": opts, "alpha": ALPHA, "forms": described}
     jr = _open_journal(journal, settings, say, read_only=recorded_only)
     cases = plan(selected, seeds)
-    payloads = [dict(c, diagnose=opts) for c in cases]
+    payloads = [dict(c, diagnose=opts, preset=preset) for c in cases]
     known = {} if jr is None else jr.cases
     before = {p["id"]: known[p["id"]] for p in payloads if p["id"] in known}
     todo = [] if recorded_only else [p for p in payloads if p["id"] not in before]
@@ -333,7 +381,7 @@ def run(quick: bool, *, seeds: int | None = None, forms_: Sequence[str] | None =
     done = {**before, **fresh}
     records = [done[p["id"]] for p in payloads if p["id"] in done]
     out = score(records)
-    out.update({"model": spec.get("model", {}).get("name"), "kind": "lumped", "free": list(FREE),
+    out.update({"model": spec.get("model", {}).get("name"), "preset": preset, "kind": kind, "free": names,
                 "quick": bool(quick), "seeds": seeds, "diagnose_options": opts, "alpha": ALPHA,
                 "forms": described, "skipped": skipped, "cases": records,
                 "planned_cases": len(payloads), "resumed_cases": len(before),
@@ -349,8 +397,8 @@ def summary_lines(res: Mapping[str, Any]) -> list[str]:
         lo, hi = r["interval_95"]
         return f"{100 * r['rate']:.0f} % ({r['k']}/{r['n']}; 95 % CI {100 * lo:.0f}-{100 * hi:.0f} %)"
 
-    lines = [f"alternative truths on {res['model']} (lumped), {len(res['cases'])} of {res['planned_cases']} "
-             f"planned cases, {res['wall_s'] / 60:.1f} min",
+    lines = [f"alternative truths on {res['model']} ({res.get('kind', 'lumped')}), {len(res['cases'])} of "
+             f"{res['planned_cases']} planned cases, {res['wall_s'] / 60:.1f} min",
              f"top-1 attribution (effect cases): {pct(res['top1'])}",
              f"spurious causes (effect cases): {pct(res['spurious'])}",
              f"false alarms on null sessions: {pct(res['null_false_alarm'])}",
@@ -373,5 +421,6 @@ def summary_lines(res: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-__all__ = ["DEFINITIONS", "FREE", "FULL_SEEDS", "QUICK_SEEDS", "effect_of", "forms", "model_spec", "plan",
-           "reading", "run", "run_case", "score", "summary_lines", "verdict", "visible_excess"]
+__all__ = ["DEFINITIONS", "FREE", "FULL_SEEDS", "KINDS", "PRESETS", "QUICK_SEEDS", "effect_of", "forms",
+           "free", "model_spec", "plan", "reading", "run", "run_case", "score", "summary_lines", "verdict",
+           "visible_excess"]

@@ -82,12 +82,14 @@ def _alternative(quick: bool, scheduler: str | None, as_json: bool, seeds: int |
                  journal: str | None, recorded_only: bool, forms: str | None, page: Path | None, *,
                  effects: str | None, model: str | None, nulls: int | None) -> None:
     """``--alternative``: the options that choose the withheld-effect benchmark's truths are refused."""
-    from skinkit.bench.gap_alternative import run, summary_lines
+    from skinkit.bench.gap_alternative import PRESETS, run, summary_lines
     from skinkit.bench.gap_cases import BenchmarkError
 
-    if model is not None:
-        raise BenchmarkError("--alternative runs on the lumped extension model only (its truths are written "
-                             "for it; a finite-element version is not built): leave out --model")
+    preset = "lumped" if model is None else model
+    if preset not in PRESETS:
+        raise BenchmarkError(f"--alternative --model: its truths are written for the presets "
+                             f"{', '.join(PRESETS)} (lumped: the extension model, the default; quick: the "
+                             f"quick finite-element model), got {model!r}")
     if effects is not None:
         raise BenchmarkError("--alternative: --effects chooses plugin truths; choose its truths with --forms")
     if nulls is not None:
@@ -95,7 +97,7 @@ def _alternative(quick: bool, scheduler: str | None, as_json: bool, seeds: int |
                              "--seeds seeds each; leave out --nulls")
     with progress(stage="gap benchmark --alternative") as bar:
         res = run(quick, seeds=seeds, forms_=_names(forms, "--forms"), parallel=parallel, scheduler=scheduler,
-                  journal=journal, recorded_only=recorded_only, progress=bar.say)
+                  journal=journal, recorded_only=recorded_only, progress=bar.say, preset=preset)
     lines = summary_lines(res)
     write_page(page, "The gap diagnosis on truths it did not make", res, lines)
     if as_json:
