@@ -192,6 +192,7 @@ def _noise_channel(name: str, t: np.ndarray, v: np.ndarray, n_rest: int, mode: s
     clean = np.where(outliers, np.nan, v)
     level, src, nominal = _channel_noise(clean, name, where, components)
     ars, innov, srcs = [], level.copy(), set()
+    rested = 0
     scale = np.ones(v.shape)
     for j in range(v.shape[1]):
         ars.append(np.zeros(0))
@@ -205,9 +206,14 @@ def _noise_channel(name: str, t: np.ndarray, v: np.ndarray, n_rest: int, mode: s
             ars[j], level[j], innov[j] = phi, sigma, se
             scale[:, j] = nm.local_scale(v[:, j], ~outliers[:, j], n_rest, phi)
             srcs.add(nm.describe(phi.size, int(np.isfinite(seg).sum())))
+        elif not phi.size and np.isfinite(seg).sum() >= nm.samples_needed(1):
+            rested = int(np.isfinite(seg).sum())
     if srcs:
         white = sum(1 for j, a in enumerate(ars) if not a.size and j not in nominal)
         src = ", ".join(sorted(srcs) + ([src] if white else []))
+    elif rested:
+        # the colour was looked for and BIC chose white: the level is sound, say so
+        src = f"{src}; white by the rest segment ({rested} samples)"
     n_out = int(outliers.sum())
     if n_out:
         src += f"; {n_out} spike(s) left out"

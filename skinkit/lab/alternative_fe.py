@@ -14,11 +14,15 @@ part of the record).
 Every form is put on the recorded tip force by NumPy (:mod:`skinkit.lab.alt_forms`,
 :mod:`skinkit.lab.alt_noise`), on all three components with weights :data:`AXIS_WEIGHTS`:
 
-* ``effect``: a drifting zero over the session clock (two-time-constant warm-up, thermal swing:
-  the plugins' drift restarts with each protocol and is linear or one exponential), the force
-  clock running slow (the plugin's lag is constant), a softening from one protocol to the next
-  (constant within each protocol: exact for a uniform softening of every layer under an imposed
-  displacement, where the displacement field is unchanged and every force scales);
+* ``effect``: a zero drifting over the session clock and tared as each protocol starts (a
+  two-time-constant warm-up, a thermal swing; the plugins' drift is linear, one exponential or a
+  spline from each protocol's start), the force clock running slow (the plugin's lag is constant),
+  a softening from one protocol to the next (constant within each protocol: exact for a uniform
+  softening of every layer under an imposed displacement, where the displacement field is
+  unchanged and every force scales). A zero drifting across protocols *without* taring (each
+  protocol starting at the offset reached so far) is outside every installed drift's form
+  (``force-warmup``'s "not covered"): the diagnosis names ``force-offset`` for it
+  (``docs/guide/gap-benchmark.md``);
 * ``null``: white, AR(1) φ 0.9 or spiky noise on the force;
 * ``out-of-library``: mains pick-up, cable tugs.
 
@@ -46,6 +50,8 @@ from skinkit.schemas import Channel, Observations, ProtocolObservations, RobotRe
 REST_S = 3.0
 #: the pause between protocols on the session clock [s]
 BETWEEN_S = 10.0
+#: the force clock's lag gained per second of a record (the clock-skew form) [s/s]
+SKEW = 0.008
 #: a form's size on the force's x, y, z components (z, the normal, the largest)
 AXIS_WEIGHTS = np.array([0.6, 0.8, 1.0])
 FAMILIES = ("effect", "null", "out-of-library")
@@ -92,9 +98,13 @@ def _each(core: Any) -> Any:
     return build
 
 
-def _additive(series: Any) -> Any:
-    """A builder adding ``series(t) (T,)`` [N] along :data:`AXIS_WEIGHTS` on the session clock."""
-    return _each(lambda p: p["force"] + series(p["t"])[:, None] * AXIS_WEIGHTS)
+def _additive(series: Any, restart: bool = False) -> Any:
+    """A builder adding ``series(t) (T,)`` [N] along :data:`AXIS_WEIGHTS`, t on the session clock
+    (``restart``: t from the protocol's start, the transient restarted by each taring)."""
+    def core(p: dict[str, Any]) -> np.ndarray:
+        t = p["t"] - p["t"][0] * restart
+        return p["force"] + series(t)[:, None] * AXIS_WEIGHTS
+    return _each(core)
 
 
 def _noise(draw: Any) -> Any:
@@ -116,13 +126,12 @@ def _spiky(parts: Parts, rng: np.random.Generator, sigma: np.ndarray) -> tuple[l
 
 
 def _skewed(parts: Parts, rng: np.random.Generator, sigma: np.ndarray) -> tuple[list[np.ndarray], dict]:
-    # the force clock slow over the whole session: lag from 0 at its start to 0.09 s at its end
-    t_end = parts[-1]["t"][-1]
+    # the force clock slow: each record starts on a common trigger and its lag grows from 0 by
+    # SKEW of its time (af.clock_skew, per component)
     out = []
     for p in parts:
-        t = p["t"]
-        lag = 0.09 * t / t_end
-        f = np.stack([np.interp(t - lag, t, p["force"][:, j]) for j in range(3)], axis=1)
+        t = p["t"] - p["t"][0]
+        f = np.stack([af.clock_skew(t, p["force"][:, j], SKEW * t[-1]) for j in range(3)], axis=1)
         out.append(f + sigma * rng.standard_normal(f.shape))
     return out, {}
 
@@ -145,13 +154,16 @@ def _softened(s: float, pace: float | None) -> Any:
 
 FORMS: tuple[Form, ...] = (
     Form("effect", "warmup-drift", "force-drift",
-         "session-long warm-up, 2.1 mN (1 − e^(−t/20 s)) + 3.4 mN (1 − e^(−t/200 s)), never re-tared",
-         _additive(lambda t: af.warmup_drift(t, (0.0021, 0.0034), (20.0, 200.0))), also=DRIFTING_ZERO),
-    Form("effect", "thermal-drift", "force-drift",
-         "thermal swing 3.2 mN sin(2π t/150 s + 0.7) over the session clock",
-         _additive(lambda t: af.thermal_drift(t, 0.0032, 150.0, 0.7)), also=DRIFTING_ZERO),
+         "warm-up with two time constants restarted by each taring, 2.5 mN (1 − e^(−t/4 s)) + 4 mN "
+         "(1 − e^(−t/60 s)), t from the protocol's start",
+         _additive(lambda t: af.warmup_drift(t, (0.0025, 0.004), (4.0, 60.0)), restart=True),
+         also=DRIFTING_ZERO),
+    Form("effect", "log-settling", "force-drift",
+         "a zero settling logarithmically after each taring (a bonded gauge's creep), 1.2 mN ln(1 + t/1 s)",
+         _additive(lambda t: 0.0012 * np.log1p(t / 1.0), restart=True), also=DRIFTING_ZERO),
     Form("effect", "clock-skew", "channel-lag",
-         "force clock running slow: lag growing from 0 to 0.09 s over the session", _skewed),
+         "force clock running slow: each record's lag grows from 0 at its trigger by 8 ms per second",
+         _skewed),
     Form("effect", "protocol-softening", "preconditioning",
          "protocol k's force scaled by 1 − 0.055 (1 − e^(−k/1.5)) (constant within a protocol)",
          _softened(0.055, 1.5)),

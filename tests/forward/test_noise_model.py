@@ -91,6 +91,14 @@ def test_record_channels_carry_the_coloured_noise_model_and_spikes():
     assert ch.noise[2] == pytest.approx(2e-3, rel=0.2)
 
 
+def test_white_noise_found_white_in_a_rest_segment_says_so():
+    # the colour was looked for and not found: the source says it (a reader then trusts the level)
+    ch = channels_from_record(_record(600, 0.0, seed=3))["tip_force"]
+    assert not ch.coloured and "white by the rest segment (6" in ch.noise_source, ch.noise_source
+    short = channels_from_record(_record(50, 0.0, seed=3))["tip_force"]
+    assert "rest segment" not in short.noise_source
+
+
 def test_the_true_model_fits_coloured_noise_at_chi2_one():
     rec = _record(800, 0.9, seed=11)
     ch = channels_from_record(rec)["tip_force"]

@@ -327,7 +327,7 @@ def test_quick_run_through_the_command_line(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("args, says", [
-    (["--model", "lumped"], "leave out --model"),
+    (["--model", "nonsense"], "presets lumped, quick"),
     (["--nulls", "3"], "leave out --nulls"),
     (["--forms", "nonsense"], "unknown nonsense"),
 ])
