@@ -16,7 +16,7 @@ TEST_REQS  := -e ".[fast,test,dev,bench,cluster,table]" -e ./plugins -e ./hardwa
 INSTALL = if [ -x $(BIN)/uv ]; then $(BIN)/uv pip install --compile-bytecode --python $(BIN)/python $(1); \
           else $(BIN)/python -m pip install --progress-bar on $(1); fi
 
-.PHONY: venv venv-test demo test test-e2e test-gap-quick lint tox clean
+.PHONY: venv venv-test demo test test-e2e test-gap-quick test-gap-alternative-fe lint tox clean
 
 venv: $(RUN_STAMP)
 venv-test: $(TEST_STAMP)
@@ -57,6 +57,9 @@ test-e2e: venv-test
 # 10 minutes); CI (.ci/run) runs it after the suite
 test-gap-quick: venv-test
 	SKINKIT_GAP_QUICK=1 $(BIN)/python -m pytest -q -s tests/gap/test_benchmark_quick.py
+
+test-gap-alternative-fe: venv-test
+	SKINKIT_GAP_ALTERNATIVE_FE=1 $(BIN)/python -m pytest -q -s tests/gap/test_benchmark_alternative_fe_quick.py
 
 lint: venv-test
 	$(BIN)/ruff check skinkit plugins hardware tests

@@ -406,8 +406,11 @@ def summary_lines(res: Mapping[str, Any]) -> list[str]:
              f"out-of-library reported unexplained: {pct(res['unexplained'])}",
              f"time per case: median {res['case_wall_s']['median'] or 0:.1f} s, "
              f"max {res['case_wall_s']['max'] or 0:.1f} s"]
+    grouped: dict[str, list[str]] = {}
     for e, why in res["skipped"].items():
-        lines.append(f"left out {e}: {why}")
+        grouped.setdefault(why, []).append(e)
+    for why, names in grouped.items():
+        lines.append(f"left out {', '.join(names)}: {why}")
     for f in res["failed"]:
         lines.append(f"failed {f['id']}: {f['error']}")
     lines.append("by form (right / cases; named):")

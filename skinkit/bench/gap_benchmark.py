@@ -198,7 +198,8 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         effects: Sequence[str] | None = None, nulls: int | None = None, pairs: int | None = None,
         magnitudes: Sequence[str] | None = None, parallel: int | None = None,
         max_effects: int | None = None, candidates: int | None = None,
-        journal: str | os.PathLike[str] | None = None, recorded_only: bool = False) -> dict[str, Any]:
+        journal: str | os.PathLike[str] | None = None, recorded_only: bool = False,
+        mesh: str = "own") -> dict[str, Any]:
     """Run the benchmark and score it (JSON-ready).
 
     ``quick``: the quick run (:data:`QUICK_EFFECTS` that apply and are visible, moderate
@@ -215,7 +216,10 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
     file (:mod:`skinkit.bench.gap_journal`) that records each calibration and case as it finishes; the
     ones it already holds are not run again (resuming a stopped run, or adding seeds or null
     sessions to a finished one); ``recorded_only``: run nothing, score the planned cases the
-    journal holds (``planned_cases`` says how many were planned). Cases run seed by seed (a
+    journal holds (``planned_cases`` says how many were planned). ``mesh``: a finite-element truth
+    on a mesh of its own (``"own"``, the default: the model's discretisation error is in the data and
+    the diagnosis carries it) or on the model's (``"shared"``); each case records
+    ``truth_unknowns`` and ``model_unknowns``. Cases run seed by seed (a
     stopped run has whole seeds), longest first within a seed, null sessions after the first
     seed. Keys:
     ``top1_accuracy``, ``null_false_alarm_rate``, ``localisation_accuracy``,
@@ -254,24 +258,28 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
         raise BenchmarkError("--recorded-only scores a journal's cases: give --journal FILE")
     if recorded_only and not Path(journal).is_file():
         raise BenchmarkError(f"--recorded-only: journal {journal} does not exist")
-    jr = _open_journal(journal, {"model": spec, "free": free, "magnitudes": {m: MAGNITUDES[m] for m in mags},
+    from skinkit.lab.truth_mesh import check_mode
+
+    check_mode(mesh, 2)
+    jr = _open_journal(journal, {"model": spec, "free": free, "mesh": mesh,
+                                 "magnitudes": {m: MAGNITUDES[m] for m in mags},
                                  "diagnose": opts, "alpha": ALPHA, "definitions": DEFINITIONS}, say,
                       read_only=recorded_only)
     pool = _Pool(1, None) if recorded_only else _Pool(parallel, scheduler)
     try:
-        cals = _calibrations(pool, [{"spec": spec, "free": free, "effect": n, "workers": workers,
-                                     "magnitudes": {m: MAGNITUDES[m] for m in mags}} for n in names], jr, say,
-                             recorded_only)
+        tasks = [{"spec": spec, "free": free, "effect": n, "workers": workers, "mesh": mesh,
+                  "magnitudes": {m: MAGNITUDES[m] for m in mags}} for n in names]
+        cals = _calibrations(pool, tasks, jr, say, recorded_only)
         cases = plan(cals, magnitudes=mags, seeds=seeds, nulls=nulls, pairs=pairs)
         if not any(c["kind"] != "null" for c in cases) and names:
             say("no effect is visible on these protocols: only null sessions run")
-        payloads = [dict(c, spec=spec, free=free, workers=workers, diagnose=opts) for c in cases]
+        payloads = [dict(c, spec=spec, free=free, workers=workers, diagnose=opts, mesh=mesh) for c in cases]
         records, n_resumed = _run_cases(pool, payloads, jr, say, recorded_only)
     finally:
         pool.close()
         release()
     out = score(records)
-    out.update({"model": spec.get("model", {}).get("name"), "kind": kind, "quick": bool(quick),
+    out.update({"model": spec.get("model", {}).get("name"), "kind": kind, "quick": bool(quick), "mesh": mesh,
                 "free": free, "effects": names, "magnitudes": {m: MAGNITUDES[m] for m in mags},
                 "occupied_share": OCCUPIED_SHARE, "alpha": ALPHA, "diagnose_options": opts,
                 "calibration": {c["effect"]: c for c in cals},

@@ -159,16 +159,24 @@ def _key(obj: Any) -> str:
     return jsonio.dumps(obj, sort_keys=True, default=str)
 
 
-def _lab(spec: Mapping[str, Any]) -> Any:
-    """:class:`~skinkit.inverse.coverage.LabSessions` of ``spec``, solved once per process."""
+def _lab(spec: Mapping[str, Any], mesh: str = "shared") -> Any:
+    """:class:`~skinkit.inverse.coverage.LabSessions` of ``spec``, solved once per process, on the
+    model's mesh (``mesh`` ``"shared"``) or on a mesh of its own (``"own"``)."""
     from skinkit.inverse.coverage import LabSessions
 
-    k = _key(spec)
+    k = _key([spec, mesh])
     if k not in _LABS:
         if len(_LABS) > 16:          # keep a worker's memory bounded on long runs
             _LABS.clear()
-        _LABS[k] = LabSessions(spec, mesh="shared")
+        _LABS[k] = LabSessions(spec, mesh=mesh)
     return _LABS[k]
+
+
+def meshes(lab: Any) -> dict[str, Any]:
+    """``truth_unknowns``, ``model_unknowns`` and the mesh mode of a lab's truth."""
+    doc = (lab.truth.truth or {}).get("mesh") or {}
+    return {"mesh": doc.get("mode", "shared"), "truth_unknowns": doc.get("truth_unknowns"),
+            "model_unknowns": doc.get("model_unknowns")}
 
 
 def _noiseless(lab: Any) -> Any:
@@ -203,13 +211,16 @@ def _references(obs: Any) -> list[np.ndarray]:
 
 class _Base:
     """The model without effects at the truth: its noiseless prediction and noise-normalised
-    sensitivities to the free parameters (one sensitivity pass), and their projector."""
+    sensitivities to the free parameters (one sensitivity pass), and their projector. On truths
+    with a mesh of their own (``mesh`` ``"own"``) an effect's signature is the truth with it less the
+    truth without it, both on the truth's mesh: the model's mesh error is not the effect's."""
 
     def __init__(self, spec: Mapping[str, Any], free: Sequence[str] | None,
-                 workers: int | None = None) -> None:
+                 workers: int | None = None, mesh: str = "shared") -> None:
         from skinkit.forward import load
 
-        self.lab = _lab(spec)
+        self.mesh = mesh
+        self.lab = _lab(spec, mesh)
         self.model = load(self.lab.model_spec, workers=workers)
         params = self.model.parameters()
         self.free = list(free) if free is not None else list(params.free_names)
@@ -226,6 +237,15 @@ class _Base:
         from scipy.stats import chi2
 
         self.critical_excess = float(chi2.ppf(1 - ALPHA, self.dof) - self.dof)
+        self.reference = self.pred if mesh == "shared" else _as_prediction(self.obs, self.pred)
+        self._floor: float | None = 0.0 if mesh == "shared" else None
+
+    def floor(self, workers: int | None) -> float:
+        """χ² (noise units²) the model leaves fitted to the noiseless truth *without* an effect: 0
+        on a shared mesh, the model's mesh error otherwise (one fit, kept)."""
+        if self._floor is None:
+            self._floor = _oracle(self.lab, self.obs, self.free, [], workers)["chi2"]
+        return self._floor
 
     def _objective(self, obs: Any) -> Any:
         from skinkit.inverse.objective import Objective
@@ -239,9 +259,9 @@ class _Base:
         from skinkit.schemas import ChannelPrediction, Prediction
 
         obs = _noiseless(lab)
-        pred = self.pred
+        pred = self.reference
         same = zip(_references(obs), _references(self.obs), strict=True)
-        if not all(np.array_equal(a, b) for a, b in same):
+        if self.mesh == "shared" and not all(np.array_equal(a, b) for a, b in same):
             # the truth's reference differs (a tracker's distortion seen in frame 0): the model
             # tracks the material points the session's reference names
             pred = self.model.predict(self.model.parameters(), obs)
@@ -290,11 +310,22 @@ def release() -> None:
     _LABS.clear()
 
 
-def _base(spec: Mapping[str, Any], free: Sequence[str] | None, workers: int | None = None) -> _Base:
-    k = _key([spec, free])
+def _base(spec: Mapping[str, Any], free: Sequence[str] | None, workers: int | None = None,
+          mesh: str = "shared") -> _Base:
+    k = _key([spec, free, mesh])
     if k not in _BASES:
-        _BASES[k] = _Base(spec, free, workers)
+        _BASES[k] = _Base(spec, free, workers, mesh)
     return _BASES[k]
+
+
+def _as_prediction(obs: Any, like: Any) -> Any:
+    """The noiseless observations ``obs`` as a prediction shaped as ``like`` (the model's): the
+    reference an own-mesh effect truth's signature is measured from."""
+    from skinkit.schemas import ChannelPrediction, Prediction
+
+    protos = {p: {c: ChannelPrediction(np.array(obs[p].channels[c].values, float), predicted=cp.predicted)
+                  for c, cp in chans.items()} for p, chans in like.protocols.items()}
+    return Prediction(protos, inputs=dict(like.inputs))
 
 
 def _occupied(cells: Sequence[Any]) -> dict[str, list[str]]:
@@ -366,12 +397,13 @@ def calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
 def _calibrate(payload: Mapping[str, Any]) -> dict[str, Any]:
     name = payload["effect"]
     t0 = time.perf_counter()
-    base = _base(payload["spec"], payload["free"], payload.get("workers"))
+    mesh = payload.get("mesh", "shared")
+    base = _base(payload["spec"], payload["free"], payload.get("workers"), mesh)
     crit = base.critical_excess
     out: dict[str, Any] = {"effect": name, "critical_excess": crit, "dof": base.dof, "magnitudes": {}}
 
     def sig(s: float) -> dict[str, Any]:
-        lab = _lab(_with_effects(payload["spec"], [effect_at(name, s)]))
+        lab = _lab(_with_effects(payload["spec"], [effect_at(name, s)]), mesh)
         return base.signature(lab)
 
     try:
@@ -438,19 +470,21 @@ def _fitted_excess(base: _Base, payload: Mapping[str, Any], effect: Mapping[str,
     """χ² (noise units²) the model without the effect (``base``: its lab and free parameters)
     leaves when fitted, from the truth's values, to the noiseless truth with ``effect``: the
     excess a session would show at most, beyond noise."""
-    obs = _noiseless(_lab(_with_effects(payload["spec"], [effect])))
-    return _oracle(base.lab, obs, base.free, [], payload.get("workers"))["chi2"]
+    obs = _noiseless(_lab(_with_effects(payload["spec"], [effect]), base.mesh))
+    # on a truth mesh of its own the model leaves its mesh error even without the effect
+    workers = payload.get("workers")
+    return _oracle(base.lab, obs, base.free, [], workers)["chi2"] - base.floor(workers)
 
 
 # -- one case -----------------------------------------------------------------------------------
 def _diagnose(spec: Mapping[str, Any], obs: Any, free: Sequence[str] | None,
-              workers: int | None, options: Mapping[str, Any]) -> dict[str, Any]:
+              workers: int | None, options: Mapping[str, Any], mesh: str = "shared") -> dict[str, Any]:
     from skinkit.gap.diagnose import diagnose
 
-    # truth and model share one mesh by construction: the discretisation check and the carried
-    # model error would find nothing and cost refined solves per case (their own tests:
-    # test_discretisation_gap, test_no_inverse_crime)
-    opts = {"error_estimate": False, "model_error": False, **dict(options)}
+    # on a shared mesh the discretisation check and the carried model error would find nothing and
+    # cost refined solves per case (their own tests: test_discretisation_gap, test_no_inverse_crime);
+    # on a truth mesh of its own the model's error is carried, as a user's diagnosis does
+    opts = {"error_estimate": False, "model_error": mesh == "own", **dict(options)}
     return diagnose(spec, obs, free=None if free is None else list(free), workers=workers, **opts).to_dict()
 
 
@@ -496,9 +530,11 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
     rec["truth"] = [e["name"] for e in effects]
     rec["truth_parameters"] = {f"{e['name']}.{k}": v for e in effects for k, v in e.items() if k != "name"}
     try:
-        base = _base(payload["spec"], payload["free"], payload.get("workers"))
-        lab = _lab(_with_effects(payload["spec"], effects))
+        mesh = payload.get("mesh", "shared")
+        base = _base(payload["spec"], payload["free"], payload.get("workers"), mesh)
+        lab = _lab(_with_effects(payload["spec"], effects), mesh)
         obs = lab(int(payload["seed"]))
+        rec.update(meshes(lab))
         if effects:
             s = base.signature(lab)
             rec["signature"] = {"raw": s["raw"], "projected": s["projected"],
@@ -506,7 +542,7 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
             rec["true_cells"] = s["cells"]
         td = time.perf_counter()
         rep = _diagnose(base.lab.model_spec, obs, base.free, payload.get("workers"),
-                        payload.get("diagnose", {}))
+                        payload.get("diagnose", {}), mesh)
         rec["diagnose_s"] = time.perf_counter() - td
         rec["report"] = _slim(rep)
         if effects:

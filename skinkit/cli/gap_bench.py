@@ -49,16 +49,22 @@ def _names(text: str | None, option: str = "--effects") -> list[str] | None:
               "forms of the effects, coloured and spiky noise, artefacts no effect describes) on the lumped "
               "extension model; see 'Outside its own forms' in docs/guide/gap-benchmark.md")
 @click.option("--forms", default=None, metavar="NAME,...", help="with --alternative: only these truth forms")
+@click.option("--shared-mesh", is_flag=True, help="solve each finite-element truth on the model's own mesh "
+              "(the inverse crime, for comparison; by default a truth has a finer mesh of its own and the "
+              "diagnosis carries the model's discretisation error)")
 @page_option
 def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | None, effects: str | None,
               model: str | None, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool,
-              alternative: bool, forms: str | None, page: Path | None) -> None:
+              alternative: bool, forms: str | None, shared_mesh: bool, page: Path | None) -> None:
     """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
     from skinkit.bench.gap_benchmark import run as benchmark_run
     from skinkit.bench.gap_benchmark import summary_lines
     from skinkit.bench.gap_cases import BenchmarkError
 
     if alternative:
+        if shared_mesh:
+            raise BenchmarkError("--shared-mesh: the alternative truths' base response is the model's own "
+                                 "(their forms are put on its force), so there is no other mesh to leave")
         _alternative(quick, scheduler, as_json, seeds, parallel, journal, recorded_only, forms, page,
                      effects=effects, model=model, nulls=nulls)
         return
@@ -68,7 +74,8 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
     with progress(stage="gap benchmark") as bar:
         res = benchmark_run(quick, scheduler=scheduler, seeds=seeds, progress=bar.say,
                             model=model or "quick", effects=_names(effects), nulls=nulls, parallel=parallel,
-                            journal=journal, recorded_only=recorded_only)
+                            journal=journal, recorded_only=recorded_only,
+                            mesh="shared" if shared_mesh else "own")
     lines = summary_lines(res)
     write_page(page, "Withheld-effect benchmark of the gap diagnosis", res, lines)
     if as_json:

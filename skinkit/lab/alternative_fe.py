@@ -181,12 +181,15 @@ FORMS: tuple[Form, ...] = (
 
 #: installed effects for finite-element models with no truth here, and why
 SKIPPED_EFFECTS = {
-    "force-offset": "a constant offset is the simplest case of the drifting-zero forms; no NumPy form of "
-                    "it differs from the plugin's",
+    "force-offset": "a constant offset is the simplest drifting zero; no NumPy form of it differs from the "
+                    "plugin's",
+    "viscoelastic": "the model already relaxes (its QLV term, g1 free); another relaxation form changes the "
+                    "stress inside the tissue and needs a finite-element solve of its own",
+    "robot-compliance": "a series spring changes the displacement the skin sees, so the field: it needs a "
+                        "finite-element solve of its own",
 }
-_GEOMETRY = ("prestress, fibres, thickness, inclusion, fascia, layer slip, support compliance, "
-             "indenter tilt and tracking bias change the field, not the force alone: a form of them "
-             "written apart from the plugins needs a finite-element solve of its own")
+_GEOMETRY = ("it changes the field, not the recorded force alone: a form of it written apart from the "
+             "plugin needs a finite-element solve of its own")
 
 
 def form(name: str) -> Form:
