@@ -63,9 +63,7 @@ def model_spec(preset: str = "lumped") -> dict[str, Any]:
     no effect); for ``"quick"``, the quick finite-element preset with a rest before each protocol
     (:func:`skinkit.lab.alternative_fe.model_spec`)."""
     if _check(preset) == "quick":
-        from skinkit.lab.alternative_fe import model_spec as fe_spec
-
-        return fe_spec()[0]
+        return _fe_spec()[0]
     from skinkit.examples import example_model
     from skinkit.fem.model import read_model
 
@@ -79,10 +77,18 @@ def free(preset: str = "lumped") -> list[str]:
     """The diagnosed model's free parameters (:data:`FREE` for the lumped preset; c, k1, κ, g1
     for the finite-element one)."""
     if _check(preset) == "quick":
-        from skinkit.lab.alternative_fe import model_spec as fe_spec
-
-        return fe_spec()[1]
+        return _fe_spec()[1]
     return list(FREE)
+
+
+def _fe_spec() -> tuple[dict[str, Any], list[str]]:
+    """The quick finite-element preset (:func:`skinkit.bench.gap_cases.quick_spec`) with a rest
+    before every protocol (:func:`skinkit.lab.alternative_fe.with_rest`) and its free parameters."""
+    from skinkit.bench.gap_cases import _plain, quick_spec
+    from skinkit.lab.alternative_fe import with_rest
+
+    spec, names = quick_spec()
+    return with_rest(_plain(spec)), list(names)
 
 
 def _check(preset: str) -> str:
@@ -180,7 +186,7 @@ def session(name: str, seed: int | None, preset: str = "lumped") -> Any:
     from skinkit.schemas import Observations, ProtocolObservations
 
     if _check(preset) != "lumped":
-        return _module(preset).session(name, seed)
+        return _module(preset).session(name, seed, model_spec(preset))
     if seed is None:
         return alt.noiseless(name)
     chans = channels_from_record(alt.record(name, seed), f"alternative truth {name}")
@@ -242,7 +248,8 @@ def run_case(payload: Mapping[str, Any]) -> dict[str, Any]:
     preset = str(payload.get("preset", "lumped"))
     try:
         rec["visible_excess"] = visible_excess(payload["form"], preset)
-        rec["truth_info"] = _module(preset).truth(payload["form"], int(payload["seed"]))["info"]
+        args = () if preset == "lumped" else (model_spec(preset),)
+        rec["truth_info"] = _module(preset).truth(payload["form"], int(payload["seed"]), *args)["info"]
         obs = session(payload["form"], int(payload["seed"]), preset)
         td = time.perf_counter()
         opts = {"error_estimate": False, **dict(payload.get("diagnose", {}))}

@@ -180,29 +180,9 @@ def meshes(lab: Any) -> dict[str, Any]:
 
 
 def _noiseless(lab: Any) -> Any:
-    """The lab's noiseless truth as observations at the declared noise levels, the points'
-    reference as the sessions have it: with a measured reference (the lab's default) the
-    noiseless frame 0 is the reference frame, so that the signature is the one a session shows
-    (whitened along frames, a distortion of the tracker seen in the reference too)."""
-    from skinkit.lab.session import top_surface
-    from skinkit.schemas import Channel, Observations, ProtocolObservations
-
-    sensors = lab.truth.sensors
-    surface = top_surface(lab.spec, lab.kind)
-    ref = surface.track_reference() if (lab.kind == "fe" and surface.has_mesh) else None
-    measured = getattr(lab, "reference", "exact") == "measured"
-    out = {}
-    for p in lab.truth.planned:
-        true = lab.truth.noiseless[p.protocol.name]
-        chans = {c: Channel(c, p.time_s, np.asarray(true[c], float), noise=sensors.sigma(c),
-                            noise_source="virtual lab (declared)") for c in ("tip_position", "tip_force")}
-        if "points" in true and ref is not None:
-            v = np.asarray(true["points"], float)
-            r0, f0 = (v[:, 0].copy(), 0) if measured else (ref.copy(), None)
-            chans["points"] = Channel("points", p.frames, v, noise=sensors.sigma("points"),
-                                      noise_source="tracker", reference=r0, reference_frame=f0)
-        out[p.protocol.name] = ProtocolObservations(p.protocol, chans)
-    return Observations(out, None, "virtual lab, noiseless")
+    """The lab's noiseless truth as observations (:meth:`LabSessions.noiseless
+    <skinkit.inverse.coverage.LabSessions.noiseless>`)."""
+    return lab.noiseless()
 
 
 def _references(obs: Any) -> list[np.ndarray]:

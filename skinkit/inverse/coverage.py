@@ -147,6 +147,26 @@ class LabSessions:
         """Protocol names, in session order."""
         return [p.protocol.name for p in self.truth.planned]
 
+    def noiseless(self) -> Observations:
+        """The noiseless truth as observations at the declared noise levels, the points' reference
+        as the sessions have it: with a measured reference (the default) the noiseless frame 0 is
+        the reference frame, so that an effect's signature is the one a session shows (whitened
+        along frames, a distortion of the tracker seen in the reference too)."""
+        sensors = self.truth.sensors
+        measured = self.reference == "measured"
+        out = {}
+        for p in self.truth.planned:
+            true = self.truth.noiseless[p.protocol.name]
+            chans = {c: Channel(c, p.time_s, np.asarray(true[c], float), noise=sensors.sigma(c),
+                                noise_source="virtual lab (declared)") for c in ("tip_position", "tip_force")}
+            if "points" in true and self._ref is not None:
+                v = np.asarray(true["points"], float)
+                r0, f0 = (v[:, 0].copy(), 0) if measured else (self._ref.copy(), None)
+                chans["points"] = Channel("points", p.frames, v, noise=sensors.sigma("points"),
+                                          noise_source="tracker", reference=r0, reference_frame=f0)
+            out[p.protocol.name] = ProtocolObservations(p.protocol, chans)
+        return Observations(out, None, "virtual lab, noiseless")
+
     def __call__(self, seed: int) -> Observations:
         """The session of ``seed``: noiseless truth plus Gaussian noise at the declared levels."""
         sensors = self.truth.sensors

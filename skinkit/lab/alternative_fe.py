@@ -1,8 +1,8 @@
 """Sessions of the alternative gap benchmark on the finite-element model: truths made apart from
 the effect plugins.
 
-The base response is the quick in vivo model's own (:func:`skinkit.bench.gap_cases.quick_spec`:
-the layered GOH + QLV forearm on its benchmark mesh, displacement-driven, one period of the four
+The base response is the diagnosed model's own (the benchmark's quick finite-element preset: the
+layered GOH + QLV forearm on its benchmark mesh, displacement-driven, one period of the four
 default Table 12 protocols), solved once without any effect on the model's mesh — a
 finite-element response cannot be written in a few lines of NumPy, so what is withheld here is
 the *form* of the effect, not the solver. Each protocol starts with :data:`REST_S` at the zero
@@ -36,7 +36,9 @@ The tracked points carry the tracker's white noise at its declared level (the la
 
 from __future__ import annotations
 
-import functools
+import copy
+import json
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -57,24 +59,29 @@ AXIS_WEIGHTS = np.array([0.6, 0.8, 1.0])
 FAMILIES = ("effect", "null", "out-of-library")
 
 
-def model_spec() -> tuple[dict[str, Any], list[str]]:
-    """The diagnosed model (the quick preset with :data:`REST_S` before every protocol) and its
-    free parameters (c, k1, κ, g1)."""
-    from skinkit.bench.gap_cases import _plain, quick_spec
+def with_rest(spec: Mapping[str, Any]) -> dict[str, Any]:
+    """``spec`` (a finite-element description with a ``[session]``) with :data:`REST_S` before
+    every protocol."""
+    out = copy.deepcopy(dict(spec))
+    session = out.setdefault("session", {})
+    params = session.setdefault("parameters", {})
+    for name in session.get("protocols", []):
+        params.setdefault(name, {})["rest"] = REST_S
+    return out
 
-    spec, free = quick_spec()
-    spec = _plain(spec)
-    for params in spec["session"]["parameters"].values():
-        params["rest"] = REST_S
-    return spec, list(free)
+
+_LABS: dict[str, Any] = {}
 
 
-@functools.lru_cache(maxsize=1)
-def _lab() -> Any:
-    """The base truth, solved once per process on the model's mesh."""
+def _lab(spec: Mapping[str, Any]) -> Any:
+    """The base truth of ``spec``, solved once per process on the model's mesh."""
     from skinkit.inverse.coverage import LabSessions
 
-    return LabSessions(model_spec()[0], mesh="shared")
+    key = json.dumps(spec, sort_keys=True, default=str)
+    if key not in _LABS:
+        _LABS.clear()
+        _LABS[key] = LabSessions(spec, mesh="shared")
+    return _LABS[key]
 
 
 def _clock(lab: Any) -> list[float]:
@@ -210,12 +217,13 @@ def _rng(name: str, seed: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), sum(ord(c) * 31**i for i, c in enumerate(name)) % 2**31, 4244])
 
 
-def truth(name: str, seed: int | None) -> dict[str, Any]:
-    """Form ``name``'s forces per protocol: ``protocols`` (names), ``force`` [(T, 3)] [N] (model
+def truth(name: str, seed: int | None, spec: Mapping[str, Any]) -> dict[str, Any]:
+    """Form ``name``'s forces per protocol on the base response of ``spec`` (the model's description
+    at the truth, :func:`with_rest`): ``protocols`` (names), ``force`` [(T, 3)] [N] (model
     frame; ``seed`` None: noiseless, noise left out and any artefact kept), ``sigma`` (3,) [N],
     ``starts`` [s] on the session clock and what the draw holds (``info``)."""
     f = form(name)
-    lab = _lab()
+    lab = _lab(spec)
     starts = _clock(lab)
     parts = [{"t": p.time_s - p.time_s[0] + s0, "index": k,
               "force": np.asarray(lab.truth.noiseless[p.protocol.name]["tip_force"], float)}
@@ -225,12 +233,12 @@ def truth(name: str, seed: int | None) -> dict[str, Any]:
     return {"protocols": lab.protocols, "force": forces, "sigma": sigma, "starts": starts, "info": info}
 
 
-def record(name: str, seed: int, k: int) -> RobotRecord:
+def record(name: str, seed: int, k: int, spec: Mapping[str, Any]) -> RobotRecord:
     """Protocol ``k`` of form ``name``'s session with noise ``seed`` as a robot record (robot frame,
     z into the skin): the drive with the encoder's noise, the force as :func:`truth` makes it."""
-    lab = _lab()
+    lab = _lab(spec)
     p = lab.truth.planned[k]
-    tr = truth(name, seed)
+    tr = truth(name, seed, spec)
     u = np.asarray(lab.truth.noiseless[p.protocol.name]["tip_position"], float)
     rng = np.random.default_rng([int(seed), k, 7, 4244])
     u = u + lab.truth.sensors.sigma("tip_position") * rng.standard_normal(u.shape)
@@ -239,31 +247,30 @@ def record(name: str, seed: int, k: int) -> RobotRecord:
                        protocol=p.protocol)
 
 
-def session(name: str, seed: int | None) -> Observations:
+def session(name: str, seed: int | None, spec: Mapping[str, Any]) -> Observations:
     """Form ``name``'s session with noise ``seed``, read as a lab's records are
     (:func:`skinkit.forward.observations.channels_from_record`: noise level, colour and spikes
     estimated from each record), with the tracked points of the lab's session ``seed``
     (``seed`` None: the noiseless session at the declared noise levels)."""
     from skinkit.forward.observations import channels_from_record
 
-    lab = _lab()
+    lab = _lab(spec)
     if seed is None:
-        return _noiseless(name, lab)
+        return _noiseless(name, lab, spec)
     pts = lab(int(seed))
     out = {}
     for k, p in enumerate(lab.truth.planned):
-        chans = channels_from_record(record(name, seed, k), f"alternative truth {name}, {p.protocol.name}")
+        where = f"alternative truth {name}, {p.protocol.name}"
+        chans = channels_from_record(record(name, seed, k, spec), where)
         if "points" in pts[p.protocol.name].channels:
             chans["points"] = pts[p.protocol.name].channels["points"]
         out[p.protocol.name] = ProtocolObservations(p.protocol, chans)
     return Observations(out, None, f"alternative finite-element truth {name}, seed {seed}")
 
 
-def _noiseless(name: str, lab: Any) -> Observations:
-    from skinkit.bench.gap_cases import _noiseless as base
-
-    obs = base(lab)
-    tr = truth(name, None)
+def _noiseless(name: str, lab: Any, spec: Mapping[str, Any]) -> Observations:
+    obs = lab.noiseless()
+    tr = truth(name, None, spec)
     out = {}
     for k, p in enumerate(lab.truth.planned):
         chans = dict(obs[p.protocol.name].channels)
@@ -274,5 +281,5 @@ def _noiseless(name: str, lab: Any) -> Observations:
     return Observations(out, None, f"alternative finite-element truth {name}, noiseless")
 
 
-__all__ = ["AXIS_WEIGHTS", "BETWEEN_S", "FORMS", "REST_S", "SKIPPED_EFFECTS", "form", "model_spec", "record",
-           "session", "skipped_reason", "truth"]
+__all__ = ["AXIS_WEIGHTS", "BETWEEN_S", "FORMS", "REST_S", "SKEW", "SKIPPED_EFFECTS", "form", "record",
+           "session", "skipped_reason", "truth", "with_rest"]
