@@ -46,6 +46,10 @@ _MAD = 1.4826
 NOISE_MODELS = ("auto", "white", "ar")
 
 
+#: the noise source of a level estimated from second differences alone (white noise assumed)
+SECOND_DIFFERENCES = "second differences"
+
+
 def _mad(x: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     if x.size == 0:
@@ -76,7 +80,7 @@ def sample_noise(x: np.ndarray) -> tuple[float, str]:
     sd2 = float(np.sqrt(np.mean(d2[keep] ** 2) / 6.0)) if keep.any() else float("nan")
     res = _resolution(xs)
     floor = res / np.sqrt(12.0)
-    est, src = sd2, "second differences"
+    est, src = sd2, SECOND_DIFFERENCES
     if np.isfinite(sd2) and sd2 > 0:
         start = np.median(xs[:min(20, xs.size)])
         away = np.flatnonzero(np.abs(xs - start) > 5 * sd2 + res)
@@ -90,7 +94,7 @@ def sample_noise(x: np.ndarray) -> tuple[float, str]:
             if rest > 0 and sd2 - rest > 3 * rest / np.sqrt(2 * n_rest):
                 est, src = rest, f"rest segment ({n_rest} samples; second differences larger)"
             elif rest > 0:
-                src = f"second differences (rest segment of {n_rest} samples agrees)"
+                src = f"{SECOND_DIFFERENCES} (rest segment of {n_rest} samples agrees)"
     if not (np.isfinite(est) and est > floor):
         if floor > 0:
             est, src = floor, "sensor resolution"

@@ -359,6 +359,7 @@ def colour_warnings(observations: Observations, prediction: Prediction,
     marginal level), so what is reported as a gap may be the sensor's own noise. One warning per
     predicted channel (a drive is not in the residual), naming its protocols."""
     from skinkit.forward.noise_model import samples_needed
+    from skinkit.forward.observations import SECOND_DIFFERENCES
 
     if not significant:
         return []
@@ -367,7 +368,7 @@ def colour_warnings(observations: Observations, prediction: Prediction,
         predicted = prediction.protocols.get(po.protocol.name, {})
         for ch in po.channels.values():
             if ch.name not in predicted or ch.is_points or ch.noise_ar is not None \
-                    or ch.noise_source != "second differences":
+                    or ch.noise_source != SECOND_DIFFERENCES:
                 continue
             where.setdefault(ch.name, []).append(po.protocol.name)
     return [_warn("noise-colour-unknown",

@@ -235,18 +235,19 @@ def noise_dof(ch: Channel) -> tuple[np.ndarray, np.ndarray]:
         return _MAD_EFFICIENCY * n, zero
     if "rest segment" not in src or ch.is_points:
         return _SD2_EFFICIENCY * n, n
+    from skinkit.forward.observations import SECOND_DIFFERENCES, sample_noise
+
     n_est, shared = _SD2_EFFICIENCY * n, n.copy()
     got = re.search(r"rest segment \((\d+) samples", src)
-    if got and "second differences" not in src:
+    if got and SECOND_DIFFERENCES not in src:
         return np.full(k, float(int(got.group(1)) - 3)), zero
-    from skinkit.forward.observations import sample_noise
     for j in range(k):
         s, how = sample_noise(ch.values[:, j])
         match = np.isclose(s, ch.noise[j], rtol=1e-9)
         seg = re.search(r"rest segment \((\d+) samples", how)
         if match and seg and how.startswith("rest segment"):
             n_est[j], shared[j] = int(seg.group(1)) - 3, 0.0
-        elif not (match and how.startswith("second differences")):
+        elif not (match and how.startswith(SECOND_DIFFERENCES)):
             n_est[j], shared[j] = _MIN_REST - 3, 0.0   # cannot tell: the shortest rest segment accepted
     return n_est, shared
 
