@@ -329,6 +329,7 @@ def test_quick_run_through_the_command_line(tmp_path: Path) -> None:
 @pytest.mark.parametrize("args, says", [
     (["--model", "nonsense"], "presets lumped, quick"),
     (["--shared-mesh"], "no other mesh"),
+    (["--model", "quick", "--forms", "cycle-softening"], "forms: warmup-drift"),
     (["--nulls", "3"], "leave out --nulls"),
     (["--forms", "nonsense"], "unknown nonsense"),
 ])
