@@ -530,12 +530,19 @@ def _lagged(e: Entry, time_s: np.ndarray, v: np.ndarray, out: dict[str, np.ndarr
     return val[..., 0].copy()
 
 
+def _source(e: Entry, channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]]
+            ) -> tuple[np.ndarray, Mapping[str, np.ndarray]]:
+    """The values and derivatives of the channel entry ``e`` reads (an error naming the entry when
+    the prediction lacks it)."""
+    if e.source not in channels:
+        raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")
+    return channels[e.source]
+
+
 def _series(e: Entry, channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
             v: np.ndarray, out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
     """Another channel, times the entry's value, added (e.g. crosstalk)."""
-    if e.source not in channels:
-        raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")
-    sv, sd = channels[e.source]
+    sv, sd = _source(e, channels)
     sv = np.nan_to_num(np.asarray(sv, dtype=float))
     v = v + e.value * sv
     for k, a in sd.items():
@@ -564,9 +571,7 @@ def _friction(e: Entry, time_s: np.ndarray,
               channels: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]], v: np.ndarray,
               out: dict[str, np.ndarray], names: Sequence[str]) -> np.ndarray:
     """value · tanh(velocity of the source's component / v_s) added to the same component."""
-    if e.source not in channels:
-        raise ForwardError(f"instrument ({e.parameter})", f"needs the {e.source!r} channel")
-    sv, sd = channels[e.source]
+    sv, sd = _source(e, channels)
     c = e.component
     vel = velocity(time_s, np.asarray(sv, dtype=float)[:, c], e.window)
     b = np.tanh(vel / e.velocity)
