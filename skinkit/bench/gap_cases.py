@@ -218,14 +218,6 @@ class _Base:
 
         self.critical_excess = float(chi2.ppf(1 - ALPHA, self.dof) - self.dof)
         self.reference = self.pred if mesh == "shared" else _as_prediction(self.obs, self.pred)
-        self._floor: float | None = 0.0 if mesh == "shared" else None
-
-    def floor(self, workers: int | None) -> float:
-        """χ² (noise units²) the model leaves fitted to the noiseless truth *without* an effect: 0
-        on a shared mesh, the model's mesh error otherwise (one fit, kept)."""
-        if self._floor is None:
-            self._floor = _oracle(self.lab, self.obs, self.free, [], workers)["chi2"]
-        return self._floor
 
     def _objective(self, obs: Any) -> Any:
         from skinkit.inverse.objective import Objective
@@ -451,9 +443,33 @@ def _fitted_excess(base: _Base, payload: Mapping[str, Any], effect: Mapping[str,
     leaves when fitted, from the truth's values, to the noiseless truth with ``effect``: the
     excess a session would show at most, beyond noise."""
     obs = _noiseless(_lab(_with_effects(payload["spec"], [effect]), base.mesh))
-    # on a truth mesh of its own the model leaves its mesh error even without the effect
-    workers = payload.get("workers")
-    return _oracle(base.lab, obs, base.free, [], workers)["chi2"] - base.floor(workers)
+    if base.mesh == "own":
+        # the model's own response plus the effect's signature (truth less truth): the mesh error,
+        # far larger than the effect, would otherwise decide what a fit absorbs
+        obs = _shifted(obs, base.obs, base.pred)
+    return _oracle(base.lab, obs, base.free, [], payload.get("workers"))["chi2"]
+
+
+def _shifted(obs: Any, ref: Any, pred: Any) -> Any:
+    """``obs`` with every predicted channel's values moved by ``pred − ref`` (a points channel
+    keeps its measured reference frame: its reference moves with it)."""
+    import dataclasses
+
+    from skinkit.schemas import Observations, ProtocolObservations
+
+    out = {}
+    for name, po in obs.protocols.items():
+        chans = dict(po.channels)
+        for c, cp in pred.protocols.get(name, {}).items():
+            ch = chans[c]
+            v = np.asarray(ch.values, float) + (np.asarray(cp.values, float)
+                                                - np.asarray(ref[name].channels[c].values, float))
+            kw = {"values": v}
+            if ch.is_points and ch.reference_frame == 0:
+                kw["reference"] = v[:, 0].copy()
+            chans[c] = dataclasses.replace(ch, **kw)
+        out[name] = ProtocolObservations(po.protocol, chans)
+    return Observations(out, obs.profile, obs.source)
 
 
 # -- one case -----------------------------------------------------------------------------------
