@@ -301,8 +301,12 @@ def summary_lines(res: Mapping[str, Any]) -> list[str]:
     def num(x: Any) -> str:
         return "-" if x is None else f"{100 * x:.1f} %"
 
+    sizes = {(c.get("truth_unknowns"), c.get("model_unknowns")) for c in res["cases"]
+             if c.get("truth_unknowns")}
+    meshes = ([f"truths on {res.get('mesh', 'own')} meshes: "
+               + ", ".join(f"{t:,} unknowns (model {m:,})" for t, m in sorted(sizes))] if sizes else [])
     lines = [f"model {res['model']} ({res['kind']}), {len(res['cases'])} of {res['planned_cases']} planned "
-             f"cases, {res['wall_s'] / 60:.1f} min",
+             f"cases, {res['wall_s'] / 60:.1f} min", *meshes,
              f"top-1 attribution (separable, moderate): {pct(res['top1'])}",
              f"truth in the reported set (not separable, moderate): "
              f"{pct(res['by_magnitude']['moderate']['in_reported_set'])}",
