@@ -4,8 +4,9 @@ The withheld-effect benchmark (:mod:`skinkit.bench.gap_benchmark`) makes its tru
 effect plugins the diagnosis tests, in their own forms, with white Gaussian noise: it shows
 the diagnosis consistent with itself. Here the truths come from :mod:`skinkit.lab.alternative`
 (NumPy forms written apart from the plugins, coloured and spiky noise, artefacts no effect
-describes) on the lumped extension model, and the model without any effect is diagnosed
-(:func:`skinkit.gap.diagnose.diagnose`, the same as ``skinkit gap diagnose``).
+describes) on the lumped extension model, or from :mod:`skinkit.lab.alternative_fe` on the quick
+finite-element model (preset ``"quick"``: forms put on its recorded force), and the model without
+any effect is diagnosed (:func:`skinkit.gap.diagnose.diagnose`, the same as ``skinkit gap diagnose``).
 
 **Reading a report.** The causes are the report's ``named`` list, in naming order (the
 candidates whose ``role`` is ``"cause"`` when ``named`` is absent); an instance label
@@ -61,7 +62,7 @@ def model_spec(preset: str = "lumped") -> dict[str, Any]:
     """The model every truth of ``preset`` is diagnosed with: for ``"lumped"``,
     ``docs/models/extension_relaxation_lumped.toml`` (the exponential element and the force zero,
     no effect); for ``"quick"``, the quick finite-element preset with a rest before each protocol
-    (:func:`skinkit.lab.alternative_fe.model_spec`)."""
+    (:func:`skinkit.lab.alternative_fe.with_rest`)."""
     if _check(preset) == "quick":
         return _fe_spec()[0]
     from skinkit.examples import example_model
