@@ -246,7 +246,7 @@ class _Base:
             cp = pred.protocols[p][c]
             m = cp.mask(ch)
             v = np.array(ch.values, float)
-            sig = np.broadcast_to(ch.noise, v.shape)
+            sig = ch.sigma()
             a = np.zeros(v.shape)
             a[m] = zp[sl]
             # pred' − Y = σ W⁻¹ z': the residual that whitens to the projected signature

@@ -261,12 +261,20 @@ def channel_from_track(track: SurfaceTrack, attrs: dict[str, Any], where: str) -
         raise SchemaError(where, f"cannot estimate the tracking noise ({src})")
     pts = track.points[..., :k]
     valid = np.repeat(track.valid[..., None], k, axis=2)
+    scale = None
+    if track.uncertainty_m is not None:
+        # each position's own standard error over the channel's level: the still-frame floor
+        # rises where the views disagree under deformation
+        u = track.uncertainty_m[..., :k] / noise
+        scale = np.where(valid & np.isfinite(u), np.maximum(u, 1.0), 1.0)
+        src = f"{src} (still floor; each position's standard error from the views' disagreement)"
     ref = np.where(track.valid[:, :1, None], track.points[:, :1, :], np.nan)[:, 0, :]
     ref = np.where(np.isfinite(ref), ref, 0.0)
     t = track.time_s
     window = attrs.get("window_m")
     return Channel("points_2d" if two_d else "points", t, np.where(valid, pts, np.nan), valid, noise, src,
-                   reference=ref, reference_frame=0, window_m=None if window is None else float(window))
+                   reference=ref, reference_frame=0, window_m=None if window is None else float(window),
+                   noise_scale=scale)
 
 
 def _read_experiment(path: Path, held_out: Sequence[str], only: Sequence[str] | None = None,

@@ -160,7 +160,8 @@ def _channel_figures(mean: Mapping[tuple[str, str], np.ndarray], observations: O
         ch = observations[proto].channels[cname]
         sel = ch.fit_mask()
         acc.setdefault(cname, []).append(m[sel])
-        noise[cname] = float(np.sqrt(np.mean(np.square(ch.noise))))
+        noise[cname] = float(np.sqrt(np.mean(np.square(ch.sigma()[sel])))) if sel.any() else \
+            float(np.sqrt(np.mean(np.square(ch.noise))))
     out = {}
     for cname, parts in acc.items():
         d = np.concatenate(parts)

@@ -102,7 +102,7 @@ class Objective:
         if self.weighting == "robot-only" and ch.is_points:
             return np.zeros(ch.values.shape), np.zeros(ch.values.shape, bool)
         w = np.ones(ch.values.shape) if self.weighting == "unweighted" else \
-            np.broadcast_to(1.0 / ch.noise, ch.values.shape).copy()
+            1.0 / ch.sigma()
         if ch.is_points and self.weighting in ("displacement", "threshold", "strain"):
             key = (proto, cname)
             if key not in self._scales:

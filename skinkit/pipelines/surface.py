@@ -10,7 +10,9 @@ rest of skinkit reads it:
 3. per protocol with images, the track of the material points the identification follows —
    a square grid from 1 mm outside the probe's rim out to ``outer_m``, seeded on the measured
    profile — with its noise level ``noise_m`` per axis, measured as a lab measures it: the
-   apparent motion between the two rest frames.
+   apparent motion between the two rest frames; and each position's standard error, which
+   rises above that floor where the cameras' views disagree under deformation
+   (:func:`skinkit.vision.tracking3d.position_uncertainty`).
 
 The skin frame (probe axis at the origin, z out of the skin) is the calibrated frame shifted by
 the first board's origin ``board_origin_m`` (where the lab placed it: centred on the probe).
@@ -137,16 +139,18 @@ def measure_surface(path: str | Path, board_inner: tuple[int, int], square_m: fl
         progress("track surface in 3D", k / max(len(protocols), 1))
         with open_experiment(path) as exp:
             seq = exp.read_images(name)
-        track, reproj = track_3d(cal.rig, seq, ref_cal, trk, subset_px)
+        track, reproj = track_3d(cal.rig, seq, ref_cal, trk, subset_px, noise_floor_m=noise)
         pts = np.where(track.valid[..., None], track.points + origin, np.nan)
-        out = SurfaceTrack(pts, track.valid, seq.time_s)
+        out = SurfaceTrack(pts, track.valid, seq.time_s, uncertainty_m=track.uncertainty_m)
         with open_experiment(path, "a") as exp:
             exp.write_track(name, out)
             exp.set_track_attrs(name, noise_m=[float(v) for v in noise], dimensions=3,
                                 tracker=tracker, subset_px=subset_px, window_m=window)
         tracked[name] = {"points": int(len(ref_cal)), "frames": int(seq.time_s.size),
                          "tracked_fraction": float(track.valid.mean()),
-                         "reprojection_rms_px": float(np.sqrt(np.nanmean(reproj[track.valid] ** 2)))}
+                         "reprojection_rms_px": float(np.sqrt(np.nanmean(reproj[track.valid] ** 2))),
+                         "uncertainty_rms_m": [float(v) for v in np.sqrt(
+                             np.mean(track.uncertainty_m[track.valid] ** 2, axis=0))]}
     progress("track surface in 3D", 1.0)
     return {"reprojection_rms_px": float(cal.rms_px), "profile_points": int(profile.n_points),
             "mean_isu_px": (None if measured.uncertainty_px is None

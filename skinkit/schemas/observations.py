@@ -68,8 +68,10 @@ class Channel:
             [unit] (None: equal to ``noise``).
         outliers: bool, the shape of ``values``: samples flagged as isolated spikes (they are
             also not ``valid``), or None.
-        noise_scale: ``(T, k)`` the AR innovation's standard deviation at each sample over
-            ``noise_innovation`` (≥ 1: a sensor noisier under load than at rest), or None (1).
+        noise_scale: the shape of ``values``: for a tip channel, the AR innovation's standard
+            deviation at each sample over ``noise_innovation`` (≥ 1: a sensor noisier under
+            load than at rest); for a point channel, each position's standard error over
+            ``noise`` (a tracker's error grows with the deformation it reads); None: 1.
     """
 
     name: str
@@ -121,6 +123,11 @@ class Channel:
                 raise SchemaError(f"{f}.window_m", f"must be positive and finite, got {self.window_m!r}")
             self.window_m = w
         self._check_noise_model(f, k)
+        if self.noise_scale is not None:
+            sc = np.asarray(self.noise_scale, dtype=float)
+            if sc.shape != self.values.shape or not np.all(np.isfinite(sc)) or np.any(sc <= 0):
+                raise SchemaError(f"{f}.noise_scale", f"must be positive, finite and {self.values.shape}")
+            self.noise_scale = sc
         if self.reference is not None:
             ref = np.asarray(self.reference, dtype=float)
             if lead == 0 or ref.shape != (v.shape[0], 3):
@@ -144,11 +151,6 @@ class Channel:
         if not np.all(np.isfinite(inn)) or np.any(inn <= 0):
             raise SchemaError(f"{f}.noise_innovation", f"must be positive and finite, got {inn.tolist()}")
         self.noise_innovation = inn
-        if self.noise_scale is not None:
-            sc = np.asarray(self.noise_scale, dtype=float)
-            if sc.shape != self.values.shape or not np.all(np.isfinite(sc)) or np.any(sc <= 0):
-                raise SchemaError(f"{f}.noise_scale", f"must be positive, finite and {self.values.shape}")
-            self.noise_scale = sc
 
     @property
     def unit(self) -> str:
@@ -191,6 +193,24 @@ class Channel:
                 out[:, j] = fn(out[:, j], mask[:, j], ar, ratio, sc)
         return np.where(mask, out, 0.0)
 
+    def sigma(self) -> np.ndarray:
+        """Each entry's noise standard deviation [unit], the shape of ``values``: the
+        component's level, times ``noise_scale`` for a point channel (a tip channel's scale
+        acts on its AR innovation, inside :meth:`whiten`)."""
+        s = np.broadcast_to(self.noise, self.values.shape)
+        if self.is_points and self.noise_scale is not None:
+            return s * self.noise_scale
+        return s
+
+    def _frame_weights(self, mask: np.ndarray) -> np.ndarray:
+        """``(P, T, k)`` v = σ(reference frame) / σ(frame) on ``mask``, 0 elsewhere (see
+        :meth:`whiten`)."""
+        if self.noise_scale is None:
+            return mask.astype(float)
+        sc = self.noise_scale
+        rf = int(self.reference_frame)
+        return np.where(mask, sc[:, rf:rf + 1, :] / sc, 0.0)
+
     def whiten(self, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """Decorrelate noise-normalised residuals (or their derivatives) ``a``.
 
@@ -199,43 +219,42 @@ class Channel:
         For points, along frames:
 
         When the reference positions are the measured frame ``reference_frame``, a point's
-        residuals over its other m frames share that frame's noise: their covariance is
-        σ² (I + 11ᵀ). Multiplying by (I + 11ᵀ)^(-1/2) = I − (1 − 1/√(1+m))/m 11ᵀ makes them
-        independent standard normals again, so Σ r² is χ² with m degrees of freedom per point
-        and component. Linear in ``a`` (Jacobians go through the same map). Other channels
-        are returned unchanged."""
-        if self.coloured:
-            return self._by_component(a, mask, inverse=False)
-        if not self.is_points or self.reference_frame is None:
-            return a
-        a = np.where(mask, a, 0.0)
-        m = mask.sum(axis=1)                                  # (P, k) frames per point/component
-        s = a.sum(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            c = np.where(m > 0, (1 - 1 / np.sqrt(1 + m)) * s / np.maximum(m, 1), 0.0)
-        return np.where(mask, a - c[:, None, :], 0.0)
+        residuals over its other m frames share that frame's noise. Normalised by each frame's
+        own σ (:meth:`sigma`) their covariance is I + vvᵀ, v = σ(reference) / σ(frame) (v = 1
+        when every frame has the same level). Multiplying by
+        (I + vvᵀ)^(-1/2) = I − (1 − 1/√(1+|v|²)) vvᵀ/|v|² makes them independent standard
+        normals again, so Σ r² is χ² with m degrees of freedom per point and component.
+        Linear in ``a`` (Jacobians go through the same map). Other channels are returned
+        unchanged."""
+        return self._frames(a, mask, inverse=False)
 
     def unwhiten(self, a: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """The inverse of :meth:`whiten`: multiply by (I + 11ᵀ)^(1/2) = I + (√(1+m) − 1)/m 11ᵀ
+        """The inverse of :meth:`whiten`: multiply by (I + vvᵀ)^(1/2) = I + (√(1+|v|²) − 1) vvᵀ/|v|²
         along frames (residuals that whiten to ``a``), or colour a tip channel's samples with its
         noise model; other channels unchanged."""
+        return self._frames(a, mask, inverse=True)
+
+    def _frames(self, a: np.ndarray, mask: np.ndarray, inverse: bool) -> np.ndarray:
         if self.coloured:
-            return self._by_component(a, mask, inverse=True)
+            return self._by_component(a, mask, inverse=inverse)
         if not self.is_points or self.reference_frame is None:
             return a
         a = np.where(mask, a, 0.0)
-        m = mask.sum(axis=1)
-        s = a.sum(axis=1)
+        v = self._frame_weights(mask)
+        q = np.sum(v * v, axis=1)                             # (P, k)
+        s = np.sum(v * a, axis=1)
+        root = np.sqrt(1 + q)
         with np.errstate(invalid="ignore", divide="ignore"):
-            c = np.where(m > 0, (np.sqrt(1 + m) - 1) * s / np.maximum(m, 1), 0.0)
-        return np.where(mask, a + c[:, None, :], 0.0)
+            gain = (root - 1) if inverse else -(1 - 1 / root)
+            c = np.where(q > 0, gain * s / np.maximum(q, 1e-300), 0.0)
+        return np.where(mask, a + c[:, None, :] * v, 0.0)
 
     def normalised(self, predicted: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        """``(predicted - values) / noise`` on ``mask`` (default :meth:`fit_mask`), whitened
+        """``(predicted - values) / sigma`` on ``mask`` (default :meth:`fit_mask`), whitened
         along frames (:meth:`whiten`), 0 elsewhere; shape of ``values``."""
         mask = self.fit_mask() if mask is None else mask
         r = np.where(mask, (np.asarray(predicted) - np.where(mask, self.values, 0.0)), 0.0)
-        return self.whiten(r / self.noise, mask)
+        return self.whiten(r / self.sigma(), mask)
 
 
 @dataclass

@@ -51,12 +51,16 @@ class SurfaceTrack:
         valid: ``(P, F)`` bool, True where the point was tracked in that frame.
         time_s: ``(F,)`` frame times [s], non-decreasing.
         point_ids: ``(P,)`` integer ids (index into the profile), or None.
+        uncertainty_m: ``(P, F, 3)`` [m] the producer's standard error of each valid position
+            per axis (positive and finite where ``valid``), or None when the producer gives one
+            level per axis only (the track's ``noise_m`` attribute).
     """
 
     points: Any
     valid: Any
     time_s: Any
     point_ids: Any = None
+    uncertainty_m: Any = None
 
     def __post_init__(self) -> None:
         dims: dict[str, int] = {}
@@ -70,6 +74,12 @@ class SurfaceTrack:
         if self.point_ids is not None:
             self.point_ids = as_array(self.point_ids, "SurfaceTrack.point_ids", ("P",), "count", dims,
                                       dtype=np.int64)
+        if self.uncertainty_m is not None:
+            u = as_array(self.uncertainty_m, "SurfaceTrack.uncertainty_m", ("P", "F", 3), "m", dims)
+            on = u[self.valid]
+            if not np.all(np.isfinite(on) & (on > 0)):
+                raise SchemaError("SurfaceTrack.uncertainty_m", "must be positive and finite where valid")
+            self.uncertainty_m = u
 
     @property
     def n_points(self) -> int:

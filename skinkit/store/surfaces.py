@@ -44,13 +44,16 @@ class SurfaceAccess(ExperimentFile):
             raise self._err(g.name, str(exc)) from None
 
     def write_track(self, name: str, track: SurfaceTrack) -> None:
-        """Store (replace) the surface track ``name``: points (P, F, 3) [m], valid (P, F), times (F,) [s]."""
+        """Store (replace) the surface track ``name``: points (P, F, 3) [m], valid (P, F), times (F,)
+        [s], and the per-position standard errors (P, F, 3) [m] when the track has them."""
         g = self._replace_group(L.TRACKS, name)
         g.create_dataset("points", data=track.points, chunks=True).attrs["unit"] = "m"
         g.create_dataset("valid", data=track.valid)
         g.create_dataset("time_s", data=track.time_s).attrs["unit"] = "s"
         if track.point_ids is not None:
             g.create_dataset("point_ids", data=track.point_ids)
+        if track.uncertainty_m is not None:
+            g.create_dataset("uncertainty", data=track.uncertainty_m, chunks=True).attrs["unit"] = "m"
         self._f.flush()
 
     @reading
@@ -78,7 +81,9 @@ class SurfaceAccess(ExperimentFile):
                 points=self._dataset(g, "points", 3, last=3, unit="m")[()],
                 valid=self._dataset(g, "valid", 2)[()],
                 time_s=self._dataset(g, "time_s", 1, unit="s")[()],
-                point_ids=g["point_ids"][()] if "point_ids" in g else None)
+                point_ids=g["point_ids"][()] if "point_ids" in g else None,
+                uncertainty_m=(self._dataset(g, "uncertainty", 3, last=3, unit="m")[()]
+                               if "uncertainty" in g else None))
         except SchemaError as exc:
             raise self._err(g.name, str(exc)) from None
 

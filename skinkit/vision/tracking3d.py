@@ -38,7 +38,8 @@ def reference_pixels(rig: CameraRig, points: np.ndarray, subset_px: int) -> np.n
 
 def track_3d(rig: CameraRig, images: ImageSequence, points: np.ndarray, tracker: Any,
              subset_px: int = 41, masks: np.ndarray | None = None, max_reprojection_px: float = 1.0,
-             progress: bool | Callable[[int, int], None] = False) -> tuple[SurfaceTrack, np.ndarray]:
+             progress: bool | Callable[[int, int], None] = False,
+             noise_floor_m: np.ndarray | None = None) -> tuple[SurfaceTrack, np.ndarray]:
     """Track ``points`` ``(P, 3)`` [m] (e.g. a surface profile, seen in frame 0) through
     ``images`` and triangulate them in every frame.
 
@@ -48,6 +49,10 @@ def track_3d(rig: CameraRig, images: ImageSequence, points: np.ndarray, tracker:
     ``(F, C, H, W)`` bool, usable pixels (e.g. False over the indenter).
     Returns the :class:`SurfaceTrack` and the ``(P, F)`` reprojection errors [px].
     ``progress``: True shows a bar; a callable is told ``(frames tracked, frames to track)``.
+
+    ``noise_floor_m`` ``(3,)`` [m] (the still-frame noise per axis): when given, the track
+    carries each position's standard error (:func:`position_uncertainty`) — the views'
+    disagreement, which grows with the deformation a subset misreads, never below the floor.
     """
     order = camera_order(rig, images.camera_names)
     sub = CameraRig(tuple(rig.cameras[i] for i in order))
@@ -77,12 +82,42 @@ def track_3d(rig: CameraRig, images: ImageSequence, points: np.ndarray, tracker:
             ok = np.asarray(res.valid, bool)
             cur[seen[ok], f, c] = ref_px[seen[ok], c] + np.asarray(res.displacement_px)[ok]
     X = np.full((P, F, 3), np.nan)
+    sig = np.full((P, F, 3), np.nan)
     err = np.full((P, F), np.nan)
     valid = np.zeros((P, F), bool)
     for f in range(F):
         tri = triangulate(sub, cur[:, f])
         X[:, f] = tri.points
+        sig[:, f] = tri.sigma_m
         err[:, f] = tri.reprojection_px
         valid[:, f] = tri.valid & (tri.reprojection_px <= max_reprojection_px)
     X[~valid] = np.nan
-    return SurfaceTrack(X, valid, images.time_s, np.arange(P)), err
+    unc = None if noise_floor_m is None else position_uncertainty(points, sig, valid, noise_floor_m)
+    return SurfaceTrack(X, valid, images.time_s, np.arange(P), unc), err
+
+
+#: neighbours (the point included) whose triangulation variances are pooled into one
+#: point's: the error field is smooth on the scale of overlapping subsets, and one point's
+#: estimate alone has only 2n − 3 degrees of freedom (5 with four views)
+POOLED_NEIGHBOURS = 9
+
+
+def position_uncertainty(points: np.ndarray, sigma_m: np.ndarray, valid: np.ndarray,
+                         floor_m: np.ndarray) -> np.ndarray:
+    """``(P, F, 3)`` [m] standard error of each tracked position: per frame and axis, the mean
+    triangulation variance ``sigma_m`` ``(P, F, 3)`` [m] over the :data:`POOLED_NEIGHBOURS`
+    nearest of ``points`` ``(P, 3)`` [m] (at rest) that are ``valid`` ``(P, F)``, never below
+    ``floor_m`` ``(3,)`` [m]; NaN where not valid."""
+    from scipy.spatial import cKDTree
+
+    floor = np.broadcast_to(np.asarray(floor_m, float), (3,))
+    P = len(points)
+    k = min(POOLED_NEIGHBOURS, P)
+    _, nb = cKDTree(np.asarray(points, float)).query(points, k)
+    nb = np.asarray(nb).reshape(P, k)
+    var = np.where(valid[..., None] & np.isfinite(sigma_m), np.square(sigma_m), 0.0)
+    have = (valid[..., None] & np.isfinite(sigma_m)).astype(float)
+    n = have[nb].sum(axis=1)                                     # (P, F, 3)
+    pooled = np.where(n > 0, var[nb].sum(axis=1) / np.maximum(n, 1.0), 0.0)
+    out = np.sqrt(np.maximum(pooled, floor**2))
+    return np.where(valid[..., None], out, np.nan)

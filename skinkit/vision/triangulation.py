@@ -14,12 +14,15 @@ from skinkit.vision import camera as cam_ops
 @dataclass
 class Triangulated:
     """``points`` ``(N, 3)`` [m] (NaN where fewer than 2 views); ``reprojection_px`` ``(N,)``
-    RMS reprojection error over the views used [px]; ``n_views`` ``(N,)``; ``valid`` ``(N,)``."""
+    RMS reprojection error over the views used [px]; ``n_views`` ``(N,)``; ``valid`` ``(N,)``;
+    ``sigma_m`` ``(N, 3)`` [m]: each coordinate's standard error from the views' disagreement
+    (see :func:`triangulate`), NaN with fewer than 3 views."""
 
     points: np.ndarray
     reprojection_px: np.ndarray
     n_views: np.ndarray
     valid: np.ndarray
+    sigma_m: np.ndarray | None = None
 
 
 def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Triangulated:
@@ -28,6 +31,12 @@ def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Tria
     Linear (DLT) solution on undistorted normalised coordinates, refined by Gauss-Newton on
     the normalised reprojection error (each view weighted by its focal length, so the cost
     is in pixels).
+
+    ``sigma_m`` is the a-posteriori standard error of least squares (Hartley & Zisserman,
+    *Multiple View Geometry*, 2nd ed., ch. 5): s² (JᵀJ)⁻¹ with s² = Σ r² / (2n − 3) over the
+    n views' 2n pixel residuals, so it grows where the views disagree — e.g. where a subset
+    tracker misreads a steep deformation differently in each camera. It sees no error the
+    views share.
     """
     px = np.asarray(pixels, dtype=float)
     C = len(rig)
@@ -75,6 +84,10 @@ def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Tria
         X[ok] = Xo - step
         if np.max(np.abs(step)) < 1e-12:
             break
+    sigma = np.full((N, 3), np.nan)
+    more = ok & (n_views >= 3)
+    if np.any(more):
+        sigma[more] = _standard_errors(R, t, fs, w[more], xs[more], X[more], n_views[more])
     err = np.full(N, np.nan)
     if np.any(ok):
         sq = np.zeros(N)
@@ -83,4 +96,20 @@ def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Tria
             if np.any(m):
                 sq[m] += np.sum((cam_ops.project(cam, X[m]) - px[m, c]) ** 2, axis=1)
         err[ok] = np.sqrt(sq[ok] / n_views[ok])
-    return Triangulated(X, err, n_views, ok & np.all(np.isfinite(X), axis=1))
+    return Triangulated(X, err, n_views, ok & np.all(np.isfinite(X), axis=1), sigma)
+
+
+def _standard_errors(R: np.ndarray, t: np.ndarray, fs: np.ndarray, w: np.ndarray, xs: np.ndarray,
+                     X: np.ndarray, n_views: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` [m] per-coordinate standard errors of triangulated ``X`` ``(n, 3)``: the
+    residual variance per pixel coordinate times the diagonal of (JᵀJ)⁻¹ [m²/px²]."""
+    Xc = np.einsum("cij,nj->nci", R, X) + t[None]
+    z = Xc[:, :, 2]
+    pred = Xc[:, :, :2] / z[:, :, None]
+    r = (pred - xs) * (w * fs)[:, :, None]
+    J = (R[None, :, :2, :] - pred[:, :, :, None] * R[None, :, 2:3, :]) / z[:, :, None, None]
+    Jf = (J * (w * fs)[:, :, None, None]).reshape(len(X), -1, 3)
+    H = np.einsum("nki,nkj->nij", Jf, Jf)
+    s2 = np.sum(r.reshape(len(X), -1) ** 2, axis=1) / (2 * n_views - 3)
+    diag = np.diagonal(np.linalg.inv(H), axis1=1, axis2=2)
+    return np.sqrt(s2[:, None] * diag)
