@@ -16,7 +16,7 @@ class Triangulated:
     """``points`` ``(N, 3)`` [m] (NaN where fewer than 2 views); ``reprojection_px`` ``(N,)``
     RMS reprojection error over the views used [px]; ``n_views`` ``(N,)``; ``valid`` ``(N,)``;
     ``sigma_m`` ``(N, 3)`` [m]: each coordinate's standard error from the views' disagreement
-    (see :func:`triangulate`), NaN with fewer than 3 views."""
+    (see :func:`triangulate`), NaN with fewer than 2 views."""
 
     points: np.ndarray
     reprojection_px: np.ndarray
@@ -85,7 +85,7 @@ def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Tria
         if np.max(np.abs(step)) < 1e-12:
             break
     sigma = np.full((N, 3), np.nan)
-    more = ok & (n_views >= 3)
+    more = ok & (n_views >= 2)
     if np.any(more):
         sigma[more] = _standard_errors(R, t, fs, w[more], xs[more], X[more], n_views[more])
     err = np.full(N, np.nan)

@@ -246,3 +246,33 @@ def test_unwhiten_inverts_whiten_and_whitening_makes_reference_noise_white():
     exact = Channel("points", np.arange(T, dtype=float), np.zeros((P, T, 3)), noise=1.0,
                     reference=np.zeros((P, 3)))
     assert exact.unwhiten(a, exact.fit_mask()) is a
+
+
+def test_whitening_with_a_standard_error_per_position():
+    """A tracker's error grows with the deformation: frame f of point p has its own σ s_pf,
+    the reference frame its floor σ s_p0. Residuals normalised by :meth:`Channel.sigma` and
+    whitened are independent standard normals (covariance I + vvᵀ, v = s_p0 / s_pf, undone
+    exactly), and unwhiten is still the exact inverse."""
+    rng = np.random.default_rng(5)
+    P, T = 4000, 5
+    scale = np.ones((P, T, 3))
+    scale[:, 1:] = 1.0 + 9.0 * rng.random((P, T - 1, 3))          # 1-10x the floor
+    ref_noise = rng.standard_normal((P, 1, 3))
+    r = scale * rng.standard_normal((P, T, 3)) - ref_noise
+    ch = Channel("points", np.arange(T, dtype=float), np.zeros((P, T, 3)), noise=2e-6,
+                 reference=np.zeros((P, 3)), reference_frame=0, noise_scale=scale)
+    np.testing.assert_allclose(ch.sigma(), 2e-6 * scale)
+    m = ch.fit_mask()
+    w = ch.whiten(r * 2e-6 / ch.sigma(), m)
+    cov = np.cov(w[:, 1:, 1].T)
+    assert np.abs(cov - np.eye(T - 1)).max() < 4 * np.sqrt(2 / P)
+    a = rng.standard_normal((P, T, 3))
+    np.testing.assert_allclose(ch.whiten(ch.unwhiten(a, m), m), np.where(m, a, 0.0), atol=1e-12)
+    flat = Channel("points", np.arange(T, dtype=float), np.zeros((P, T, 3)), noise=2e-6,
+                   reference=np.zeros((P, 3)), reference_frame=0, noise_scale=np.ones((P, T, 3)))
+    same = Channel("points", np.arange(T, dtype=float), np.zeros((P, T, 3)), noise=2e-6,
+                   reference=np.zeros((P, 3)), reference_frame=0)
+    np.testing.assert_allclose(flat.whiten(a, m), same.whiten(a, m), atol=1e-14)
+    with pytest.raises(SchemaError, match="noise_scale"):
+        Channel("points", np.arange(T, dtype=float), np.zeros((P, T, 3)), noise=2e-6,
+                noise_scale=np.zeros((P, T, 3)))
