@@ -35,6 +35,8 @@ from skinkit.errors import SkinkitError
 from skinkit.examples import example_model
 
 CASES = ("gel", "invivo", "twopad", "lumped")
+#: where a finite-element truth is solved: on the model's mesh, or on one of its own
+MESHES = ("shared", "own")
 #: relative spread of each fit's start around the truth (the in vivo fit, at ~8 s per evaluation,
 #: is started closer: 7 evaluations from 20 % off, against about 5 from 10 %)
 SPREAD = {"gel": 0.2, "invivo": 0.1, "twopad": 0.2, "lumped": 0.2}
@@ -109,27 +111,56 @@ SPECS: dict[str, Callable[[], tuple[dict[str, Any], list[str]]]] = {
 
 def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int | None = None,
              first_seed: int = 0,
-             progress: Callable[[int, int, dict[str, Any]], None] | None = None) -> dict[str, Any]:
+             progress: Callable[[int, int, dict[str, Any]], None] | None = None,
+             mesh: str = "shared") -> dict[str, Any]:
     """One case's coverage study (JSON-ready; :func:`skinkit.inverse.coverage.coverage`'s fields
-    plus the case's description, DOF, protocols and the truth run's wall time)."""
+    plus the case's description, DOF, protocols and the truth run's wall time).
+
+    ``mesh``: ``"shared"`` (the truth on the model's mesh) or ``"own"`` (a finite-element truth on
+    a mesh of its own, :mod:`skinkit.lab.truth_mesh`; every fit then carries the model's
+    discretisation error, :func:`model_error`)."""
     from skinkit.forward import load
     from skinkit.inverse.coverage import LabSessions, coverage, perturbed_start
 
     if case not in SPECS:
         raise SkinkitError(f"--case: unknown case {case!r}; choose from {', '.join(CASES)} or all")
+    if mesh not in MESHES:
+        raise SkinkitError(f"--mesh: expected one of {', '.join(MESHES)}, got {mesh!r}")
     spec, free = SPECS[case]()
-    lab = LabSessions(spec, workers=workers, mesh="shared")
+    lab = LabSessions(spec, workers=workers, mesh=mesh)
     model = load(lab.model_spec, workers=workers)
+    carried: dict[str, Any] | None = None
     try:
         st = perturbed_start(model, free, SPREAD[case]) if start == "perturbed" else "truth"
-        res = coverage(model, lab, free, range(first_seed, first_seed + seeds), start=st, progress=progress)
+        sessions: Callable[[int], Any] = lab
+        if mesh == "own" and _dof_of(lab.model_spec):
+            err, carried = model_error(model, lab(first_seed), free)
+            sessions = lambda seed: lab(seed).with_model_error(err)  # noqa: E731
+        res = coverage(model, sessions, free, range(first_seed, first_seed + seeds), start=st,
+                       progress=progress)
     finally:
         model.close()
     res.update({"case": case, "model": spec.get("model", {}).get("name"), "protocols": lab.protocols,
                 "start_kind": start, "start_spread": SPREAD[case] if start == "perturbed" else 0.0,
                 "truth_wall_s": lab.truth_wall_s, "dof": _dof_of(lab.model_spec),
-                "observations": _n_obs(lab(0))})
+                "observations": _n_obs(lab(0)), "mesh": mesh, "truth_mesh": lab.truth.truth.get("mesh"),
+                "model_error": carried})
     return res
+
+
+def model_error(model: Any, observations: Any, free: list[str]) -> tuple[Any, dict[str, Any]]:
+    """The model's discretisation error as a gap diagnosis estimates it
+    (:func:`skinkit.inverse.approximation.refit`: calibrated on ``observations`` from the truth,
+    estimated there, calibrated again; two passes), made once on the first seed's session and
+    carried by every seed's fit: ``(the estimate, its summary)``."""
+    from skinkit.inverse import fit
+    from skinkit.inverse.approximation import refit
+
+    params = model.parameters()
+    start = {n: float(params[n]) for n in free}
+    first = fit(model, observations, free, start=start)
+    result, carried = refit(model, observations, first, free, fit)
+    return carried.model_error, dict(result.extra["model_error"])
 
 
 def _dof_of(spec: dict[str, Any]) -> int | None:
@@ -163,7 +194,8 @@ def _line(res: dict[str, Any]) -> str:
 
 
 def run(case: str = "all", seeds: int = 20, start: str = "perturbed", first_seed: int = 0,
-        workers: int | None = None, say: Callable[[str], None] | None = None) -> dict[str, Any]:
+        workers: int | None = None, say: Callable[[str], None] | None = None,
+        mesh: str = "shared") -> dict[str, Any]:
     """Every case named by ``case`` (one of :data:`CASES` or ``"all"``): ``{"cases": {name:
     run_case(...)}, "wall_s": ...}``; ``say`` receives one progress line per fitted seed."""
     cases = list(CASES) if case == "all" else [case]
@@ -176,8 +208,8 @@ def run(case: str = "all", seeds: int = 20, start: str = "perturbed", first_seed
             k = sum(rec["inside"].values())
             status = "failed" if "error" in rec else f"{k}/{len(rec['inside'])} inside"
             say(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s")
-        out[c] = run_case(c, seeds, start, workers, first_seed, progress)
-    return {"cases": out, "wall_s": time.perf_counter() - t0}
+        out[c] = run_case(c, seeds, start, workers, first_seed, progress, mesh)
+    return {"cases": out, "mesh": mesh, "wall_s": time.perf_counter() - t0}
 
 
 def summary_lines(res: dict[str, Any]) -> list[str]:
@@ -187,4 +219,14 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
     out += [_line(res["cases"][c]) for c in cases]
     out.append(f"expected: the central 95 % of the inside count if the intervals were exact (binomial); "
                f"{res['cases'][cases[0]]['note']}")
+    if res.get("mesh") == "own":
+        out.append("truths on meshes of their own; each fit carries the model's discretisation error, "
+                   "estimated once on the first seed's session")
+        for c in cases:
+            tm, me = res["cases"][c].get("truth_mesh") or {}, res["cases"][c].get("model_error") or {}
+            if tm:
+                ratio = me.get("largest_over_noise")
+                out.append(f"  {c}: truth {tm.get('truth_unknowns', 0):,} unknowns, model "
+                           f"{tm.get('model_unknowns', 0):,}; model error "
+                           f"{'-' if ratio is None else f'{ratio:.3g}'} noise levels at most")
     return out

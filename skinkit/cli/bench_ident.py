@@ -77,16 +77,19 @@ def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool
 @click.option("--first-seed", type=click.IntRange(0), default=0, show_default=True,
               help="seeds are first-seed, first-seed + 1, ...")
 @click.option("--workers", type=click.IntRange(1), default=None, help="worker processes per FE prediction")
+@click.option("--mesh", type=click.Choice(["shared", "own"]), default="shared", show_default=True,
+              help="finite-element truths on the model's mesh, or on meshes of their own (every fit then "
+                   "carries the model's discretisation error)")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 @page_option
-def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None,
+def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None, mesh: str,
                    as_json: bool, page: Path | None) -> None:
     """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
     from skinkit.bench import coverage
 
     # progress goes to stderr, also with --json
     with progress(stage="bench coverage") as bar:
-        res = coverage.run(case, seeds, start, first_seed, workers, say=bar.say)
+        res = coverage.run(case, seeds, start, first_seed, workers, say=bar.say, mesh=mesh)
     lines = coverage.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Coverage of the reported 95 % intervals", res, lines)
