@@ -146,3 +146,11 @@ def test_fe_harness_reduced(case):
             assert abs(rec["z"][n]) < 5                    # |z| > 5 has probability 6e-7 per pair
         # >= 10^4 residuals: chi2/dof has sd <= 0.014 under the noise model
         assert abs(rec["chi2_per_dof"] - 1) < 0.07
+
+
+def test_coverage_bench_refuses_an_unknown_mesh_mode():
+    from skinkit.bench.coverage import run_case
+    from skinkit.errors import SkinkitError
+
+    with pytest.raises(SkinkitError, match="--mesh: expected one of shared, own"):
+        run_case("lumped", 1, mesh="fine")
