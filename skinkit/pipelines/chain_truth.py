@@ -36,13 +36,21 @@ def _profile_error(out: Path, curved: bool) -> float:
     return float(np.sqrt(np.mean((p[:, 2] - z) ** 2)))
 
 
+def _truth_motion(field: Any, key: str, ref: np.ndarray, window_m: float | None, f: int) -> np.ndarray:
+    """``(n, 3)`` [m] the truth's displacement of frame ``f`` from its first frame at ``ref``
+    ``(n, 3)`` [m], averaged over a subset's footprint ``window_m`` [m] (None: at the point)."""
+    from skinkit.forward.fe import window_offsets, window_weights
+    from skinkit.lab.imaging import displacement_field
+
+    off, wq = (window_offsets(window_m), window_weights()) if window_m else (np.zeros((1, 3)), np.ones(1))
+    u = displacement_field(field["grid_m"], field["points_m"], field[key][:, f] - field[key][:, 0])
+    return sum(wq[q] * u(ref[:, 0] + off[q, 0], ref[:, 1] + off[q, 1]) for q in range(len(wq)))
+
+
 def tracked_against_truth(out: Path, windowed: bool) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per track of ``out``'s session: every valid tracked displacement ``(n, 3)`` [m] from the
     protocol's start (its rest state) and the truth's ``(n, 3)`` [m] at the tracked point or
     (``windowed``) averaged over the subset's footprint, as the forward model predicts it."""
-    from skinkit.forward.fe import window_offsets, window_weights
-    from skinkit.lab.imaging import displacement_field
-
     field = _truth_field(out)
     pairs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     with open_experiment(out / SESSION) as exp:
@@ -52,18 +60,40 @@ def tracked_against_truth(out: Path, windowed: bool) -> dict[str, tuple[np.ndarr
                 continue
             tr = exp.read_track(name)
             w = exp.track_attrs(name).get("window_m") if windowed else None
-            off, wq = (window_offsets(w), window_weights()) if w else (np.zeros((1, 3)), np.ones(1))
             ref = tr.points[:, 0]
             meas, true = [], []
             for f in range(1, tr.time_s.size):
-                moved = field[key][:, f] - field[key][:, 0]
-                u = displacement_field(field["grid_m"], field["points_m"], moved)
-                pred = sum(wq[q] * u(ref[:, 0] + off[q, 0], ref[:, 1] + off[q, 1]) for q in range(len(wq)))
+                pred = _truth_motion(field, key, ref, w, f)
                 ok = tr.valid[:, f]
                 meas.append(tr.points[ok, f] - ref[ok])
                 true.append(pred[ok])
             pairs[name] = (np.concatenate(meas), np.concatenate(true))
     return pairs
+
+
+def track_error_z(out: Path) -> float | None:
+    """RMS over every valid tracked displacement and axis of its error against the truth's subset
+    mean, over the standard error the track states for it (√(σ₀² + σ_f²): the reference frame's
+    and the frame's); ≈ 1 when the stated errors are honest; None without stated errors."""
+    field = _truth_field(out)
+    zs = []
+    with open_experiment(out / SESSION) as exp:
+        for name in exp.track_names():
+            key = f"followed_{name}"
+            tr = exp.read_track(name)
+            if key not in field.files or tr.uncertainty_m is None:
+                continue
+            w = exp.track_attrs(name).get("window_m")
+            ref, s0 = tr.points[:, 0], tr.uncertainty_m[:, 0]
+            for f in range(1, tr.time_s.size):
+                pred = _truth_motion(field, key, ref, w, f)
+                ok = tr.valid[:, f] & tr.valid[:, 0]
+                sd = np.sqrt(s0[ok] ** 2 + tr.uncertainty_m[ok, f] ** 2)
+                zs.append(((tr.points[ok, f] - ref[ok] - pred[ok]) / sd).ravel())
+    if not zs:
+        return None
+    z = np.concatenate(zs)
+    return float(np.sqrt(np.mean(z**2)))
 
 
 def _track_error(out: Path, windowed: bool) -> float | None:
@@ -107,6 +137,9 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
     for windowed, what in ((False, "point motion"), (True, "subset mean")):
         e = _track_error(out, windowed)
         row("cameras", f"track RMS error vs {what}", None if e is None else um * e, 0.0, "µm", rel=False)
+    z = track_error_z(out)
+    if z is not None:   # the tracks' stated standard errors against their errors (≈ 1: honest)
+        row("cameras", "track error over its standard error (RMS)", z, 1.0, "1", rel=False)
     mesh = truth.get("mesh") or {}
     if mesh:   # the truth's mesh is its own: the model's discretisation error is in the data
         row("acquire", f"truth mesh ({mesh['mode']}) unknowns", mesh["truth_unknowns"], None)
