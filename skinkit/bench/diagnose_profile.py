@@ -11,7 +11,7 @@ default) or on the model's (``mesh="shared"``):
 
 The diagnosis runs as ``skinkit gap diagnose`` runs it (one effect named at most, two candidates
 refitted) inside a :func:`skinkit.forward.stages.recording`: per stage (calibration, model error,
-score sensitivities, discretisation check, each refit, separation, how far, reporting) its own
+score sensitivities, discretisation check, each refit, separation, how far, final model, reporting) its own
 seconds and forward equivalents (whole-session predictions), and how every parameter's
 derivative was computed. One plain prediction of the calibrated model is timed apart, so that
 seconds and forward equivalents can be compared.

@@ -44,15 +44,14 @@ import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.forward.stages import stage
 from skinkit.gap.checks import GapError, check_channels, check_effects
+from skinkit.gap.report_files import write_report
 from skinkit.gap.score import (
     ScoreTest,
     Sensitivities,
@@ -268,6 +267,7 @@ class _Run:
     winners: list[EffectScore] = field(default_factory=list)
     first_scores: tuple[Any, Any] | None = None
     max_iterations: int = 50
+    final: FitResult | None = None   # the final model refitted with its own model error
 
 
 def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
@@ -337,6 +337,11 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
             break
     with stage("how far"):
         far = _how_far(run)
+    if cal["model_error"] is not None and run.additions:
+        from skinkit.gap.final_model import refit_final
+        with stage("final model"):
+            run.final = refit_final(with_effects(spec, run.tables), run.observations, run.current["result"],
+                                    run.theta_r, run.loader, say, run.max_iterations)
     with stage("reporting"):
         return _assemble_report(run, cal, far, t0)
 
@@ -674,7 +679,7 @@ def _verdict(run: _Run, cal: Mapping[str, Any], loc_final: Any) -> dict[str, Any
     """Roles and shares on the candidates, ``remaining``, ``warnings``, ``noise`` and the causes."""
     from skinkit import registry
 
-    final = run.current
+    final = dict(run.current, result=run.final or run.current["result"])
     # an added effect is reported by the record of the round that added it
     won = {w.effect: w for w in run.winners}
     first = {c.effect for c in run.first_candidates}
@@ -711,7 +716,7 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
     """The :class:`GapReport` of a finished diagnosis (``cal``: :func:`_calibrate`'s, ``far``:
     :func:`_how_far`'s; ``t0``: its start, ``time.perf_counter``)."""
     r0, theta, state0, final, loc0 = cal["result"], cal["theta"], run.state0, run.current, run.loc0
-    observations, loc_after = run.observations, far["loc_after"]
+    observations, loc_after, fr = run.observations, far["loc_after"], run.final or final["result"]
     v = _verdict(run, cal, loc_after if loc_after is not None else loc0)
     fit_d = {"parameters": {n: float(r0.parameters[n]) for n in theta}, "chi2_per_dof": r0.chi2_per_dof,
              "n_forward": r0.n_forward, "se": {n: num(r0.se.get(n)) for n in theta}, "aic": r0.aic,
@@ -726,8 +731,9 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
              "chi2": {"before": state0["chi2"], "after": final["chi2"], "dof_before": state0["dof"],
                       "dof_after": final["dof"], "held_out_before": state0["held_chi2"],
                       "held_out_after": final["held_chi2"], "held_out_samples": state0["held_n"]},
-             "final_parameters": {n: float(final["result"].parameters[n]) for n in run.theta_r},
-             "final_se": {n: num(final["result"].se.get(n)) for n in run.theta_r},
+             "final_parameters": {n: float(fr.parameters[n]) for n in run.theta_r},
+             "final_se": {n: num(fr.se.get(n)) for n in run.theta_r},
+             "final_model_error": None if run.final is None else run.final.extra.get("model_error"),
              "effects_model": [dict(t) for t in run.tables], "minor": v["minor"],
              "noise": v["noise"], "remaining": v["remaining"], "warnings": v["warnings"],
              "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0,
@@ -776,25 +782,6 @@ def _mesh_only(disc: Mapping[str, Any] | None, sens: Any, tests: Sequence[ScoreT
     from skinkit.gap.score import score_all
     ok_exact = corrected(score_all(sens, nuisance=disc["e"][:, None]), alpha)
     return [t.effect for t in tests if ok[t.effect] and not ok_exact.get(t.effect, False)]
-
-
-def write_report(report: GapReport, out_dir: str | os.PathLike[str]) -> list[Path]:
-    """``gap.json`` (and ``gap.html`` when :mod:`skinkit.gap.html` is installed) in ``out_dir``."""
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    d = report.to_dict()
-    path = out / "gap.json"
-    tmp = path.with_name(path.name + ".part")
-    tmp.write_text(jsonio.dumps(d, indent=2, allow_nan=False))
-    os.replace(tmp, path)
-    written = [path]
-    try:
-        from skinkit.gap.html import write_html
-    except ImportError:
-        return written
-    written.append(Path(write_html(d, out / "gap.html") or out / "gap.html"))
-    return written
 
 
 __all__ = ["AIC_MARGIN", "GapError", "check_effects", "diagnose", "write_report"]
