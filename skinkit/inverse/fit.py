@@ -261,8 +261,11 @@ def _fit_result(model: Any, observations: Observations, run: _FitRun, x_best: np
     z = final["z"]
     J = final["J"] / sc.dvalue_dscaled(x_best)[None, :]     # back to ∂z/∂p in SI
     res = Residual(z, None, [(p, c, slice(a, b)) for p, c, a, b in final["blocks"]])
+    from skinkit.inverse.overlap import overlap_meat
+
+    meat, overlap = overlap_meat(J, res.blocks, obj.observations) if weighting == "noise" else (None, {})
     ident = analyse(J, z, names, best.free_vector(), sc.dvalue_dscaled(x_best),
-                    noise_weighted=weighting == "noise")
+                    noise_weighted=weighting == "noise", meat=meat)
     n_obs = z.size
     chi2 = float(z @ z)
     a, ac = aic(chi2, n_obs, len(names))
@@ -278,7 +281,7 @@ def _fit_result(model: Any, observations: Observations, run: _FitRun, x_best: np
                     chi2_per_dof=ident["chi2_per_dof"], residual_by_protocol=res.by("protocol"),
                     residual_by_channel=res.by("channel"), held_out=held, n_forward=n_fwd,
                     n_sensitivity=n_sens, wall_s=wall)
-    out.extra.update({"chi2": chi2, "n_observations": n_obs})
+    out.extra.update({"chi2": chi2, "n_observations": n_obs, "overlap": overlap})
     return out
 
 

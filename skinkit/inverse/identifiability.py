@@ -33,14 +33,17 @@ RELATIVE_SE_LIMIT = 0.5
 
 
 def analyse(J: np.ndarray, z: np.ndarray, names: list[str], values: np.ndarray,
-            dvalue_dscaled: np.ndarray, noise_weighted: bool = True) -> dict[str, Any]:
+            dvalue_dscaled: np.ndarray, noise_weighted: bool = True,
+            meat: np.ndarray | None = None) -> dict[str, Any]:
     """Identifiability at an optimum (module docstring).
 
     ``J`` ``(m, n)``: ∂z/∂p [1 per SI unit]; ``z`` ``(m,)``; ``values`` ``(n,)`` the estimate [SI];
     ``dvalue_dscaled`` ``(n,)`` dp/dθ of the fit's scaling. JSON-ready dict with
     ``covariance`` (SI²), ``se``, ``correlation``, the metrics, the weak directions, and
     ``problems`` (pairs that trade off and parameters the data do not determine, in words,
-    each with a suggestion).
+    each with a suggestion). ``meat`` ``(n, n)``: Jᵀ C J when the residuals are correlated
+    (C their correlation, e.g. :func:`skinkit.inverse.overlap.overlap_meat`); the covariance is
+    then the sandwich F⁻¹ (Jᵀ C J) F⁻¹ before the χ²/ν inflation.
     """
     m, n = J.shape
     dof = max(m - n, 1)
@@ -56,6 +59,8 @@ def analyse(J: np.ndarray, z: np.ndarray, names: list[str], values: np.ndarray,
     tol = max(w.max(), 0.0) * 1e-14 * n if n else 0.0
     inv_w = np.where(w > tol, 1.0 / np.where(w > tol, w, 1.0), 0.0)
     cov = ((V * inv_w) @ V.T) * np.outer(D0, D0)
+    if meat is not None:
+        cov = cov @ np.asarray(meat, float) @ cov
     singular = [i for i in range(n) if w[i] <= tol]
     inflation = max(1.0, chi2 / dof) if noise_weighted else chi2 / dof
     cov = cov * inflation
