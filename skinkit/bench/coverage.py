@@ -130,10 +130,11 @@ def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int 
     lab = LabSessions(spec, workers=workers, mesh=mesh)
     model = load(lab.model_spec, workers=workers)
     carried: dict[str, Any] | None = None
+    dof = _dof_of(lab.model_spec)
     try:
         st = perturbed_start(model, free, SPREAD[case]) if start == "perturbed" else "truth"
         sessions: Callable[[int], Any] = lab
-        if mesh == "own" and _dof_of(lab.model_spec):
+        if mesh == "own" and dof:
             err, carried = model_error(model, lab(first_seed), free)
             sessions = lambda seed: lab(seed).with_model_error(err)  # noqa: E731
         res = coverage(model, sessions, free, range(first_seed, first_seed + seeds), start=st,
@@ -142,7 +143,7 @@ def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int 
         model.close()
     res.update({"case": case, "model": spec.get("model", {}).get("name"), "protocols": lab.protocols,
                 "start_kind": start, "start_spread": SPREAD[case] if start == "perturbed" else 0.0,
-                "truth_wall_s": lab.truth_wall_s, "dof": _dof_of(lab.model_spec),
+                "truth_wall_s": lab.truth_wall_s, "dof": dof,
                 "observations": _n_obs(lab(0)), "mesh": mesh, "truth_mesh": lab.truth.truth.get("mesh"),
                 "model_error": carried})
     return res

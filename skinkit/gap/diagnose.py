@@ -269,6 +269,11 @@ class _Run:
     max_iterations: int = 50
     final: FitResult | None = None   # the final model refitted with its own model error
 
+    @property
+    def final_fit(self) -> FitResult:
+        """The final model's fit to report: refitted with its own model error when it was."""
+        return self.final or self.current["result"]
+
 
 def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              observations: Observations | str | os.PathLike[str], *,
@@ -679,7 +684,7 @@ def _verdict(run: _Run, cal: Mapping[str, Any], loc_final: Any) -> dict[str, Any
     """Roles and shares on the candidates, ``remaining``, ``warnings``, ``noise`` and the causes."""
     from skinkit import registry
 
-    final = dict(run.current, result=run.final or run.current["result"])
+    final = dict(run.current, result=run.final_fit)
     # an added effect is reported by the record of the round that added it
     won = {w.effect: w for w in run.winners}
     first = {c.effect for c in run.first_candidates}
@@ -716,7 +721,7 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
     """The :class:`GapReport` of a finished diagnosis (``cal``: :func:`_calibrate`'s, ``far``:
     :func:`_how_far`'s; ``t0``: its start, ``time.perf_counter``)."""
     r0, theta, state0, final, loc0 = cal["result"], cal["theta"], run.state0, run.current, run.loc0
-    observations, loc_after, fr = run.observations, far["loc_after"], run.final or final["result"]
+    observations, loc_after, fr = run.observations, far["loc_after"], run.final_fit
     v = _verdict(run, cal, loc_after if loc_after is not None else loc0)
     fit_d = {"parameters": {n: float(r0.parameters[n]) for n in theta}, "chi2_per_dof": r0.chi2_per_dof,
              "n_forward": r0.n_forward, "se": {n: num(r0.se.get(n)) for n in theta}, "aic": r0.aic,

@@ -69,15 +69,7 @@ def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Tria
         if not np.any(ok):
             break
         Xo = X[ok]
-        Xc = np.einsum("cij,nj->nci", R, Xo) + t[None]  # (n, C, 3)
-        z = Xc[:, :, 2]
-        pred = Xc[:, :, :2] / z[:, :, None]
-        r = (pred - xs[ok]) * (w[ok] * fs)[:, :, None]  # (n, C, 2) in px
-        # d(pred)/dX = (R[:2] - pred R[2]) / z
-        J = (R[None, :, :2, :] - pred[:, :, :, None] * R[None, :, 2:3, :]) / z[:, :, None, None]
-        J = J * (w[ok] * fs)[:, :, None, None]
-        Jf = J.reshape(len(Xo), -1, 3)
-        rf = r.reshape(len(Xo), -1)
+        rf, Jf = _linearised(R, t, fs, w[ok], xs[ok], Xo)
         H = np.einsum("nki,nkj->nij", Jf, Jf)
         g = np.einsum("nki,nk->ni", Jf, rf)
         step = np.linalg.solve(H, g[:, :, None])[:, :, 0]
@@ -85,9 +77,8 @@ def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Tria
         if np.max(np.abs(step)) < 1e-12:
             break
     sigma = np.full((N, 3), np.nan)
-    more = ok & (n_views >= 2)
-    if np.any(more):
-        sigma[more] = _standard_errors(R, t, fs, w[more], xs[more], X[more], n_views[more])
+    if np.any(ok):
+        sigma[ok] = _standard_errors(R, t, fs, w[ok], xs[ok], X[ok], n_views[ok])
     err = np.full(N, np.nan)
     if np.any(ok):
         sq = np.zeros(N)
@@ -99,17 +90,27 @@ def triangulate(rig: CameraRig, pixels: np.ndarray, iterations: int = 5) -> Tria
     return Triangulated(X, err, n_views, ok & np.all(np.isfinite(X), axis=1), sigma)
 
 
+def _linearised(R: np.ndarray, t: np.ndarray, fs: np.ndarray, w: np.ndarray, xs: np.ndarray,
+                X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reprojection residuals ``(n, 2C)`` [px] of points ``X`` ``(n, 3)`` [m] against the
+    normalised views ``xs`` (weight ``w``, focal lengths ``fs``) and their Jacobian ``(n, 2C, 3)``
+    [px/m]."""
+    Xc = np.einsum("cij,nj->nci", R, X) + t[None]  # (n, C, 3)
+    z = Xc[:, :, 2]
+    pred = Xc[:, :, :2] / z[:, :, None]
+    r = (pred - xs) * (w * fs)[:, :, None]  # (n, C, 2) in px
+    # d(pred)/dX = (R[:2] - pred R[2]) / z
+    J = (R[None, :, :2, :] - pred[:, :, :, None] * R[None, :, 2:3, :]) / z[:, :, None, None]
+    J = J * (w * fs)[:, :, None, None]
+    return r.reshape(len(X), -1), J.reshape(len(X), -1, 3)
+
+
 def _standard_errors(R: np.ndarray, t: np.ndarray, fs: np.ndarray, w: np.ndarray, xs: np.ndarray,
                      X: np.ndarray, n_views: np.ndarray) -> np.ndarray:
     """``(n, 3)`` [m] per-coordinate standard errors of triangulated ``X`` ``(n, 3)``: the
     residual variance per pixel coordinate times the diagonal of (JᵀJ)⁻¹ [m²/px²]."""
-    Xc = np.einsum("cij,nj->nci", R, X) + t[None]
-    z = Xc[:, :, 2]
-    pred = Xc[:, :, :2] / z[:, :, None]
-    r = (pred - xs) * (w * fs)[:, :, None]
-    J = (R[None, :, :2, :] - pred[:, :, :, None] * R[None, :, 2:3, :]) / z[:, :, None, None]
-    Jf = (J * (w * fs)[:, :, None, None]).reshape(len(X), -1, 3)
+    rf, Jf = _linearised(R, t, fs, w, xs, X)
     H = np.einsum("nki,nkj->nij", Jf, Jf)
-    s2 = np.sum(r.reshape(len(X), -1) ** 2, axis=1) / (2 * n_views - 3)
+    s2 = np.sum(rf ** 2, axis=1) / (2 * n_views - 3)
     diag = np.diagonal(np.linalg.inv(H), axis1=1, axis2=2)
     return np.sqrt(s2[:, None] * diag)
