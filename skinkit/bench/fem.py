@@ -1,13 +1,26 @@
-"""``skinkit bench fem``: skinkit's Newton iteration against sfepy's on the same problem.
+"""``skinkit bench fem``: skinkit's Newton iteration against its peers' on the same problem.
 
-The same ~10,000-dof block of 27-node hexahedra (7 x 7 x 7 elements), the same
-nearly incompressible neo-Hookean law split as sfepy does it (``dw_tl_he_neohook`` +
-``dw_tl_bulk_penalty``: W = μ/2 (Ī1 - 3) + K/2 (J - 1)²), the same boundary conditions
-(floor fixed, top face moved by a shear and a compression) and the same quadrature degree,
-solved in one load step by both in one process, total Lagrangian, ``approx_order=2``.
-Seconds per Newton iteration = solve wall time / number of tangent factorisations;
-``assembly_s`` is all assembly per iteration (the tangent and the line search's residuals),
-``tangent_assembly_s`` one tangent assembly, ``solve_s`` one factorisation + solve.
+The same block of 27-node hexahedra (n x n x n elements; 7 -> 10,125 dofs), the same nearly
+incompressible neo-Hookean law W = μ/2 (Ī1 - 3) + K/2 (J - 1)² (sfepy's ``dw_tl_he_neohook`` +
+``dw_tl_bulk_penalty``), the same boundary conditions (floor fixed, top face moved by a shear
+and a compression), the same quadrature degree, one load step, total Lagrangian. The peers:
+
+* ``sfepy`` (Python/NumPy assembly, SciPy's direct solver; ``approx_order=2`` on the linear mesh);
+* ``ngsolve`` (C++ assembly of the energy's second derivative, order-2 ``VectorH1`` on the same
+  hexahedra, its own sparse LDLᵀ; :mod:`skinkit.bench.fem_ngsolve`).
+
+Both are in the ``bench`` extra. Every code runs in this process, skinkit first at every size
+and then the peers, so that no peer's libraries are loaded while skinkit is timed. sfepy's
+failure on a larger block (an inverted element: "warp violation") is a Python ``ValueError``
+raised by its C terms, not a process abort, so it is caught and reported beside skinkit's
+figures like any other peer failure.
+
+Seconds per Newton iteration = solve wall time / number of tangent factorisations (the
+tangent predictor's and each Newton iteration's); ``assembly_s`` is all of skinkit's assembly
+per iteration (the tangent and the line search's residuals), ``tangent_assembly_s`` one
+tangent assembly (skinkit's element pass yields the residual with it; sfepy's ``matrix`` and
+NGSolve's ``AssembleLinearization`` are the tangent alone), ``solve_s`` one factorisation +
+solve.
 """
 
 from __future__ import annotations
@@ -15,7 +28,8 @@ from __future__ import annotations
 import contextlib
 import io
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -52,7 +66,7 @@ def run_skinkit(n: int = 7, linear: str = "auto") -> dict:
     wall = time.perf_counter() - t0
     tm = sol.timings
     n_fact = tm.iterations  # factorisations: the tangent predictor's and each Newton iteration's
-    return {"mesh": mesh, "u": sol.u[-1].reshape(-1, 3), "wall": wall, "setup": setup,
+    return {"n": n, "mesh": mesh, "u": sol.u[-1].reshape(-1, 3), "wall": wall, "setup": setup,
             "factorisations": n_fact, "assembly_s": tm.assembly / n_fact, "solve_s": tm.solve / n_fact,
             "tangent_assembly_s": tm.tangent / max(tm.tangent_assemblies, 1),
             "s_per_newton": wall / n_fact, "dof": mesh.n_dof, "linear": solver.linear.name}
@@ -111,57 +125,171 @@ def _run_sfepy(mesh) -> dict:
         else pb.get_variables()["u"]().reshape(-1, 3)
     n_it = max(int(status.nls_status.n_iter if hasattr(status, "nls_status") else status.n_iter), 1)
     stats = getattr(status.nls_status if hasattr(status, "nls_status") else status, "time_stats", {})
+    ts = {k: float(v) for k, v in dict(stats).items()}
+    # each Newton iteration assembles the tangent ("matrix") and factorises it (ScipyDirect)
     return {"u": uv[:nv], "wall": wall, "iterations": n_it, "s_per_newton": wall / n_it,
-            "time_stats": {k: float(v) for k, v in dict(stats).items()}}
+            "time_stats": ts, "factorisations": n_it,
+            "tangent_assembly_s": ts["matrix"] / n_it if "matrix" in ts else None,
+            "solve_s": ts["solve"] / n_it if "solve" in ts else None}
 
 
-#: the extra that installs the peer
+def run_ngsolve(mesh) -> dict:
+    """Solve the same problem with NGSolve (:func:`skinkit.bench.fem_ngsolve.run_ngsolve`)."""
+    from skinkit.bench.fem_ngsolve import run_ngsolve as solve
+
+    return solve(mesh, MU, BULK, TOP_U)
+
+
+#: the extra that installs the peers
 PEER_EXTRA = "bench"
 
 
-def peer_failure(exc: BaseException) -> str:
-    """Why the peer gave no figures, in one line: not installed (naming the extra that installs
-    it) or failed (its own error, e.g. sfepy's "warp violation" of an inverted element)."""
-    if isinstance(exc, ImportError) and (exc.name or "").split(".")[0] == "sfepy":
-        return f"sfepy is not installed (pip install 'skinkit[{PEER_EXTRA}]')"
-    return f"sfepy failed: {type(exc).__name__}: {' '.join(str(exc).split())}"
+@dataclass(frozen=True)
+class Peer:
+    """A code compared with skinkit: ``modules`` whose absence means it is not installed,
+    ``extra`` the skinkit extra that installs it, ``runner`` the name of this module's function
+    that solves a mesh (looked up when the peer runs)."""
+
+    name: str
+    modules: tuple[str, ...]
+    extra: str
+    runner: str
 
 
-def run(n: int = 7, linear: str = "auto", peer: Callable[[Any], dict] | None = None) -> dict:
-    """Both solvers; the JSON-ready summary. ``peer`` solves the mesh (default: :func:`run_sfepy`).
-    A peer that is not installed or fails leaves skinkit's figures, its own set to None and
-    ``peer_error`` saying why."""
-    sk = run_skinkit(n, linear)
-    res = {"dof": sk["dof"], "elements": sk["mesh"].n_elements, "linear_solver": sk["linear"],
+PEERS = {"sfepy": Peer("sfepy", ("sfepy",), PEER_EXTRA, "run_sfepy"),
+         "ngsolve": Peer("ngsolve", ("ngsolve", "netgen"), PEER_EXTRA, "run_ngsolve")}
+#: the figures a peer's entry carries (None where it gave none)
+PEER_KEYS = ("s_per_newton", "tangent_assembly_s", "solve_s", "factorisations", "wall_s",
+             "max_rel_disp_diff", "ratio_s_per_newton", "ratio_tangent_assembly")
+#: keys of a row that are sfepy's in the first form of the JSON (kept for the tools reading it)
+_SFEPY_LEGACY = ("sfepy_s_per_newton", "speedup", "max_rel_disp_diff", "sfepy_iterations",
+                 "sfepy_wall_s", "sfepy_time_stats")
+
+
+def peer_failure(exc: BaseException, name: str = "sfepy") -> str:
+    """Why the peer ``name`` gave no figures, in one line: not installed (naming the extra that
+    installs it) or failed (its own error, e.g. sfepy's "warp violation" of an inverted element)."""
+    peer = PEERS.get(name, Peer(name, (name,), PEER_EXTRA, ""))
+    if isinstance(exc, ImportError) and (exc.name or "").split(".")[0] in peer.modules:
+        return f"{name} is not installed (pip install 'skinkit[{peer.extra}]')"
+    return f"{name} failed: {type(exc).__name__}: {' '.join(str(exc).split())}"
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return None if a is None or not b else a / b
+
+
+def _peer_entry(name: str, sk: dict, runner: Callable[[Any], dict]) -> tuple[dict, dict | None]:
+    """Run one peer on skinkit's mesh: its entry of ``peers`` and its raw output (None when it
+    gave no figures)."""
+    entry: dict[str, Any] = {"status": "ok", "error": None, "extra": PEERS[name].extra if name in PEERS
+                             else PEER_EXTRA, **dict.fromkeys(PEER_KEYS)}
+    try:
+        out = runner(sk["mesh"])
+    except Exception as exc:   # the peer's own failure is a figure of the comparison, not skinkit's
+        missing = isinstance(exc, ImportError) and "not installed" in peer_failure(exc, name)
+        entry.update(status="not installed" if missing else "failed", error=peer_failure(exc, name))
+        return entry, None
+    nv = out["u"].shape[0]
+    # vertices are the first nodes of a MeshHex2 and the first vertices of the peers' meshes
+    du = np.abs(sk["u"][:nv] - out["u"])
+    entry.update({"s_per_newton": out["s_per_newton"], "tangent_assembly_s": out.get("tangent_assembly_s"),
+                  "solve_s": out.get("solve_s"), "factorisations": out.get("factorisations"),
+                  "wall_s": out["wall"], "max_rel_disp_diff": float(du.max() / np.abs(out["u"]).max()),
+                  "ratio_s_per_newton": _ratio(out["s_per_newton"], sk["s_per_newton"]),
+                  "ratio_tangent_assembly": _ratio(out.get("tangent_assembly_s"), sk["tangent_assembly_s"])})
+    entry.update({k: out[k] for k in ("setup_s", "residuals", "inverse", "assembly", "version") if k in out})
+    return entry, out
+
+
+def compare(sk: dict, peers: Sequence[str] = tuple(PEERS),
+            runners: Mapping[str, Callable[[Any], dict]] | None = None) -> dict:
+    """One size's row: skinkit's figures (``sk`` from :func:`run_skinkit`) and each of ``peers``
+    run on the same mesh. ``runners`` replaces a peer's solver (default: this module's
+    ``run_sfepy`` / ``run_ngsolve``). ``peers`` maps each name to its entry (``status``: ok, not
+    installed, failed; ``error``; the figures of :data:`PEER_KEYS`, ratios peer / skinkit); the
+    sfepy keys of the first form of this JSON stay, ``peer_error`` saying why sfepy has none."""
+    res = {"n": sk["n"], "dof": sk["dof"], "elements": sk["mesh"].n_elements, "linear_solver": sk["linear"],
            "skinkit_s_per_newton": sk["s_per_newton"], "assembly_s": sk["assembly_s"],
            "solve_s": sk["solve_s"], "tangent_assembly_s": sk["tangent_assembly_s"],
            "skinkit_factorisations": sk["factorisations"], "skinkit_wall_s": sk["wall"],
-           "peer_error": None, "sfepy_s_per_newton": None, "speedup": None, "max_rel_disp_diff": None,
-           "sfepy_iterations": None, "sfepy_wall_s": None, "sfepy_time_stats": None}
-    try:
-        sf = (peer or run_sfepy)(sk["mesh"])
-    except Exception as exc:   # the peer's own failure is a figure of the comparison, not skinkit's
-        res["peer_error"] = peer_failure(exc)
-        return res
-    nv = sf["u"].shape[0]
-    # vertices are the first nodes of a MeshHex2 in both numberings
-    du = np.abs(sk["u"][:nv] - sf["u"])
-    scale = float(np.abs(sf["u"]).max())
-    res.update({"sfepy_s_per_newton": sf["s_per_newton"], "speedup": sf["s_per_newton"] / sk["s_per_newton"],
-                "max_rel_disp_diff": float(du.max() / scale), "sfepy_iterations": sf["iterations"],
-                "sfepy_wall_s": sf["wall"], "sfepy_time_stats": sf["time_stats"]})
+           "peer_error": "sfepy was not run (--peer)", **dict.fromkeys(_SFEPY_LEGACY), "peers": {}}
+    for name in peers:
+        runner = (runners or {}).get(name) or globals()[PEERS[name].runner]
+        entry, out = _peer_entry(name, sk, runner)
+        res["peers"][name] = entry
+        if name == "sfepy":
+            res["peer_error"] = entry["error"]
+            if out is not None:
+                res.update({"sfepy_s_per_newton": entry["s_per_newton"],
+                            "speedup": entry["ratio_s_per_newton"],
+                            "max_rel_disp_diff": entry["max_rel_disp_diff"],
+                            "sfepy_iterations": out.get("iterations"), "sfepy_wall_s": out["wall"],
+                            "sfepy_time_stats": out.get("time_stats")})
     return res
 
 
+def run(n: int = 7, linear: str = "auto", peers: Sequence[str] = tuple(PEERS),
+        runners: Mapping[str, Callable[[Any], dict]] | None = None) -> dict:
+    """skinkit and ``peers`` on the n x n x n block; the JSON-ready row of :func:`compare`."""
+    return compare(run_skinkit(n, linear), peers, runners)
+
+
+def run_sizes(sizes: Sequence[int], linear: str = "auto", peers: Sequence[str] = tuple(PEERS),
+              runners: Mapping[str, Callable[[Any], dict]] | None = None) -> dict:
+    """Every size in ``sizes``: skinkit at all of them first, then the peers. Returns the first
+    size's row (the keys of a one-size run) with ``sizes``, every size's row in order, and
+    ``threads``, the thread-count variables of the environment it ran in."""
+    import os
+
+    runs = [run_skinkit(n, linear) for n in sizes]
+    rows = [compare(sk, peers, runners) for sk in runs]
+    env = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+    return {**rows[0], "sizes": rows, "threads": {k: os.environ.get(k) for k in env}}
+
+
+def _fmt(x: float | None, spec: str = ".3f") -> str:
+    return "-" if x is None else format(x, spec)
+
+
 def summary_lines(res: dict) -> list[str]:
-    """The figures of :func:`run` as lines of text."""
-    out = [f"{res['dof']} dofs, {res['elements']} 27-node hexahedra, "
-           f"linear solver {res['linear_solver']}",
-           f"skinkit {res['skinkit_s_per_newton']:.3f} s/iteration "
-           f"(assembly {res['assembly_s']:.3f} s of which tangent {res['tangent_assembly_s']:.3f} s, "
-           f"solve {res['solve_s']:.3f} s)"]
-    if res.get("peer_error"):
-        return [*out, f"sfepy   no figures: {res['peer_error']}"]
-    return [*out, f"sfepy   {res['sfepy_s_per_newton']:.3f} s/iteration",
-            f"speedup {res['speedup']:.2f}x; max relative displacement difference "
-            f"{res['max_rel_disp_diff']:.2e}"]
+    """The figures of :func:`run` or :func:`run_sizes` as lines of text, a block per size."""
+    out: list[str] = []
+    for row in res.get("sizes", [res]):
+        out += [f"n = {row.get('n', '?')}: {row['dof']} dofs, {row['elements']} 27-node hexahedra, "
+                f"linear solver {row['linear_solver']}",
+                f"skinkit {row['skinkit_s_per_newton']:.3f} s/iteration "
+                f"(assembly {row['assembly_s']:.3f} s of which tangent {row['tangent_assembly_s']:.3f} s, "
+                f"solve {row['solve_s']:.3f} s), {row['skinkit_factorisations']} factorisations"]
+        for name, p in row.get("peers", {}).items():
+            if p["status"] != "ok":
+                out.append(f"{name:<7} no figures: {p['error']}")
+                continue
+            out.append(f"{name:<7} {p['s_per_newton']:.3f} s/iteration "
+                       f"({_fmt(p['ratio_s_per_newton'], '.2f')}x skinkit's; tangent "
+                       f"{_fmt(p['tangent_assembly_s'])} s, {_fmt(p['ratio_tangent_assembly'], '.2f')}x "
+                       f"skinkit's; solve {_fmt(p['solve_s'])} s), {p['factorisations']} factorisations; "
+                       f"max relative displacement difference {p['max_rel_disp_diff']:.1e}")
+    return out
+
+
+#: the columns of :func:`table_rows`
+COLUMNS = ("n", "dofs", "code", "s/iteration", "x skinkit", "tangent s", "x skinkit (tangent)",
+           "solve s", "factorisations", "max rel. disp. diff.", "note")
+
+
+def table_rows(res: dict) -> list[list[str]]:
+    """The figures as table cells (:data:`COLUMNS`), a row per size and code."""
+    rows = []
+    for row in res.get("sizes", [res]):
+        head = [str(row.get("n", "?")), str(row["dof"])]
+        rows.append([*head, "skinkit", _fmt(row["skinkit_s_per_newton"]), "1",
+                     _fmt(row["tangent_assembly_s"]), "1", _fmt(row["solve_s"]),
+                     str(row["skinkit_factorisations"]), "-",
+                     f"linear solver {row['linear_solver']}"])
+        for name, p in row.get("peers", {}).items():
+            rows.append([*head, name, _fmt(p["s_per_newton"]), _fmt(p["ratio_s_per_newton"], ".2f"),
+                         _fmt(p["tangent_assembly_s"]), _fmt(p["ratio_tangent_assembly"], ".2f"),
+                         _fmt(p["solve_s"]), "-" if p["factorisations"] is None else str(p["factorisations"]),
+                         _fmt(p["max_rel_disp_diff"], ".1e"), p["error"] or p.get("assembly", "")])
+    return rows

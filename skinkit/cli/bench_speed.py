@@ -52,20 +52,47 @@ def bench_sysid(repeat: int, seed: int, threads: int, as_json: bool, page: Path 
     write_page(page, "Wiener identification and IRF against plain least squares", res, lines)
 
 
+def _sizes(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> list[int]:
+    """``--n 7 --n 10`` or ``--n 7,10``: the block sizes, each 1 to 30, in the order given."""
+    out: list[int] = []
+    for item in value:
+        for part in item.split(","):
+            if not part.strip():
+                continue
+            try:
+                n = int(part)
+            except ValueError:
+                raise click.BadParameter(f"{part.strip()!r} is not a whole number") from None
+            if not 1 <= n <= 30:
+                raise click.BadParameter(f"{n} is not in the range 1 to 30")
+            out.append(n)
+    if not out:
+        raise click.BadParameter("give at least one size")
+    return out
+
+
 @click.command("fem")
-@click.option("--n", type=click.IntRange(1, 30), default=7, show_default=True,
-              help="elements per side (7 -> 10,125 dofs)")
+@click.option("--n", "sizes", multiple=True, default=("7",), show_default=True, callback=_sizes,
+              help="elements per side (7 -> 10,125 dofs, 10 -> 27,783); repeat it or give a "
+                   "comma-separated list for several sizes, one row each")
 @click.option("--linear", default="auto", show_default=True, help="linear solver: auto, pardiso, splu")
+@click.option("--peer", "peers", multiple=True, type=click.Choice(["sfepy", "ngsolve"]),
+              help="peers to run beside skinkit (repeatable; default: all)")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 @page_option
-def bench_fem(n: int, linear: str, as_json: bool, page: Path | None) -> None:
-    """Seconds per Newton iteration, skinkit against sfepy, same mesh and law."""
+def bench_fem(sizes: list[int], linear: str, peers: tuple[str, ...], as_json: bool,
+              page: Path | None) -> None:
+    """Seconds per Newton iteration, skinkit against sfepy and NGSolve, same mesh and law.
+
+    Peers that are not installed (pip install 'skinkit[bench]') or that fail are named with
+    the reason beside skinkit's figures. Run with OMP_NUM_THREADS=1 to compare one thread each."""
     from skinkit.bench import fem
 
-    res = fem.run(n, linear)
+    res = fem.run_sizes(sizes, linear, peers or tuple(fem.PEERS))
     lines = fem.summary_lines(res)
     emit(res, as_json, lines)
-    write_page(page, "Seconds per Newton iteration against sfepy", res, lines)
+    write_page(page, "Seconds per Newton iteration against sfepy and NGSolve", res, lines,
+               tables=[(fem.COLUMNS, fem.table_rows(res))])
 
 
 @click.command("robot")
