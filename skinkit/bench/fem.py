@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -213,7 +214,8 @@ def compare(sk: dict, peers: Sequence[str] = tuple(PEERS),
            "skinkit_s_per_newton": sk["s_per_newton"], "assembly_s": sk["assembly_s"],
            "solve_s": sk["solve_s"], "tangent_assembly_s": sk["tangent_assembly_s"],
            "skinkit_factorisations": sk["factorisations"], "skinkit_wall_s": sk["wall"],
-           "peer_error": "sfepy was not run (--peer)", **dict.fromkeys(_SFEPY_LEGACY), "peers": {}}
+           "peer_error": "sfepy was not run (not among the peers asked for)",
+           **dict.fromkeys(_SFEPY_LEGACY), "peers": {}}
     for name in peers:
         runner = (runners or {}).get(name) or globals()[PEERS[name].runner]
         entry, out = _peer_entry(name, sk, runner)
@@ -240,8 +242,6 @@ def run_sizes(sizes: Sequence[int], linear: str = "auto", peers: Sequence[str] =
     """Every size in ``sizes``: skinkit at all of them first, then the peers. Returns the first
     size's row (the keys of a one-size run) with ``sizes``, every size's row in order, and
     ``threads``, the thread-count variables of the environment it ran in."""
-    import os
-
     runs = [run_skinkit(n, linear) for n in sizes]
     rows = [compare(sk, peers, runners) for sk in runs]
     env = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -270,6 +270,9 @@ def summary_lines(res: dict) -> list[str]:
                        f"{_fmt(p['tangent_assembly_s'])} s, {_fmt(p['ratio_tangent_assembly'], '.2f')}x "
                        f"skinkit's; solve {_fmt(p['solve_s'])} s), {p['factorisations']} factorisations; "
                        f"max relative displacement difference {p['max_rel_disp_diff']:.1e}")
+    if res.get("threads"):
+        out.append("threads: " + ", ".join(f"{k}={v or 'unset'}" for k, v in res["threads"].items())
+                   + " (NGSolve: one thread, its task manager off)")
     return out
 
 

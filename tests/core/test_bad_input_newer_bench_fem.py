@@ -50,7 +50,8 @@ def test_a_failing_peer_is_reported_with_skinkits_figures(monkeypatch, tmp_path)
     assert r.exit_code == 0, r.output
     lines = r.stdout.splitlines()
     assert lines[1].startswith("skinkit ") and "s/iteration" in lines[1]
-    assert lines[-1] == "sfepy   no figures: sfepy failed: ValueError: warp violation!"
+    assert lines[2] == "sfepy   no figures: sfepy failed: ValueError: warp violation!"
+    assert lines[-1].startswith("threads: OMP_NUM_THREADS=")
     assert "warp violation" in page.read_text()
     r = CliRunner().invoke(cli, ["bench", "fem", "--n", "1", "--peer", "sfepy", "--json"])
     assert r.exit_code == 0, r.output
