@@ -78,9 +78,11 @@ def _sizes(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -
 @click.option("--linear", default="auto", show_default=True, help="linear solver: auto, pardiso, splu")
 @click.option("--peer", "peers", multiple=True, type=click.Choice(["sfepy", "ngsolve"]),
               help="peers to run beside skinkit (repeatable; default: all)")
+@click.option("--repeat", type=click.IntRange(1, 20), default=1, show_default=True,
+              help="solves per code and size; the fastest per iteration is reported")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 @page_option
-def bench_fem(sizes: list[int], linear: str, peers: tuple[str, ...], as_json: bool,
+def bench_fem(sizes: list[int], linear: str, peers: tuple[str, ...], repeat: int, as_json: bool,
               page: Path | None) -> None:
     """Seconds per Newton iteration, skinkit against sfepy and NGSolve, same mesh and law.
 
@@ -88,7 +90,7 @@ def bench_fem(sizes: list[int], linear: str, peers: tuple[str, ...], as_json: bo
     the reason beside skinkit's figures. Run with OMP_NUM_THREADS=1 to compare one thread each."""
     from skinkit.bench import fem
 
-    res = fem.run_sizes(sizes, linear, peers or tuple(fem.PEERS))
+    res = fem.run_sizes(sizes, linear, peers or tuple(fem.PEERS), repeat=repeat)
     lines = fem.summary_lines(res)
     emit(res, as_json, lines)
     write_page(page, "Seconds per Newton iteration against sfepy and NGSolve", res, lines,

@@ -19,10 +19,16 @@ pytestmark = pytest.mark.needs_plugins
 HAVE_NGSOLVE = importlib.util.find_spec("ngsolve") is not None
 
 
+calls: list[int] = []
+
+
 def _fake_peer(mesh) -> dict:
-    """A peer that answers skinkit's own vertex displacements, a little off, with round figures."""
+    """A peer that answers skinkit's own vertex displacements, a little off, with round figures:
+    0.7 s per iteration on its first run of a mesh, 0.5 s on the second."""
+    calls.append(mesh.n_elements)
     u = fem.run_skinkit(round(mesh.n_elements ** (1 / 3)))["u"][: int(mesh.t.max()) + 1]
-    return {"u": u * (1 + 1e-9), "wall": 2.0, "s_per_newton": 0.5, "factorisations": 4,
+    s_it = 0.7 if calls.count(mesh.n_elements) % 2 else 0.5
+    return {"u": u * (1 + 1e-9), "wall": 4 * s_it, "s_per_newton": s_it, "factorisations": 4,
             "tangent_assembly_s": 0.25, "solve_s": 0.2}
 
 
@@ -31,8 +37,10 @@ def _inverts(mesh) -> dict:
 
 
 def test_several_sizes_give_a_row_each_and_a_failing_peer_does_not_stop_the_others():
+    calls.clear()
     res = fem.run_sizes([1, 2], peers=("sfepy", "ngsolve"),
-                        runners={"sfepy": _inverts, "ngsolve": _fake_peer})
+                        runners={"sfepy": _inverts, "ngsolve": _fake_peer}, repeat=2)
+    assert calls == [1, 1, 8, 8] and res["repeat"] == 2   # each size twice, the fastest kept
     assert [row["n"] for row in res["sizes"]] == [1, 2]
     assert [row["dof"] for row in res["sizes"]] == [81, 375]
     # the first size's figures stay at the top, under the keys a one-size run always had
@@ -44,6 +52,7 @@ def test_several_sizes_give_a_row_each_and_a_failing_peer_does_not_stop_the_othe
         assert row["peer_error"] == sf["error"] and row["sfepy_s_per_newton"] is None
         assert sf["s_per_newton"] is None and sf["ratio_s_per_newton"] is None
         assert ng["status"] == "ok" and ng["error"] is None and ng["factorisations"] == 4
+        assert ng["s_per_newton"] == 0.5 and ng["wall_s"] == 2.0
         assert ng["ratio_s_per_newton"] == pytest.approx(0.5 / row["skinkit_s_per_newton"])
         assert ng["ratio_tangent_assembly"] == pytest.approx(0.25 / row["tangent_assembly_s"])
         assert ng["max_rel_disp_diff"] == pytest.approx(1e-9, rel=1e-3)
@@ -61,20 +70,20 @@ def test_sizes_on_the_command_line_repeated_or_comma_separated(monkeypatch, tmp_
     seen = []
     real = fem.run_sizes
 
-    def run_sizes(sizes, linear, peers):
-        seen.append((list(sizes), tuple(peers)))
-        return real(sizes, linear, peers, runners={"sfepy": _inverts})
+    def run_sizes(sizes, linear, peers, repeat):
+        seen.append((list(sizes), tuple(peers), repeat))
+        return real(sizes, linear, peers, runners={"sfepy": _inverts}, repeat=repeat)
 
     monkeypatch.setattr(fem, "run_sizes", run_sizes)
     page = tmp_path / "fem.md"
-    r = CliRunner().invoke(cli, ["bench", "fem", "--n", "1", "--n", "2,1", "--peer", "sfepy", "--json",
-                                 "--page", str(page)])
+    r = CliRunner().invoke(cli, ["bench", "fem", "--n", "1", "--n", "2,1", "--peer", "sfepy", "--repeat", "2",
+                                 "--json", "--page", str(page)])
     assert r.exit_code == 0, r.output
-    assert seen == [([1, 2, 1], ("sfepy",))]
+    assert seen == [([1, 2, 1], ("sfepy",), 2)]
     res = json.loads(r.stdout)
-    assert [row["n"] for row in res["sizes"]] == [1, 2, 1] and "threads" in res
+    assert [row["n"] for row in res["sizes"]] == [1, 2, 1] and "threads" in res and res["repeat"] == 2
     text = page.read_text()
-    assert "skinkit bench fem --n 1 --n 2,1" in text and text.count("| sfepy |") == 3
+    assert "skinkit bench fem --n 1 --n 2,1 --peer sfepy --repeat 2" in text and text.count("| sfepy |") == 3
     for bad in (["--n", "0"], ["--n", "7,x"], ["--n", ","]):
         r = CliRunner().invoke(cli, ["bench", "fem", *bad])
         assert r.exit_code == 2 and "--n" in r.output
