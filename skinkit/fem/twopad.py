@@ -25,6 +25,9 @@ from skinkit.fem.mesh import FEMesh, _from_linear, _layer_coords, _near, _region
 #: default layers (name, thickness [m], element layers), top down
 DEFAULT_LAYERS: tuple[tuple[str, float, int], ...] = (("skin", 0.0015, 2), ("subdermal", 0.0035, 2))
 
+#: default side of the square pads [m] and distance between their facing edges [m]
+PAD_SIZE, GAP = 0.008, 0.032
+
 _KEYS = {"kind", "size", "pad_size", "gap", "n_pad", "n_gap", "n_outer", "n_side", "grading",
          "pad_grading", "layer_grading"}
 
@@ -57,7 +60,7 @@ def _axis(breaks: Sequence[float], counts: Sequence[int], fines: Sequence[str], 
     return np.concatenate(parts + [[breaks[-1]]])
 
 
-def twopad_mesh(size: Sequence[float] = (0.100, 0.050), pad_size: float = 0.008, gap: float = 0.032,
+def twopad_mesh(size: Sequence[float] = (0.100, 0.050), pad_size: float = PAD_SIZE, gap: float = GAP,
                 layers: Sequence[tuple[str, float, int]] = DEFAULT_LAYERS, n_pad: int = 2, n_gap: int = 6,
                 n_outer: int = 3, n_side: int = 3, grading: float = 1.6, pad_grading: float = 1.0,
                 layer_grading: float = 1.0) -> FEMesh:
@@ -158,8 +161,8 @@ def twopad_from_spec(g: Mapping[str, Any], layers: Sequence[tuple[str, float, in
         v = g.get(key, 1.0)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise ModelError(f"geometry.{key}", f"must be a number at least 1, got {v!r}")
-    return twopad_mesh(size, quantity(g.get("pad_size", 0.008), "m", "geometry.pad_size"),
-                       quantity(g.get("gap", 0.032), "m", "geometry.gap"), layers,
+    return twopad_mesh(size, quantity(g.get("pad_size", PAD_SIZE), "m", "geometry.pad_size"),
+                       quantity(g.get("gap", GAP), "m", "geometry.gap"), layers,
                        _count(g, "n_pad", 2), _count(g, "n_gap", 6), _count(g, "n_outer", 3),
                        _count(g, "n_side", 3), _grading(g, "grading", 1.6), _grading(g, "pad_grading"),
                        _grading(g, "layer_grading"))

@@ -22,6 +22,7 @@ from typing import Any
 from skinkit.errors import ForwardError
 from skinkit.forward.observations import read_observations
 from skinkit.interfaces import ForwardModel
+from skinkit.schemas.regions import RegionProvider
 
 
 def read_description(path_or_spec: str | os.PathLike[str] | Mapping[str, Any]) -> dict[str, Any]:
@@ -83,4 +84,16 @@ def load(path_or_spec: str | os.PathLike[str] | Mapping[str, Any], *, workers: i
     return FEForwardModel(spec, effects, workers=workers, scheduler=scheduler)
 
 
-__all__ = ["ForwardModel", "load", "model_kind", "read_description", "read_observations"]
+def region_partitions(spec: Mapping[str, Any]) -> RegionProvider | None:
+    """The regions of the model's tracked surface that the gap diagnosis tests: a provider
+    ``points (P, 2) [m] -> [RegionPartition, ...]`` (:mod:`skinkit.schemas.regions`) from a
+    finite-element model's geometry (:func:`skinkit.fem.regions.region_partitions`); None for a
+    lumped model, which predicts no surface."""
+    if model_kind(spec) == "lumped":
+        return None
+    from skinkit.fem.regions import region_partitions as fe_regions
+
+    return fe_regions(spec)
+
+
+__all__ = ["ForwardModel", "load", "model_kind", "read_description", "read_observations", "region_partitions"]

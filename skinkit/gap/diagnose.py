@@ -268,6 +268,7 @@ class _Run:
     first_scores: tuple[Any, Any] | None = None
     max_iterations: int = 50
     final: FitResult | None = None   # the final model refitted with its own model error
+    regions: Any = None              # the model geometry's regions of the tracked surface (where.locate)
 
     @property
     def final_fit(self) -> FitResult:
@@ -306,7 +307,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     calibration and carried as noise by every later step (:mod:`skinkit.inverse.approximation`;
     it then replaces ``error_estimate``'s projection).
     """
-    from skinkit.forward import load, model_kind, read_description
+    from skinkit.forward import load, model_kind, read_description, region_partitions
 
     t0 = time.perf_counter()
     say = progress or (lambda _m: None)
@@ -334,7 +335,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
                present=cal["present"], loader=loader, say=say, alpha=alpha, candidates=candidates,
                max_effects=max_effects, error_estimate=error_estimate, state0=state0, current=state0,
                theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1,
-               min_share=float(min_share), max_iterations=int(max_iterations))
+               min_share=float(min_share), max_iterations=int(max_iterations),
+               regions=region_partitions(spec))
     if effects is None:
         _more_of_the_same(run)     # a repeatable effect the model file already has: one more term
     for rnd in range(max(max_effects, 1)):
@@ -415,7 +417,8 @@ def _round(run: _Run, rnd: int) -> bool:
 
     current = run.current
     run.say(f"round {rnd + 1}: locating the residual (χ²/ν {current['chi2'] / current['dof']:.4g})")
-    loc = locate(run.observations, current["prediction"], n_params=current["k"], alpha=run.alpha)
+    loc = locate(run.observations, current["prediction"], n_params=current["k"], alpha=run.alpha,
+                 regions=run.regions)
     if run.loc0 is None:
         run.loc0 = loc
     values = _values(current["result"])
@@ -651,8 +654,8 @@ def _how_far(run: _Run) -> dict[str, Any]:
 
     final, state0, loc0, named = run.current, run.state0, run.loc0, run.named
     cells_before = [(c.axis, c.label) for c in loc0.cells]
-    after = (cell_chi2(run.observations, final["prediction"], cells_before, n_params=final["k"])
-             if named else {})
+    after = (cell_chi2(run.observations, final["prediction"], cells_before, n_params=final["k"],
+                       regions=run.regions) if named else {})
     shrink_cells = []
     for c in loc0.cells:
         a2, d2 = after.get((c.axis, c.label), (c.chi2, c.dof))
@@ -665,8 +668,8 @@ def _how_far(run: _Run) -> dict[str, Any]:
     if state0["held_n"]:
         held_out = _fraction(state0["held_chi2"] - state0["held_n"], final["held_chi2"] - final["held_n"]) \
             if named else 0.0
-    loc_after = (locate(run.observations, final["prediction"], n_params=final["k"], alpha=run.alpha)
-                 if named else None)
+    loc_after = (locate(run.observations, final["prediction"], n_params=final["k"], alpha=run.alpha,
+                        regions=run.regions) if named else None)
     return {"overall": overall, "held_out": held_out, "cells": shrink_cells, "loc_after": loc_after}
 
 

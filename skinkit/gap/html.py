@@ -98,7 +98,8 @@ def _mpl(s: Any) -> str:
 
 def _axis_name(c: Mapping[str, Any]) -> str:
     """The cell's axis, with its partition when the axis has more than one (phase: direction and
-    cycle; region: radius and sector): shares add up to 1 within a partition."""
+    cycle; region: radius, sector and those the model's geometry adds, e.g. twopad): shares add
+    up to 1 within a partition."""
     axis, part = str(c.get("axis", "?")), c.get("partition")
     return f"{axis} ({part})" if part and str(part) != axis else axis
 

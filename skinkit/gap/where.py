@@ -7,8 +7,9 @@ so Σz² over every cell of one partition is the fit's χ². It is split along f
 * ``protocol``; ``channel`` (``tip_force``, ``tip_position``, ``surface x|y|z``);
 * ``phase``: loading / unloading / hold of the protocol's drive (partition ``direction``) and
   first cycle / later cycles (partition ``cycle``);
-* ``region``: radial bands (``radius``) and angular sectors (``sector``) of the tracked points'
-  reference positions around ``centre``, and a per-point map;
+* ``region``: the partitions of the tracked points' reference positions that the model's
+  geometry supplies (:mod:`skinkit.schemas.regions`; by default radial bands ``radius`` and
+  angular sectors ``sector`` around ``centre``), and a per-point map;
 * ``frequency``: bands of each residual series' spectrum relative to the band holding 95 % of
   the drive's power (Parseval: the bands partition the χ² of every series).
 
@@ -24,6 +25,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -37,6 +39,7 @@ from skinkit.gap.lines import ALPHA_SHARE, Line, search
 from skinkit.inverse.objective import WEIGHTINGS, Objective
 from skinkit.schemas import Channel, Observations, Prediction
 from skinkit.schemas.observations import CHANNELS
+from skinkit.schemas.regions import RegionPartition, RegionProvider, polar_partitions
 
 AXES = ("protocol", "channel", "phase", "region", "frequency")
 PHASES = ("loading", "unloading", "hold")
@@ -58,9 +61,10 @@ class Cell:
     """One cell of one axis: its χ² against the noise and its share of the axis's excess.
 
     ``partition`` names the partition of the axis the cell belongs to (``phase`` has
-    ``direction`` and ``cycle``, ``region`` has ``radius`` and ``sector``; the others one, named
-    after the axis): shares sum to 1 within a partition. ``noise_dof`` is the effective number
-    of samples behind the noise level of the cell's samples (inf: the noise was known).
+    ``direction`` and ``cycle``; ``region`` has ``radius`` and ``sector``, and those the model's
+    geometry adds, e.g. ``twopad``; the others one, named after the axis): shares sum to 1 within
+    a partition. ``noise_dof`` is the effective number of samples behind the noise level of the
+    cell's samples (inf: the noise was known).
     """
 
     axis: str
@@ -355,7 +359,7 @@ class _Partition:
 class _Table:
     """Every sample of every :class:`Samples`, flattened, with one code array per partition."""
 
-    def __init__(self, ss: list[Samples], centre: Sequence[float], radial_bands: int, sectors: int) -> None:
+    def __init__(self, ss: list[Samples], regions: RegionProvider) -> None:
         self.ss = ss
         k = [s.full.shape[-1] for s in ss]
         self.offset = np.concatenate([[0], np.cumsum(k)]).astype(int)
@@ -365,8 +369,7 @@ class _Table:
         self.z2 = np.concatenate([s.z ** 2 for s in ss])
         self.g = np.concatenate([self.offset[i] + s.component for i, s in enumerate(ss)])
         self.N = self.z2.size
-        self.centre = np.asarray(centre, dtype=float)[:2]
-        self.radial_bands, self.sectors = radial_bands, sectors
+        self.regions = regions
 
     def _tally(self, axis: str, name: str, code: np.ndarray, labels: list[str]) -> _Partition:
         L, G = len(labels), self.G
@@ -395,29 +398,37 @@ class _Table:
         return out
 
     def _regions(self) -> list[_Partition]:
-        ref = np.concatenate([s.reference for s in self.ss])[:, :2] - self.centre
-        r = np.hypot(ref[:, 0], ref[:, 1])
-        onpts = np.isfinite(r)
-        if not onpts.any():
+        """The ``region`` partitions of the provider, on every tracked point's reference position."""
+        pts = [s for s in self.ss if s.is_points]
+        if not pts:
             return []
-        # bands of equal width between the nearest and farthest point, edges on 0.1 mm (readable
-        # labels; quantile edges would cut through the rings a regular layout puts points on)
-        lo, hi = float(r[onpts].min()), float(r[onpts].max())
-        edges = np.unique(np.round(np.linspace(lo, hi, self.radial_bands + 1), 4))
-        edges[0], edges[-1] = min(edges[0], lo), max(edges[-1], hi)
-        nb = max(edges.size - 1, 1)
-        code = np.full(r.size, -1)
-        code[onpts] = np.clip(np.searchsorted(edges, r[onpts] + 1e-10, side="right") - 1, 0, nb - 1)
-        top = edges.size - 1
-        labels = [f"r {1e3 * edges[i]:.1f}-{1e3 * edges[min(i + 1, top)]:.1f} mm" for i in range(nb)]
-        parts = [self._tally("region", "radius", code, labels)]
-        width = 360.0 / self.sectors
-        # points on a sector's edge (grids put many there) go to the sector above, consistently
-        ang = (np.degrees(np.arctan2(ref[:, 1], ref[:, 0])) + 1e-7) % 360.0
-        sector = np.floor(np.nan_to_num(ang) / width).astype(int) % self.sectors
-        code = np.where(onpts & (r > 1e-9), sector, -1)
-        labels = [f"sector {i * width:g}-{(i + 1) * width:g} deg" for i in range(self.sectors)]
-        parts.append(self._tally("region", "sector", code, labels))
+        # each protocol's points once: the provider labels points, every sample of a point
+        # shares its label
+        refs, where = [], []
+        n = 0
+        for s in pts:
+            _, first, inv = np.unique(s.point, return_index=True, return_inverse=True)
+            refs.append(s.reference[first, :2])
+            where.append(n + inv.ravel())
+            n += first.size
+        points = np.concatenate(refs)
+        parts: list[_Partition] = []
+        owner: dict[str, str] = {}         # cell label -> its partition: cells are keyed by label
+        for rp in self.regions(points):
+            if not isinstance(rp, RegionPartition):
+                raise SchemaError("regions", "a region provider must give RegionPartition records, got "
+                                  f"{type(rp).__name__}")
+            if any(p.name == rp.name for p in parts):
+                raise SchemaError(f"regions.{rp.name}", "two partitions of the region axis have this name")
+            code = rp.codes(points.shape[0])
+            for lab in rp.cells:
+                if lab in owner:
+                    raise SchemaError(f"regions.{rp.name}", f"cell {lab!r} is also a cell of partition "
+                                      f"{owner[lab]!r}: labels must be unique along the region axis")
+                owner[lab] = rp.name
+            it = iter(where)
+            full = np.concatenate([code[next(it)] if s.is_points else np.full(s.z.size, -1) for s in self.ss])
+            parts.append(self._tally("region", rp.name, full, list(rp.cells)))
         return parts
 
     def _frequency(self) -> _Partition:
@@ -681,7 +692,7 @@ def _point_map(ss: list[Samples], n_params: int, N: int) -> dict[str, np.ndarray
 
 def locate(observations: Observations, prediction: Prediction, *, n_params: int = 0, alpha: float = 0.05,
            protocols: Sequence[str] | None = None, centre: Sequence[float] = (0.0, 0.0),
-           radial_bands: int = 4, sectors: int = 12) -> GapLocation:
+           radial_bands: int = 4, sectors: int = 12, regions: RegionProvider | None = None) -> GapLocation:
     """Decompose the noise-normalised residual of ``prediction`` along every axis and test it.
 
     ``n_params``: parameters fitted to these data (each cell's dof loses its share of them);
@@ -689,21 +700,35 @@ def locate(observations: Observations, prediction: Prediction, *, n_params: int 
     ``protocols``: restrict to these (None: every predicted protocol); ``centre`` ``(x, y)`` [m]:
     where radii and angles of tracked points are measured from (skin frame: the probe's contact
     point is the origin); ``radial_bands``, ``sectors``: the region partitions (sectors of
-    360/``sectors`` degrees, counter-clockwise from +x).
+    360/``sectors`` degrees, counter-clockwise from +x). ``regions``: the model's partitions of the
+    tracked surface instead (:class:`skinkit.schemas.regions.RegionProvider`, e.g.
+    :func:`skinkit.forward.region_partitions` of the model description), every one tested as a
+    partition of the ``region`` axis; None: the radial bands and sectors around ``centre``.
     """
     if not (0 < alpha < 1):
         raise SchemaError("alpha", f"must be in (0, 1), got {alpha!r}")
     if n_params < 0:
         raise SchemaError("n_params", f"must be >= 0, got {n_params!r}")
     with single_threaded_blas():     # small products: BLAS threads only spin on a shared machine
-        return _locate(observations, prediction, n_params, alpha, protocols, centre, radial_bands, sectors)
+        return _locate(observations, prediction, n_params, alpha, protocols,
+                       _provider(regions, centre, radial_bands, sectors))
+
+
+def _provider(regions: RegionProvider | None, centre: Sequence[float], radial_bands: int,
+              sectors: int) -> RegionProvider:
+    """``regions``, else the polar partitions around ``centre``."""
+    if regions is not None:
+        if not callable(regions):
+            raise SchemaError("regions", f"must be a region provider (points -> partitions), got "
+                              f"{type(regions).__name__}")
+        return regions
+    return partial(polar_partitions, centre=centre, radial_bands=radial_bands, sectors=sectors)
 
 
 def _locate(observations: Observations, prediction: Prediction, n_params: int, alpha: float,
-            protocols: Sequence[str] | None, centre: Sequence[float], radial_bands: int,
-            sectors: int) -> GapLocation:
+            protocols: Sequence[str] | None, regions: RegionProvider) -> GapLocation:
     ss = samples(observations, prediction, protocols=protocols)
-    table = _Table(ss, centre, radial_bands, sectors)
+    table = _Table(ss, regions)
     if n_params >= table.N:
         raise SchemaError("n_params", f"{n_params} parameters leave no degree of freedom "
                           f"in {table.N} samples")
@@ -742,14 +767,16 @@ def _lines(ss: list[Samples], alpha: float) -> tuple[list[Line], float]:
 def cell_chi2(observations: Observations, prediction: Prediction, cells: Sequence[tuple[str, str]],
               protocols: Sequence[str] | None = None, *, n_params: int = 0,
               centre: Sequence[float] = (0.0, 0.0), radial_bands: int = 4,
-              sectors: int = 12) -> dict[tuple[str, str], tuple[float, float]]:
+              sectors: int = 12, regions: RegionProvider | None = None
+              ) -> dict[tuple[str, str], tuple[float, float]]:
     """``(axis, label) -> (chi2, dof)`` of ``prediction`` over the same cells as :func:`locate`
-    (for "before/after" comparisons); a cell absent here gives ``(0.0, 0.0)``."""
+    with the same region arguments (for "before/after" comparisons); a cell absent here gives
+    ``(0.0, 0.0)``."""
     for a, _ in cells:
         if a not in AXES:
             raise SchemaError("cells", f"unknown axis {a!r} (one of {list(AXES)})")
     ss = samples(observations, prediction, protocols=protocols)
-    table = _Table(ss, centre, radial_bands, sectors)
+    table = _Table(ss, _provider(regions, centre, radial_bands, sectors))
     got: dict[tuple[str, str], tuple[float, float]] = {}
     for part in table.partitions():
         n = part.nmat.sum(axis=1)
