@@ -101,6 +101,11 @@ class Field:
         """φ ``(n_el, n_q)`` at quadrature points ``Xq`` ``(n_el, n_q, 3)`` [m] of depth ``depth``."""
         return np.asarray(self._phi(self.params, Xq, depth, t), dtype=float)
 
+    def complex_value(self, Xq: np.ndarray, depth: np.ndarray, t: float) -> np.ndarray:
+        """φ ``(n_el, n_q)`` at complex ``Xq`` and ``depth`` (for a complex step in position or
+        depth: φ is analytic in both)."""
+        return np.asarray(self._phi(self.params, Xq, depth, t), dtype=complex)
+
     def derivative(self, key: str, Xq: np.ndarray, depth: np.ndarray, t: float) -> np.ndarray:
         """∂φ/∂``key`` ``(n_el, n_q)`` [1 per SI unit of the parameter] (complex step)."""
         if key not in self.params:

@@ -67,6 +67,9 @@ def prestretch(l1: float, l2: float, angle: float = 0.0, l3: float | None = None
     return Q @ np.diag([l1, l2, l3]) @ Q.T
 
 
+#: complex step of :meth:`Problem.scale_shape_derivative` [1]
+_CS = 1e-30
+
 #: elements per chunk of the law-and-tangent evaluation (see ``evaluate``)
 _CHUNK = 48
 
@@ -181,6 +184,21 @@ class Problem:
             if g is not f:
                 d = d * g.value(Xq, dq, self.t)
         return d
+
+    def scale_shape_derivative(self, k: int, Vq: np.ndarray, Vd: np.ndarray) -> np.ndarray | None:
+        """dφ/dp ``(n_el_k, n_q)`` of material ``k`` at the current time when its quadrature points
+        move with velocity ``Vq`` ``(n_el_k, n_q, 3)`` and their depths with ``Vd`` ``(n_el_k, n_q)``
+        [m per unit of p] (a geometry parameter; None: no field), by the complex step (φ is
+        analytic in position and depth, so exact to rounding)."""
+        fs = self.fields_of(k)
+        if not fs:
+            return None
+        Xq, dq = self._field_points[k]
+        phi = None
+        for f in fs:
+            v = f.complex_value(Xq + 1j * _CS * Vq, dq + 1j * _CS * Vd, self.t)
+            phi = v if phi is None else phi * v
+        return np.imag(phi) / _CS
 
     def elastic_response(self, k: int, Ce: np.ndarray, with_tangent: bool, sub: slice | None = None):
         """``(Se, CCe)``: material ``k``'s elastic stress and tangent in its natural configuration

@@ -15,6 +15,11 @@ Parameters differentiated (every one the model has, static or through a viscous 
 * **field parameters** ``"<field>.<key>"``: ∂φ/∂p times the law's elastic stress;
 * **drive parameters** (named by the rigid region's programme, e.g. instrument biases):
   the applied force (force control) or the imposed motion (displacement control) changes;
+* **geometry parameters** (``shapes``: name -> :class:`skinkit.fem.shape.DesignVelocity`, a
+  layer's thickness): the reference nodes move; the shape derivative of the internal force at
+  fixed displacement (:mod:`skinkit.fem.shape`) is the pseudo-load, its stress part carried
+  through viscous histories like a law parameter's, and a distributed support's springs
+  change with the rim's face areas;
 * **the support's compliance** ``"boundary.compliance"`` c [m/Pa] (``[boundary] compliance``):
   for c > 0 the rim's springs A/c give ∂r/∂c = −(A/c²) u on its dofs; at c = 0 (the rim fixed)
   the rim moves as −c f/A to first order, f the support's force on it (the internal force at
@@ -30,6 +35,7 @@ motion (force control) and its reaction force (both controls), every nodal react
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -37,6 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from skinkit.fem import lawkit, viscoelastic
+from skinkit.fem import shape as shape_mod
 from skinkit.fem.assembly import element_tangent, element_tangent_apply, first_elasticity, full_vector
 from skinkit.fem.problem import Problem
 from skinkit.fem.tensors import push_with
@@ -100,14 +107,15 @@ class _Par:
     """One parameter: its name, its kind and, for material parameters, the material."""
 
     name: str
-    kind: str            # "law", "prony", "prestretch", "field", "drive", "compliance"
+    kind: str            # "law", "prony", "prestretch", "field", "drive", "compliance", "shape"
     k: int = -1          # material (law, prony, prestretch)
     local: str = ""      # law parameter name, or prestretch index as str
 
 
 def parameter_list(problem: Problem, drive_names: tuple[str, ...] = (),
-                   compliance: ComplianceSupport | None = None) -> list[_Par]:
-    """Every differentiable parameter of ``problem`` (and of its drive and elastic support)."""
+                   compliance: ComplianceSupport | None = None, shapes: tuple[str, ...] = ()) -> list[_Par]:
+    """Every differentiable parameter of ``problem`` (and of its drive and elastic support), and
+    the geometry parameters ``shapes`` whose design velocities the caller gives."""
     out: list[_Par] = []
     for k, m in enumerate(problem.materials):
         pr = m.prony() is not None
@@ -122,6 +130,7 @@ def parameter_list(problem: Problem, drive_names: tuple[str, ...] = (),
     out.extend(_Par(n, "drive") for n in drive_names)
     if compliance is not None:
         out.append(_Par(compliance.name, "compliance"))
+    out.extend(_Par(n, "shape") for n in shapes)
     return out
 
 
@@ -147,11 +156,13 @@ class HistorySensitivity:
     holding the indenter are differentiated). ``tol``, ``max_iter``: the iterative solve's
     relative error estimate per column and iteration limit (with its final correction the
     error is well below the estimate: on ``skinkit bench fit`` at most 6e-11 of each column
-    against a sparse LU of the assembled tangent).
+    against a sparse LU of the assembled tangent). ``shapes``: geometry parameters, name ->
+    :class:`skinkit.fem.shape.DesignVelocity` (differentiated as the others).
     """
 
     def __init__(self, solver: NewtonSolver, only: list[str] | None = None, method: str = "iterative",
-                 reactions: bool = False, tol: float = 1e-8, max_iter: int = 12) -> None:
+                 reactions: bool = False, tol: float = 1e-8, max_iter: int = 12,
+                 shapes: Mapping[str, shape_mod.DesignVelocity] | None = None) -> None:
         if method not in METHODS:
             from skinkit.fem.errors import ModelError
             raise ModelError("sensitivities", f"method {method!r} is not one of {list(METHODS)}")
@@ -163,7 +174,8 @@ class HistorySensitivity:
         prob = solver.problem
         rigid = solver.dofmap.bc.rigid
         drive = tuple(getattr(rigid, "parameter_names", ())) if rigid is not None else ()
-        pars = parameter_list(prob, drive, solver.dofmap.bc.compliance)
+        shapes = dict(shapes or {})
+        pars = parameter_list(prob, drive, solver.dofmap.bc.compliance, tuple(shapes))
         if only is not None:
             known = {p.name for p in pars}
             unknown = sorted(set(only) - known)
@@ -174,6 +186,10 @@ class HistorySensitivity:
             pars = [p for p in pars if p.name in set(only)]
         self.pars = pars
         self.names = [p.name for p in pars]
+        #: parameter index -> material -> its design velocity at the quadrature points
+        self._shape = {j: [shape_mod.at_quadrature(prob.geom, sl, shapes[p.name]) for sl in prob.slices]
+                       for j, p in enumerate(pars) if p.kind == "shape"}
+        self._shape_springs = {j: shapes[pars[j].name].springs for j in self._shape}
         nq = prob.geom.w.shape[1]
         npar = len(pars)
         self.dSe: dict[int, np.ndarray] = {}
@@ -199,11 +215,16 @@ class HistorySensitivity:
             self._tip_elements = np.flatnonzero(on[g.edofs].any(axis=1))
 
     # -- explicit derivatives at fixed displacement ------------------------------------------
-    def _explicit_dSe(self, k: int, p: _Par, Ce: np.ndarray, C: np.ndarray, Se: np.ndarray,
+    def _explicit_dSe(self, k: int, j: int, Ce: np.ndarray, C: np.ndarray, F: np.ndarray,
                       CCe: np.ndarray | None, law_S: np.ndarray | None) -> np.ndarray | None:
         """∂Sₑ/∂p (natural configuration, scaled by the fields) at fixed displacement."""
         prob = self.solver.problem
         m = prob.materials[k]
+        p = self.pars[j]
+        if p.kind == "shape":
+            ms = self._shape[j][k]
+            dphi = prob.scale_shape_derivative(k, ms.Vq, ms.Vd)
+            return shape_mod.explicit_stress(F, ms.G, CCe, m.F0, dphi, law_S)
         if p.kind == "law" and p.k == k:
             d = lawkit.stress_parameter_derivative(m.law, Ce, m.params, p.local)
             phi = prob.scale(k)
@@ -256,13 +277,14 @@ class HistorySensitivity:
         lin = prob.linearise(u, dt if viscous else None, keep=states)
         lin = [(F, S, first_elasticity(F, S, CC, g.w[sl]), CC)
                for (F, S, CC), sl in zip(lin, prob.slices, strict=True)]
-        dre = self._pseudo_loads(states, dt, viscous)
+        dre = self._pseudo_loads(states, dt, viscous, lin)
         # right-hand sides: explicit material part, plus the drive
         rhs = self._reduce(dre.transpose(1, 2, 0)) if npar else np.zeros((solver.dofmap.n_unknowns, 0))
         dm = solver.dofmap
         rigid = dm.bc.rigid
         dup = self._drive(rhs, t, lin)
         self._support(rhs, u, lin, dup)
+        self._springs_moved(rhs, u)
         dq = -self._solve(rhs, lin, states) if npar else rhs
         mp = dm.map
         du = dup.copy()
@@ -284,15 +306,16 @@ class HistorySensitivity:
                 tip_f = _full(g.edofs[el], fe, prob.n_dof).reshape(-1, 3, npar)[rigid.nodes].sum(axis=0)
         return Sensitivities(list(self.names), du, tip_u, tip_f, react)
 
-    def _pseudo_loads(self, states: dict, dt: float | None, viscous: bool) -> np.ndarray:
-        """``(n_par, n_el, 81)`` element forces ∂rₑ/∂p at fixed displacement [N per unit]."""
+    def _pseudo_loads(self, states: dict, dt: float | None, viscous: bool, lin: list) -> np.ndarray:
+        """``(n_par, n_el, 81)`` element forces ∂rₑ/∂p at fixed displacement [N per unit]
+        (``lin``: :meth:`step`'s per-material ``(F, S, A, CC)`` at the state)."""
         prob, g = self.solver.problem, self.solver.problem.geom
         npar = len(self.pars)
         dre = np.zeros((npar, g.edofs.shape[0], g.edofs.shape[1]))
         for k, m in enumerate(prob.materials):
             sl = prob.slices[k]
             F, C, Ce, Se, CCe = states[k]
-            need_law_S = any(p.kind == "field" for p in self.pars) and prob.fields_of(k)
+            need_law_S = any(p.kind in ("field", "shape") for p in self.pars) and prob.fields_of(k)
             law_S = lawkit.response(m.law, Ce, m.params, False)[0] if need_law_S else None
             pr = m.prony() if viscous else None
             h_new = None
@@ -306,7 +329,7 @@ class HistorySensitivity:
             js, dSs = [], []
             self._explicit[k] = {}
             for j, p in enumerate(self.pars):
-                dSe_p = self._explicit_dSe(k, p, Ce, C, Se, CCe, law_S)
+                dSe_p = self._explicit_dSe(k, j, Ce, C, F, CCe, law_S)
                 if dSe_p is not None:   # the history update reads it again
                     self._explicit[k][j] = dSe_p
                 if p.kind == "prony" and p.k == k and pr is None:
@@ -333,6 +356,11 @@ class HistorySensitivity:
                     dSs.append(dS)
             if js:
                 dre[js, sl] = self._residuals(k, F, np.stack(dSs))
+            if self._shape:   # the rest of the shape derivative: moved gradients and volume
+                jg = list(self._shape)
+                Q = np.stack([shape_mod.geometric_piola(F, lin[k][1], self._shape[j][k].G) for j in jg])
+                with single_threaded_blas():
+                    dre[jg, sl] += shape_mod.element_forces(g, sl, Q)
         return dre
 
     def _residuals(self, k: int, F: np.ndarray, dS: np.ndarray) -> np.ndarray:
@@ -447,6 +475,14 @@ class HistorySensitivity:
         dup[sup.dofs, j] = -f[sup.dofs] / sup.area
         rhs[:, [j]] += self._reduce(self._apply(lin, dup[:, [j]]))
 
+    def _springs_moved(self, rhs: np.ndarray, u: np.ndarray) -> None:
+        """Add the distributed support's part of the geometry parameters to ``rhs`` (in place):
+        ∂(k u)/∂p = (∂k/∂p) u on the springs' dofs."""
+        dm = self.solver.dofmap
+        for j, dk in self._shape_springs.items():
+            if dk is not None and dm.spring_dofs.size:
+                np.add.at(rhs[:, j], dm.map[dm.spring_dofs], dk * u[dm.spring_dofs])
+
     def _update_history(self, u: np.ndarray, du: np.ndarray, dt: float, cache: dict) -> None:
         """Carry the total dSₑ/dp and dh/dp of this step to the next (every parameter at once)."""
         prob, g = self.solver.problem, self.solver.problem.geom
@@ -529,15 +565,15 @@ def _pcg(matvec, precondition, b: np.ndarray, tol: float, max_iter: int):
     return None, it
 
 
-def sensitivities(solver: NewtonSolver, u: np.ndarray, t: float, only: list[str] | None = None
-                  ) -> Sensitivities:
+def sensitivities(solver: NewtonSolver, u: np.ndarray, t: float, only: list[str] | None = None,
+                  shapes: Mapping[str, shape_mod.DesignVelocity] | None = None) -> Sensitivities:
     """Derivatives of the converged static state ``u`` (at load ``t``).
 
     Viscous laws respond elastically in a static solve, so their Prony parameters get zero
     derivatives; through a time history use :class:`HistorySensitivity`. Costs one tangent
     assembly and factorisation at ``u`` plus one back-substitution per parameter.
     """
-    return HistorySensitivity(solver, only, reactions=True).step(u, t, None)
+    return HistorySensitivity(solver, only, reactions=True, shapes=shapes).step(u, t, None)
 
 
 __all__ = ["PRESTRESS_NAMES", "HistorySensitivity", "Sensitivities", "dF0", "parameter_list",

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -313,7 +313,8 @@ class NewtonSolver:
     def run(self, times: Sequence[float], u0: np.ndarray | None = None, viscous_time: bool = False,
             progress: Callable[[float], None] | None = None, sensitivities: bool | Sequence[str] = False,
             extrapolate: bool = True, sensitivity_method: str = "iterative",
-            on_step: Callable[[float, np.ndarray], None] | None = None) -> Solution:
+            on_step: Callable[[float, np.ndarray], None] | None = None,
+            shapes: Mapping[str, Any] | None = None) -> Solution:
         """Solve at each of ``times`` (increasing); cut increments that fail.
 
         ``viscous_time``: ``times`` are seconds and viscous histories advance; otherwise
@@ -329,6 +330,8 @@ class NewtonSolver:
         ``on_step(t, u)``: called at each output time with its converged displacement
         ``(n_dof,)`` [m], while the problem's viscous history is the one at ``u`` (what the
         field output, :mod:`skinkit.fem.vtu`, reads the total stress from).
+        ``shapes``: geometry parameters to differentiate too, name ->
+        :class:`skinkit.fem.shape.DesignVelocity` (named in ``sensitivities`` when that is a list).
 
         Floating-point warnings (overflow, division by zero, invalid values in a law's stress)
         are silenced here: the solver checks every residual and increment itself, cuts the
@@ -336,16 +339,18 @@ class NewtonSolver:
         """
         with np.errstate(all="ignore"):
             return self._run(times, u0, viscous_time, progress, sensitivities, extrapolate,
-                             sensitivity_method, on_step)
+                             sensitivity_method, on_step, shapes)
 
     def _run(self, times: Sequence[float], u0: np.ndarray | None, viscous_time: bool,
              progress: Callable[[float], None] | None, sensitivities: bool | Sequence[str],
              extrapolate: bool, sensitivity_method: str = "iterative",
-             on_step: Callable[[float, np.ndarray], None] | None = None) -> Solution:
+             on_step: Callable[[float, np.ndarray], None] | None = None,
+             shapes: Mapping[str, Any] | None = None) -> Solution:
         from skinkit.fem import sensitivity as sens_mod
         only = None if isinstance(sensitivities, bool) else list(sensitivities)
         want_sens = bool(sensitivities) if isinstance(sensitivities, bool) else True
-        tracker = sens_mod.HistorySensitivity(self, only, sensitivity_method) if want_sens else None
+        tracker = sens_mod.HistorySensitivity(self, only, sensitivity_method, shapes=shapes) \
+            if want_sens else None
         sens_out = []
         times = [float(x) for x in times]
         if any(b <= a for a, b in zip(times, times[1:], strict=False)):
