@@ -84,7 +84,7 @@ def profile_case(name: str, mesh: str = "own", workers: int = 2, seed: int = 0,
     finally:
         m.close()
     prof = clock.to_dict()
-    numerical = sorted(k for k, v in prof["methods"].items() if v != "analytic")
+    numerical = sorted(k for k, v in prof["methods"].items() if not v.startswith("analytic"))
     return {"case": name, "mesh": mesh, "withheld": withheld, "named": d["named"],
             "truth_wall_s": truth_s, "wall_s": wall, "forward_s": forward_s,
             "truth_unknowns": lab.truth.truth.get("mesh", {}).get("truth_unknowns"),

@@ -113,6 +113,30 @@ class Embedding:
         return sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * M, n_dof))
 
 
+    def moved(self, X: np.ndarray, u: np.ndarray, V: np.ndarray, dX: np.ndarray) -> np.ndarray:
+        """``(M, 3)`` [m per unit of p] the positions' change at fixed nodal displacements ``u``
+        (``(n_dof,)`` or ``(N, 3)``) when the mesh's nodes ``X`` ``(N, 3)`` move with ``V`` ``(N, 3)``
+        and the points' reference positions with ``dX`` ``(M, 3)`` (a geometry parameter p).
+
+        A point stays where it was located, so its local coordinates move by
+        ``dξ = J⁻¹ (dX − V(ξ))`` and it reads the displacement field elsewhere: the change is
+        ``dX + ∇_X u (dX − V(ξ))``; with ``J @ du/dp`` (:meth:`position_jacobian`) it is the
+        whole derivative."""
+        _, dN = _shape(self.local.T)
+        Jx = _jacobian(dN, X[self.nodes])
+        Ju = _jacobian(dN, np.asarray(u).reshape(-1, 3)[self.nodes])
+        grad = Ju @ np.linalg.inv(Jx)                       # ∇_X u at the points
+        rel = dX - _interpolate(self.N.T, V[self.nodes])
+        return dX + np.matmul(grad, rel[..., None])[..., 0]
+
+
+def located(mesh: FEMesh, element: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """``(M, 3)`` [m] reference positions of points at local coordinates ``local`` ``(M, 3)`` in
+    the elements ``element`` ``(M,)`` of ``mesh``."""
+    N, _ = _shape(np.asarray(local, dtype=float).T)
+    return _interpolate(N, mesh.nodes[mesh.elements[np.asarray(element)]])
+
+
 #: each node's position on the 1D quadratic nodes (0, ½, 1) along each axis, ``(27, 3)``: the
 #: element's shape functions are products of 1D quadratic Lagrange polynomials
 _AXIS_NODE = np.rint(2 * np.asarray(_ELEMENT.doflocs)).astype(int)

@@ -11,7 +11,9 @@ times (cubic in time between solved steps; frames are solved steps).
 Sensitivities: law, pre-stretch, field and drive parameters by direct differentiation
 (``skinkit.fem.sensitivity``), through viscous histories; instrument parameters analytically
 (``skinkit.forward.instrument``); effect parameters bound to any of these under the
-effect's name; anything else (geometry) by central differences of whole solves.
+effect's name; effect parameters declared as geometry (a layer's thickness) by the shape
+derivative through the same pass (``skinkit.forward.fe_geometry``); anything else by central
+differences of whole solves.
 
 Protocols are independent solves: they run in worker processes (``workers``, default one
 per core) or on a Dask cluster (``scheduler``); every solve uses one thread, so the numbers
@@ -62,6 +64,9 @@ class ProtocolJob:
     sens: list[str]                       # FE parameter names to differentiate
     options: dict[str, Any] = field(default_factory=dict)
     strokes: np.ndarray | None = None     # (n,) loading strokes so far [1], or None
+    # geometry parameter -> design velocity of the nodes (N, 3) and their depths (N,) [m per unit]
+    shapes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    shape_points: dict[str, np.ndarray] = field(default_factory=dict)   # -> (P, 3) points' dX/dp
 
 
 def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np.ndarray]:
@@ -112,10 +117,12 @@ def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None
                 f.strokes = _interp_table(job.times, job.strokes if job.strokes is not None else none)
         solver = NewtonSolver(model.problem, model.bc, model.options)
         series = _field_series(job, model)
+        from skinkit.forward import fe_geometry
+        shapes = fe_geometry.velocities(spec, mesh, job.shapes, model) if job.shapes else None
         sol = solver.run(job.times, viscous_time=model.problem.viscous, sensitivities=job.sens or False,
                          extrapolate=job.options.get("extrapolate", True),
                          on_step=None if series is None else series[1],
-                         progress=step_reporter(job.name, job.times, on_fraction))
+                         progress=step_reporter(job.name, job.times, on_fraction), shapes=shapes)
         n = len(job.times) + 1
         P = 0 if job.embed is None else len(job.embed[0])
         npar = len(job.sens)
@@ -145,6 +152,8 @@ def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None
                 d_tip_f[i + 1] = sv.tip_force[:, col]
                 if emb is not None:
                     d_pts[i + 1] = (J @ sv.du[:, col]).reshape(P, 3, npar)
+            if emb is not None and shapes:
+                fe_geometry.add_point_terms(d_pts, job.sens, job.shape_points, shapes, emb, mesh.nodes, sol.u)
         untied = [c for c in range(3) if c not in rigid.components]
         tm = solver.timings
         info = {"wall_s": time.perf_counter() - t0, "steps": len(job.times),
@@ -337,7 +346,8 @@ class FEForwardModel(ForwardModel):
         return spec
 
     def _classify(self, spec: Mapping[str, Any], names: Sequence[str]) -> dict[str, tuple[str, str]]:
-        """parameter -> (method, internal name): "fe" (engine), "instrument", "fd"."""
+        """parameter -> (method, internal name): "fe" (engine), "instrument", "shape" (an
+        effect's geometry parameter), "fd"."""
         from skinkit.fem.model import build_model
         probe = build_model(spec, require_load=False)
         from skinkit.fem.sensitivity import parameter_names as fe_names
@@ -345,6 +355,8 @@ class FEForwardModel(ForwardModel):
         inst = {str(e.get(k)) for e in spec.get("instrument", []) or []
                 for k in ("parameter", "azimuth_parameter", "tau_parameter") if e.get(k)}
         bind = dict(spec.get("bindings", {}))
+        from skinkit.forward.fe_geometry import geometry_parameters
+        geo = geometry_parameters(self.effects)
         out = {}
         for nm in names:
             target = bind.get(nm, nm)
@@ -352,6 +364,8 @@ class FEForwardModel(ForwardModel):
                 out[nm] = ("fe", target)
             elif target in inst:
                 out[nm] = ("instrument", target)
+            elif nm in geo:
+                out[nm] = ("shape", nm)
             else:
                 out[nm] = ("fd", nm)
         return out
@@ -378,16 +392,19 @@ class FEForwardModel(ForwardModel):
         fe_names = sorted({v[1] for v in cls.values() if v[0] == "fe"})
         inst_names = sorted({v[1] for v in cls.values() if v[0] == "instrument"})
         t0 = time.perf_counter()
+        shapes = self._designs(params, observations, [nm for nm, (m, _) in cls.items() if m == "shape"],
+                               inst_names)
         fd = [nm for nm, (m, _) in cls.items() if m == "fd"]
         share = 1.0 / (1 + 2 * len(fd))   # of the whole solves reported as progress
         with stages.portion(0.0, share):
-            results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names, fields_dir)
+            results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names, fields_dir, shapes)
         pred = self._assemble(spec, observations, results, jobs_meta, cls, inst_names)
         if fd:
             with stages.portion(share, 1.0):
                 self._central_differences(params, observations, pred, fd)
         for nm, (m, _) in cls.items():
-            pred.methods[nm] = {"fe": "analytic", "instrument": "analytic", "fd": "central-difference"}[m]
+            pred.methods[nm] = {"fe": "analytic", "instrument": "analytic", "shape": "analytic (shape)",
+                                "fd": "central-difference"}[m]
         stages.count(len(results), len(names), pred.methods)
         infos = [r["info"] for r in results.values()]
         steps = sum(i["increments"] for i in infos)
@@ -397,6 +414,18 @@ class FEForwardModel(ForwardModel):
                      "n_dof": infos[0]["n_dof"] if infos else 0}
         self.last_info = pred.info
         return pred
+
+    def _designs(self, params: ParameterSet, observations: Observations, names: list[str],
+                 inst_names: list[str]) -> dict[str, Any]:
+        """Geometry parameter -> its :class:`skinkit.forward.fe_geometry.GeometryDesign` (no solve)."""
+        if not names:
+            return {}
+        from skinkit.forward import fe_geometry as geo
+
+        def build(p: ParameterSet):
+            return geo.layout(self, p, observations, inst_names)
+        base = build(params)[0]
+        return {nm: geo.design(build, nm, params, base) for nm in names}
 
     def _surface(self, spec: Mapping[str, Any], observations: Observations):
         """The mesh (fitted to the session's profile when asked) and the point embedding per channel."""
@@ -501,7 +530,7 @@ class FEForwardModel(ForwardModel):
         return mode, ("tip_force" if mode == "force" else "tip_position")
 
     def _solve_all(self, spec, observations: Observations, fe_names: list[str], inst_names: list[str],
-                   fields_dir: str | os.PathLike[str] | None = None):
+                   fields_dir: str | os.PathLike[str] | None = None, shapes: Mapping[str, Any] | None = None):
         from skinkit.fem.model import quantity
         inst_mod = _instrument()
         mode, drive_name = self._drive_channel(spec)
@@ -552,9 +581,12 @@ class FEForwardModel(ForwardModel):
                 els = np.concatenate([e[0] for e in embeds.values()])
                 locs = np.concatenate([e[1] for e in embeds.values()])
                 emb = (els, locs)
+            geo = dict(shapes or {})
             jobs.append(ProtocolJob(po.name, spec, nodes, mode, times, dsteps, dd, level, emb,
-                                    list(fe_names) + list(dd), strokes=strokes,
-                                    options={"vtu": str(fields_dir)} if fields_dir is not None else {}))
+                                    list(fe_names) + list(geo) + list(dd), strokes=strokes,
+                                    options={"vtu": str(fields_dir)} if fields_dir is not None else {},
+                                    shapes={n: (g.nodes, g.depth) for n, g in geo.items()},
+                                    shape_points={n: g.points[po.name] for n, g in geo.items()}))
         results = self._run(jobs)
         return results, meta
 

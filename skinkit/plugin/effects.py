@@ -92,6 +92,14 @@ class BaseEffect:
     (``form = "..."``) and :func:`skinkit.forward.effects.resolve` applies a shallow copy of the
     plugin whose ``form`` is the chosen one; ``_declared`` and ``_apply_*`` read
     :meth:`chosen_form`.
+
+    ``geometry``, the parameters that only move the model's geometry (a layer's thickness): for
+    each of them ``apply`` changes where the mesh's nodes lie and nothing else — the same
+    elements, regions, node sets, laws and values. The finite-element forward model then
+    differentiates it analytically, by the shape derivative (:mod:`skinkit.fem.shape`), its
+    design velocity dX/dp read off the meshes built at neighbouring values (geometry, no solve);
+    a parameter not declared here is differentiated by central differences of whole solves
+    unless the engine knows it otherwise (a binding).
     """
 
     name: str = ""
@@ -101,6 +109,7 @@ class BaseEffect:
     repeatable: ClassVar[bool] = False
     forms: ClassVar[tuple[str, ...]] = ()
     form: str = ""
+    geometry: ClassVar[frozenset[str]] = frozenset()
 
     def _declared(self) -> list[Declared]:
         raise NotImplementedError

@@ -1,7 +1,8 @@
 """Effects on the geometry and the support: ``thickness`` and ``support-compliance``.
 
-Neither is a parameter the forward model differentiates analytically: both are
-differentiated by central differences (``docs/guide/effects.md``).
+Both are differentiated analytically by the FE forward model: ``thickness.delta`` only moves
+the mesh's nodes (declared in ``geometry``: the shape derivative), ``support-compliance`` is
+bound to the engine's ``boundary.compliance`` (``docs/guide/effects.md``).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ class Thickness(BaseEffect):
     kinds = ("fe",)
     touches = {"fe": frozenset({"layers"})}
     once = False  # it only moves an interface: nothing to recognise it by
+    # moving an interface moves nodes and nothing else: differentiated by the shape derivative
+    geometry = frozenset({"delta"})
 
     def _declared(self) -> list[Declared]:
         return [declare("delta", 0.3, 0.0, "mm", -0.8, 1.5)]
