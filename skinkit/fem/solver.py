@@ -35,6 +35,10 @@ def sp_triu(A):
 #: the increment starts again from the tangent predictor (quadratic convergence cuts it by
 #: orders of magnitude; a damped crawl by a few tens of per cent)
 GUESS_PROGRESS = 0.5
+#: a residual that stops falling (two Newton iterations without halving it) below this fraction
+#: of the reference force has reached the round-off floor: a large body carrying large internal
+#: stresses (pre-stress) against small net reactions cannot balance them to ``rtol`` of those
+STALL_RTOL = 1e-6
 
 
 @dataclass
@@ -154,12 +158,12 @@ class NewtonSolver:
             u, r, ref = self._predict(u, t, dt)
         norm = float(np.linalg.norm(r))
         tol = max(o.rtol * ref, o.atol)
-        last = math.inf
+        last, stalled = math.inf, 0
         for it in range(o.max_iter + 1):
             if not np.isfinite(norm):
                 raise SolverError(f"residual is not finite at t = {t:g} (a layer's stress overflowed or "
                                   "divided by zero: check its law parameters)")
-            if norm <= tol:
+            if norm <= tol or (stalled >= 2 and norm <= STALL_RTOL * ref):
                 return u, it, norm
             if it == o.max_iter:
                 break
@@ -186,6 +190,7 @@ class NewtonSolver:
                 raise SolverError(f"line search failed at t = {t:g} (|r| = {norm:.3g} N): "
                                   "every trial step inverted an element or diverged")
             norm = float(np.linalg.norm(r))
+            stalled = stalled + 1 if norm > 0.5 * last else 0
         raise SolverError(f"no convergence in {o.max_iter} iterations at t = {t:g} "
                           f"(|r| = {norm:.3g} N, reference {ref:.3g} N)")
 

@@ -30,7 +30,7 @@ SHORT_ROWS = 3000
 EXPENSIVE: dict[str, str] = {
     "bench coverage": "fits 20 virtual sessions per case (minutes to hours)",
     "bench diagnose": "diagnoses two finite-element sessions, truths on their own meshes (minutes)",
-    "bench fem": "needs sfepy, solves a 10,000-unknown block twice",
+    "bench fem": "needs its peers (sfepy, NGSolve), solves a 10,000-unknown block once per code",
     "bench fit": "three fits of a finite-element model (minutes)",
     "bench fit-invivo": "fits at in vivo scale (hours)",
     "bench mesh-nulls": "diagnoses 40 finite-element sessions, truths on their own meshes (tens of minutes)",

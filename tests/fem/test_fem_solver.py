@@ -57,6 +57,18 @@ def test_force_control_reproduces_displacement_control():
     np.testing.assert_allclose(sf.u[-1], sd.u[-1], atol=1e-7 * 3e-4)
 
 
+def test_a_tolerance_below_round_off_converges_at_the_floor():
+    """A tolerance no arithmetic can meet (zero): Newton stops once its residual stops falling
+    below 1e-6 of the reference force (the round-off floor) instead of cutting steps until it
+    gives up; the state equals a normally converged one to that floor's effect (1e-6 of the
+    reference force through the tangent: far below 1e-6 of the displacement)."""
+    prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.0003])
+    normal = NewtonSolver(prob, bc, SolverOptions(rtol=1e-10)).run([0.5, 1.0])
+    prob2, bc2 = _indent_problem("displacement", [0.0, 0.0, -0.0003])
+    floor = NewtonSolver(prob2, bc2, SolverOptions(rtol=0.0, atol=0.0)).run([0.5, 1.0])
+    np.testing.assert_allclose(floor.u[-1], normal.u[-1], atol=1e-6 * 3e-4)
+
+
 def test_inverting_load_is_cut_then_reported():
     prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.02])  # 4x the thickness
     # 8 iterations per increment: with the default 20 the cut steps creep on to a quarter of the
