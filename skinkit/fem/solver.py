@@ -50,7 +50,8 @@ FROZEN_RTOL = 1e-4
 #: a frozen-tangent step must cut the residual at least this much, or Newton takes a fresh
 #: tangent from the iterate before it: one such step (back-substitution + residual, a fifth to
 #: a tenth of a factorised iteration) that quarters the residual does more per second than a
-#: factorisation; the same test as the extrapolated start's corrections
+#: factorisation; the same test as the extrapolated start's corrections. A factorised step
+#: must have cut it as much for its tangent to be used frozen
 FROZEN_GAIN = 4.0
 
 
@@ -163,7 +164,10 @@ class NewtonSolver:
         :class:`InvertedElementError`. The residual is checked before a tangent is built, so
         a converged iterate costs no tangent. ``guess``: a first iterate extrapolated from the
         previous increments (its prescribed values are overwritten); without it, the tangent
-        predictor spreads the prescribed increment through the body.
+        predictor spreads the prescribed increment through the body. Below
+        :data:`FROZEN_RTOL` of the reference force, Newton steps on the tangent last factorised
+        in this increment while each step cuts the residual :data:`FROZEN_GAIN`-fold (counted
+        in ``timings.back_substitutions``); the convergence test is the same for every step.
         """
         o = self.options
         self.problem.t = t
@@ -209,11 +213,11 @@ class NewtonSolver:
                     u, r, norm = step
                     stalled = 0   # it cut the residual at least FROZEN_GAIN-fold
                     continue
-                frozen = False    # not paying: a fresh tangent at the same iterate
+                # not paying: a fresh tangent at the same iterate
             r, K, _ = self._residual(u, t, dt, True)
             t0 = time.perf_counter()
             self.linear.factor(K)
-            self.factored, frozen = True, True
+            self.factored = True
             du = -self.linear.solve(r)
             self.timings.solve += time.perf_counter() - t0
             self.timings.iterations += 1
@@ -224,6 +228,10 @@ class NewtonSolver:
                                   "every trial step inverted an element or diverged")
             norm = float(np.linalg.norm(r))
             stalled = stalled + 1 if norm > 0.5 * last else 0
+            # the new tangent may finish the increment only if its own step paid as a frozen
+            # one must: one that did not (at the round-off floor, under a damped line search)
+            # predicts too poorly for a frozen step to pay
+            frozen = FROZEN_GAIN * norm <= last
         raise SolverError(f"no convergence in {o.max_iter} iterations at t = {t:g} "
                           f"(|r| = {norm:.3g} N, reference {ref:.3g} N)")
 
