@@ -15,12 +15,16 @@ failure on a larger block (an inverted element: "warp violation") is a Python ``
 raised by its C terms, not a process abort, so it is caught and reported beside skinkit's
 figures like any other peer failure.
 
-Seconds per Newton iteration = solve wall time / number of tangent factorisations (the
-tangent predictor's and each Newton iteration's); ``assembly_s`` is all of skinkit's assembly
-per iteration (the tangent and the line search's residuals), ``tangent_assembly_s`` one
-tangent assembly (skinkit's element pass yields the residual with it; sfepy's ``matrix`` and
+Seconds per step = solve wall time / converged load steps (one here, for every code): the
+figure to compare, since skinkit finishes Newton with back-substitutions on its last
+factorisation (frozen-tangent steps) where the peers factorise at every iteration. Seconds per
+Newton iteration = solve wall time / number of tangent factorisations (the tangent predictor's
+and each factorised Newton iteration's; skinkit's back-substitutions ride on them);
+``assembly_s`` is all of skinkit's assembly per factorisation (the tangent and the residuals
+of the line search and of the frozen-tangent steps), ``tangent_assembly_s`` one tangent
+assembly (skinkit's element pass yields the residual with it; sfepy's ``matrix`` and
 NGSolve's ``AssembleLinearization`` are the tangent alone), ``solve_s`` one factorisation +
-solve.
+its solves.
 """
 
 from __future__ import annotations
@@ -66,11 +70,14 @@ def run_skinkit(n: int = 7, linear: str = "auto") -> dict:
     sol = solver.run([1.0])
     wall = time.perf_counter() - t0
     tm = sol.timings
-    n_fact = tm.iterations  # factorisations: the tangent predictor's and each Newton iteration's
+    n_fact = tm.factorisations  # the tangent predictor's and each factorised Newton iteration's
+    steps = max(solver.steps_taken, 1)   # converged increments (more than one if a step was cut)
     return {"n": n, "mesh": mesh, "u": sol.u[-1].reshape(-1, 3), "wall": wall, "setup": setup,
             "factorisations": n_fact, "assembly_s": tm.assembly / n_fact, "solve_s": tm.solve / n_fact,
             "tangent_assembly_s": tm.tangent / max(tm.tangent_assemblies, 1),
-            "s_per_newton": wall / n_fact, "dof": mesh.n_dof, "linear": solver.linear.name}
+            "s_per_newton": wall / n_fact, "dof": mesh.n_dof, "linear": solver.linear.name,
+            "steps": steps, "s_per_step": wall / steps, "factorisations_per_step": n_fact / steps,
+            "iterations": tm.iterations, "back_substitutions": tm.back_substitutions}
 
 
 def run_sfepy(mesh) -> dict:
@@ -161,7 +168,8 @@ PEERS = {"sfepy": Peer("sfepy", ("sfepy",), PEER_EXTRA, "run_sfepy"),
          "ngsolve": Peer("ngsolve", ("ngsolve", "netgen"), PEER_EXTRA, "run_ngsolve")}
 #: the figures a peer's entry carries (None where it gave none)
 PEER_KEYS = ("s_per_newton", "tangent_assembly_s", "solve_s", "factorisations", "wall_s",
-             "max_rel_disp_diff", "ratio_s_per_newton", "ratio_tangent_assembly")
+             "max_rel_disp_diff", "ratio_s_per_newton", "ratio_tangent_assembly", "s_per_step",
+             "ratio_s_per_step")
 #: keys of a row that are sfepy's in the first form of the JSON (kept for the tools reading it)
 _SFEPY_LEGACY = ("sfepy_s_per_newton", "speedup", "max_rel_disp_diff", "sfepy_iterations",
                  "sfepy_wall_s", "sfepy_time_stats")
@@ -182,12 +190,13 @@ def _ratio(a: float | None, b: float | None) -> float | None:
 
 def _peer_entry(name: str, sk: dict, runner: Callable[[Any], dict],
                 repeat: int = 1) -> tuple[dict, dict | None]:
-    """Run one peer on skinkit's mesh (``repeat`` times, the fastest per iteration kept): its
-    entry of ``peers`` and its raw output (None when it gave no figures)."""
+    """Run one peer on skinkit's mesh (``repeat`` times, the fastest kept): its entry of
+    ``peers`` and its raw output (None when it gave no figures). A peer solves the one load
+    step, so its seconds per step are its wall time [s]."""
     entry: dict[str, Any] = {"status": "ok", "error": None, "extra": PEERS[name].extra if name in PEERS
                              else PEER_EXTRA, **dict.fromkeys(PEER_KEYS)}
     try:
-        out = min((runner(sk["mesh"]) for _ in range(repeat)), key=lambda o: o["s_per_newton"])
+        out = min((runner(sk["mesh"]) for _ in range(repeat)), key=lambda o: o["wall"])
     except Exception as exc:   # the peer's own failure is a figure of the comparison, not skinkit's
         missing = isinstance(exc, ImportError) and "not installed" in peer_failure(exc, name)
         entry.update(status="not installed" if missing else "failed", error=peer_failure(exc, name))
@@ -199,7 +208,8 @@ def _peer_entry(name: str, sk: dict, runner: Callable[[Any], dict],
                   "solve_s": out.get("solve_s"), "factorisations": out.get("factorisations"),
                   "wall_s": out["wall"], "max_rel_disp_diff": float(du.max() / np.abs(out["u"]).max()),
                   "ratio_s_per_newton": _ratio(out["s_per_newton"], sk["s_per_newton"]),
-                  "ratio_tangent_assembly": _ratio(out.get("tangent_assembly_s"), sk["tangent_assembly_s"])})
+                  "ratio_tangent_assembly": _ratio(out.get("tangent_assembly_s"), sk["tangent_assembly_s"]),
+                  "s_per_step": out["wall"], "ratio_s_per_step": _ratio(out["wall"], sk["s_per_step"])})
     entry.update({k: out[k] for k in ("setup_s", "residuals", "inverse", "assembly", "version") if k in out})
     return entry, out
 
@@ -208,14 +218,17 @@ def compare(sk: dict, peers: Sequence[str] = tuple(PEERS),
             runners: Mapping[str, Callable[[Any], dict]] | None = None, repeat: int = 1) -> dict:
     """One size's row: skinkit's figures (``sk`` from :func:`run_skinkit`) and each of ``peers``
     run on the same mesh. ``runners`` replaces a peer's solver (default: this module's
-    ``run_sfepy`` / ``run_ngsolve``); each peer runs ``repeat`` times, its fastest run per
-    iteration kept. ``peers`` maps each name to its entry (``status``: ok, not
-    installed, failed; ``error``; the figures of :data:`PEER_KEYS`, ratios peer / skinkit); the
-    sfepy keys of the first form of this JSON stay, ``peer_error`` saying why sfepy has none."""
+    ``run_sfepy`` / ``run_ngsolve``); each peer runs ``repeat`` times, its fastest run kept.
+    ``peers`` maps each name to its entry (``status``: ok, not installed, failed; ``error``;
+    the figures of :data:`PEER_KEYS`, ratios peer / skinkit); the sfepy keys of the first form
+    of this JSON stay, ``peer_error`` saying why sfepy has none."""
     res = {"n": sk["n"], "dof": sk["dof"], "elements": sk["mesh"].n_elements, "linear_solver": sk["linear"],
            "skinkit_s_per_newton": sk["s_per_newton"], "assembly_s": sk["assembly_s"],
            "solve_s": sk["solve_s"], "tangent_assembly_s": sk["tangent_assembly_s"],
            "skinkit_factorisations": sk["factorisations"], "skinkit_wall_s": sk["wall"],
+           "skinkit_s_per_step": sk["s_per_step"], "skinkit_steps": sk["steps"],
+           "skinkit_factorisations_per_step": sk["factorisations_per_step"],
+           "skinkit_iterations": sk["iterations"], "skinkit_back_substitutions": sk["back_substitutions"],
            "peer_error": "sfepy was not run (not among the peers asked for)",
            **dict.fromkeys(_SFEPY_LEGACY), "peers": {}}
     for name in peers:
@@ -242,11 +255,11 @@ def run(n: int = 7, linear: str = "auto", peers: Sequence[str] = tuple(PEERS),
 def run_sizes(sizes: Sequence[int], linear: str = "auto", peers: Sequence[str] = tuple(PEERS),
               runners: Mapping[str, Callable[[Any], dict]] | None = None, repeat: int = 1) -> dict:
     """Every size in ``sizes``: skinkit at all of them first, then the peers, each code
-    ``repeat`` times with its fastest run per iteration kept (a shared machine's load only
+    ``repeat`` times with its fastest run kept (a shared machine's load only
     slows a run down). Returns the first size's row (the keys of a one-size run) with ``sizes``,
     every size's row in order, ``repeat``, and ``threads``, the thread-count variables of the
     environment it ran in."""
-    runs = [min((run_skinkit(n, linear) for _ in range(repeat)), key=lambda r: r["s_per_newton"])
+    runs = [min((run_skinkit(n, linear) for _ in range(repeat)), key=lambda r: r["wall"])
             for n in sizes]
     rows = [compare(sk, peers, runners, repeat) for sk in runs]
     env = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -263,14 +276,20 @@ def summary_lines(res: dict) -> list[str]:
     for row in res.get("sizes", [res]):
         out += [f"n = {row.get('n', '?')}: {row['dof']} dofs, {row['elements']} 27-node hexahedra, "
                 f"linear solver {row['linear_solver']}",
-                f"skinkit {row['skinkit_s_per_newton']:.3f} s/iteration "
-                f"(assembly {row['assembly_s']:.3f} s of which tangent {row['tangent_assembly_s']:.3f} s, "
-                f"solve {row['solve_s']:.3f} s), {row['skinkit_factorisations']} factorisations"]
+                f"skinkit {_fmt(row.get('skinkit_s_per_step'))} s/step, "
+                f"{_fmt(row.get('skinkit_factorisations_per_step'), 'g')} factorisations + "
+                f"{_fmt(row.get('skinkit_back_substitutions'), 'g')} back-substitutions; "
+                f"{row['skinkit_s_per_newton']:.3f} s/iteration "
+                f"(per factorisation: assembly {row['assembly_s']:.3f} s of which tangent "
+                f"{row['tangent_assembly_s']:.3f} s, "
+                f"solve {row['solve_s']:.3f} s)"]
         for name, p in row.get("peers", {}).items():
             if p["status"] != "ok":
                 out.append(f"{name:<7} no figures: {p['error']}")
                 continue
-            out.append(f"{name:<7} {p['s_per_newton']:.3f} s/iteration "
+            out.append(f"{name:<7} {_fmt(p.get('s_per_step'))} s/step "
+                       f"({_fmt(p.get('ratio_s_per_step'), '.2f')}x skinkit's); "
+                       f"{p['s_per_newton']:.3f} s/iteration "
                        f"({_fmt(p['ratio_s_per_newton'], '.2f')}x skinkit's; tangent "
                        f"{_fmt(p['tangent_assembly_s'])} s, {_fmt(p['ratio_tangent_assembly'], '.2f')}x "
                        f"skinkit's; solve {_fmt(p['solve_s'])} s), {p['factorisations']} factorisations; "
@@ -282,8 +301,9 @@ def summary_lines(res: dict) -> list[str]:
 
 
 #: the columns of :func:`table_rows`
-COLUMNS = ("n", "dofs", "code", "s/iteration", "x skinkit", "tangent s", "x skinkit (tangent)",
-           "solve s", "factorisations", "max rel. disp. diff.", "note")
+COLUMNS = ("n", "dofs", "code", "s/step", "x skinkit (step)", "s/iteration", "x skinkit", "tangent s",
+           "x skinkit (tangent)", "solve s", "factorisations", "back-substitutions",
+           "max rel. disp. diff.", "note")
 
 
 def table_rows(res: dict) -> list[list[str]]:
@@ -291,13 +311,15 @@ def table_rows(res: dict) -> list[list[str]]:
     rows = []
     for row in res.get("sizes", [res]):
         head = [str(row.get("n", "?")), str(row["dof"])]
-        rows.append([*head, "skinkit", _fmt(row["skinkit_s_per_newton"]), "1",
+        rows.append([*head, "skinkit", _fmt(row.get("skinkit_s_per_step")), "1",
+                     _fmt(row["skinkit_s_per_newton"]), "1",
                      _fmt(row["tangent_assembly_s"]), "1", _fmt(row["solve_s"]),
-                     str(row["skinkit_factorisations"]), "-",
-                     f"linear solver {row['linear_solver']}"])
+                     str(row["skinkit_factorisations"]), _fmt(row.get("skinkit_back_substitutions"), "g"),
+                     "-", f"linear solver {row['linear_solver']}"])
         for name, p in row.get("peers", {}).items():
-            rows.append([*head, name, _fmt(p["s_per_newton"]), _fmt(p["ratio_s_per_newton"], ".2f"),
+            rows.append([*head, name, _fmt(p.get("s_per_step")), _fmt(p.get("ratio_s_per_step"), ".2f"),
+                         _fmt(p["s_per_newton"]), _fmt(p["ratio_s_per_newton"], ".2f"),
                          _fmt(p["tangent_assembly_s"]), _fmt(p["ratio_tangent_assembly"], ".2f"),
                          _fmt(p["solve_s"]), "-" if p["factorisations"] is None else str(p["factorisations"]),
-                         _fmt(p["max_rel_disp_diff"], ".1e"), p["error"] or p.get("assembly", "")])
+                         "-", _fmt(p["max_rel_disp_diff"], ".1e"), p["error"] or p.get("assembly", "")])
     return rows

@@ -79,12 +79,12 @@ def _sizes(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -
 @click.option("--peer", "peers", multiple=True, type=click.Choice(["sfepy", "ngsolve"]),
               help="peers to run beside skinkit (repeatable; default: all)")
 @click.option("--repeat", type=click.IntRange(1, 20), default=1, show_default=True,
-              help="solves per code and size; the fastest per iteration is reported")
+              help="solves per code and size; the fastest is reported")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 @page_option
 def bench_fem(sizes: list[int], linear: str, peers: tuple[str, ...], repeat: int, as_json: bool,
               page: Path | None) -> None:
-    """Seconds per Newton iteration, skinkit against sfepy and NGSolve, same mesh and law.
+    """Seconds per load step and per Newton iteration, skinkit against sfepy and NGSolve.
 
     Peers that are not installed (pip install 'skinkit[bench]') or that fail are named with
     the reason beside skinkit's figures. Run with OMP_NUM_THREADS=1 to compare one thread each."""
@@ -93,7 +93,7 @@ def bench_fem(sizes: list[int], linear: str, peers: tuple[str, ...], repeat: int
     res = fem.run_sizes(sizes, linear, peers or tuple(fem.PEERS), repeat=repeat)
     lines = fem.summary_lines(res)
     emit(res, as_json, lines)
-    write_page(page, "Seconds per Newton iteration against sfepy and NGSolve", res, lines,
+    write_page(page, "Seconds per step and per Newton iteration against sfepy and NGSolve", res, lines,
                tables=[(fem.COLUMNS, fem.table_rows(res))])
 
 

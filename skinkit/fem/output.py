@@ -32,6 +32,7 @@ def summary(model_name: str, mesh: FEMesh, sol: Solution, fixed_nodes: np.ndarra
                       "newton_iterations": int(st.iterations)})
     return {"model": model_name, "dof": mesh.n_dof, "elements": mesh.n_elements,
             "wall_s": wall_s, "newton_iterations": int(sol.timings.iterations),
+            "factorisations": int(sol.timings.factorisations),
             "assembly_s": sol.timings.assembly, "solve_s": sol.timings.solve, "steps": steps}
 
 

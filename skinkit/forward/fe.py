@@ -159,6 +159,7 @@ def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None
         info = {"wall_s": time.perf_counter() - t0, "steps": len(job.times),
                 "increments": solver.steps_taken, "newton_iterations": tm.iterations,
                 "newton_per_step": tm.iterations / max(solver.steps_taken, 1),
+                "factorisations": tm.factorisations, "back_substitutions": tm.back_substitutions,
                 "assembly_s": tm.assembly, "linear_solve_s": tm.solve, "n_dof": mesh.n_dof,
                 "linear_solver": solver.linear.name, "process": os.getpid()}
         if series is not None:

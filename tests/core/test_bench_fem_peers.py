@@ -56,10 +56,14 @@ def test_several_sizes_give_a_row_each_and_a_failing_peer_does_not_stop_the_othe
         assert ng["ratio_s_per_newton"] == pytest.approx(0.5 / row["skinkit_s_per_newton"])
         assert ng["ratio_tangent_assembly"] == pytest.approx(0.25 / row["tangent_assembly_s"])
         assert ng["max_rel_disp_diff"] == pytest.approx(1e-9, rel=1e-3)
+        # per converged step: the peer's one load step against skinkit's
+        assert ng["s_per_step"] == 2.0 and row["skinkit_steps"] == 1
+        assert ng["ratio_s_per_step"] == pytest.approx(2.0 / row["skinkit_s_per_step"])
+        assert row["skinkit_factorisations_per_step"] == row["skinkit_factorisations"]
     lines = fem.summary_lines(res)
     assert [ln.split(":")[0] for ln in lines if ln.startswith("n = ")] == ["n = 1", "n = 2"]
     assert sum(ln == "sfepy   no figures: sfepy failed: ValueError: warp violation!" for ln in lines) == 2
-    assert sum(ln.startswith("ngsolve 0.500 s/iteration") for ln in lines) == 2
+    assert sum(ln.startswith("ngsolve 2.000 s/step") and "0.500 s/iteration" in ln for ln in lines) == 2
     rows = fem.table_rows(res)
     assert [(r[0], r[2]) for r in rows] == [("1", "skinkit"), ("1", "sfepy"), ("1", "ngsolve"),
                                             ("2", "skinkit"), ("2", "sfepy"), ("2", "ngsolve")]
