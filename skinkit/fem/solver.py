@@ -292,7 +292,7 @@ class NewtonSolver:
                 break
             u, r, gain, current = cand, r2, norm / max(n2, 1e-300), True
             norm = n2
-            if gain < 4 or norm <= max(self.options.rtol * ref, self.options.atol):
+            if gain < FROZEN_GAIN or norm <= max(self.options.rtol * ref, self.options.atol):
                 break
         if not current:
             self._residual(u, t, dt, False)   # step results read the last residual evaluated
