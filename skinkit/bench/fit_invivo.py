@@ -92,7 +92,7 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
     out = [f"{r['n_params']} parameters from {r['n_protocols']} protocols x {r['periods']} periods, "
            f"{r['n_dof']} unknowns, {r['workers']} workers: fit {r['wall_s_fit'] / 60:.1f} min "
            f"({r['n_forward']} evaluations with sensitivities, {r['wall_s_per_evaluation']:.0f} s each); "
-           f"session {r['wall_s_session'] / 60:.1f} min",
+           f"virtual record simulated in {r['wall_s_session'] / 60:.1f} min",
            f"  one prediction with sensitivities {r['one_prediction_with_sensitivities_s']:.0f} s: "
            f"assembly {r['assembly_s_summed']:.0f} s, linear solves {r['linear_solve_s_summed']:.0f} s "
            f"(summed over protocols), {r['newton_per_step']:.2f} Newton iterations per step"]

@@ -51,6 +51,7 @@ import numpy as np
 from skinkit.errors import SkinkitError
 from skinkit.forward.stages import stage
 from skinkit.gap.checks import GapError, check_channels, check_effects
+from skinkit.gap.mesh_check import discretisation_check, mesh_only_effects
 from skinkit.gap.report_files import write_report
 from skinkit.gap.score import (
     ScoreTest,
@@ -284,7 +285,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              progress: Callable[[str], None] | None = None,
              protocols: Sequence[str] | None = None, error_estimate: bool = True,
              min_share: float = MIN_SHARE, noise: str = "auto", max_iterations: int = 50,
-             model_error: bool = True) -> GapReport:
+             model_error: bool = True, calibration: FitResult | None = None) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -305,7 +306,9 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     ``max_iterations``: evaluations each fit may make (the calibration and every refit);
     ``model_error``: a finite-element model's discretisation error is estimated at the
     calibration and carried as noise by every later step (:mod:`skinkit.inverse.approximation`;
-    it then replaces ``error_estimate``'s projection).
+    it then replaces ``error_estimate``'s projection); ``calibration``: a fit of the same ``free``
+    parameters on the same observations already made (e.g. the session's identification), used
+    as the calibration instead of fitting again.
     """
     from skinkit.forward import load, model_kind, read_description, region_partitions
 
@@ -327,7 +330,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
 
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
                      until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations,
-                     model_error=model_error)
+                     model_error=model_error, calibration=calibration)
     if cal["model_error"] is not None:
         error_estimate = False     # the mesh's error is in the noise model already
     state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
@@ -357,7 +360,8 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
                observations: Observations | str | os.PathLike[str], *, effects: Sequence[str] | None,
                holdout: Sequence[str], free: Sequence[str] | None, until: float | None,
                protocols: Sequence[str] | None, say: Callable[[str], None], noise: str = "auto",
-               max_iterations: int = 50, model_error: bool = False) -> dict[str, Any]:
+               max_iterations: int = 50, model_error: bool = False,
+               calibration: FitResult | None = None) -> dict[str, Any]:
     """The session read and checked, the candidate effects, and the model calibrated on it:
     ``name``, ``source``, ``observations``, ``held``, ``present`` (the model's effects),
     ``theta`` (free names), ``candidates``, ``result`` (the fit), ``state0`` (:func:`_state`),
@@ -393,7 +397,8 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         held = observations.held_out()
         say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
         with stage("calibration"):
-            r0 = fit(base, observations, theta, max_iterations=max_iterations)
+            given = calibration is not None and sorted(calibration.parameters.free_names) == sorted(theta)
+            r0 = calibration if given else fit(base, observations, theta, max_iterations=max_iterations)
         carried = None
         if model_error and has_mesh(base):
             from skinkit.inverse.approximation import refit
@@ -475,10 +480,10 @@ def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
     ok = corrected(tests, run.alpha)
     if run.error_estimate and run.disc is None and any(ok.values()) and has_mesh(run.base):
         with stage("discretisation check"):
-            run.disc = _discretisation(run.base, run.observations, values, run.state0["prediction"], sens,
-                                       run.alpha, run.say)
+            run.disc = discretisation_check(run.base, run.observations, values, run.state0["prediction"],
+                                            sens, run.alpha, run.say)
         run.n_forward += 1
-    mesh_only = _mesh_only(run.disc, sens, tests, ok, run.alpha)
+    mesh_only = mesh_only_effects(run.disc, sens, tests, ok, run.alpha)
     top = [t for t in tests if ok[t.effect] and t.effect not in mesh_only][:run.candidates]
     return sens, tests, ok, mesh_only, top
 
@@ -759,37 +764,6 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
     report.extra["messages"] = messages(report.to_dict(), loc0, run.gap0 or {}, cpd, v["added"],
                                         run.min_share, sig_tests, refit_any)
     return report
-
-
-def _discretisation(model: Any, observations: Observations, values: Mapping[str, float], coarse: Prediction,
-                    sens: Any, alpha: float, say: Callable[[str], None]) -> dict[str, Any] | None:
-    """The calibrated model's discretisation error in the score step's residual space (``e``,
-    exact − coarse, whitened) with the residual figures of
-    :func:`skinkit.inverse.discretisation.residual_check`; None (said) when it cannot be made."""
-    from skinkit.inverse.discretisation import error_in_residual, residual_check
-    try:
-        e, summary, _ = error_in_residual(model, observations, dict(values), coarse, progress=say)
-    except SkinkitError as exc:
-        say(f"discretisation check not made: {exc}")
-        return None
-    if e.size != sens.z.size:
-        say("discretisation check not made: its residual does not match the score step's")
-        return None
-    chk = residual_check(sens.z, sens.J_theta, e)
-    return {**summary, **{k: v for k, v in chk.items() if k != "bias"}, "e": e, "explains": []}
-
-
-def _mesh_only(disc: Mapping[str, Any] | None, sens: Any, tests: Sequence[ScoreTest], ok: Mapping[str, bool],
-               alpha: float) -> list[str]:
-    """The candidates significant on the residual but no longer once the discretisation error's
-    signature ``e`` is projected out beside the fitted parameters' (at any size: the estimate's
-    size rests on an assumed order, its shape does not): what they would explain, a finer mesh
-    would explain too."""
-    if disc is None or not np.any(disc["e"]):
-        return []
-    from skinkit.gap.score import score_all
-    ok_exact = corrected(score_all(sens, nuisance=disc["e"][:, None]), alpha)
-    return [t.effect for t in tests if ok[t.effect] and not ok_exact.get(t.effect, False)]
 
 
 __all__ = ["AIC_MARGIN", "GapError", "check_effects", "diagnose", "write_report"]

@@ -228,8 +228,9 @@ def _observations(session: Path, quick: bool) -> Any:
 
 
 def identify_fe(session: Path, quick: bool, workers: int, progress: Progress = _quiet
-                ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Step 4: fit the thesis's model; its fit summary and its description at the optimum."""
+                ) -> tuple[dict[str, Any], dict[str, Any], Any]:
+    """Step 4: fit the thesis's model; its fit summary, its description at the optimum and the fit
+    (a :class:`skinkit.schemas.FitResult`, the diagnosis's calibration)."""
     from skinkit.forward import load
     from skinkit.inverse import fit
     from skinkit.inverse.fit import fit_json
@@ -250,13 +251,16 @@ def identify_fe(session: Path, quick: bool, workers: int, progress: Progress = _
     progress("identify: thesis model", 1.0)
     out = fit_json(res)
     out["stored_as"] = f"fit-{model.name}"
-    return out, desc
+    return out, desc, res
 
 
 def diagnose_gap(session: Path, out: Path, description: dict[str, Any], quick: bool, workers: int,
-                 progress: Progress = _quiet, model_error: bool = True) -> dict[str, Any]:
+                 progress: Progress = _quiet, model_error: bool = True, calibration: Any = None
+                 ) -> dict[str, Any]:
     """Step 5: the gap diagnosis of the calibrated model (started at its optimum); ``model_error``:
-    its mesh's discretisation error carried as noise."""
+    its mesh's discretisation error carried as noise; ``calibration``: step 4's fit, which the
+    diagnosis takes as its calibration rather than fitting the same parameters to the same data
+    again."""
     from skinkit.gap import diagnose
     from skinkit.gap.diagnose import write_report
     from skinkit.lab import forearm
@@ -272,7 +276,7 @@ def diagnose_gap(session: Path, out: Path, description: dict[str, Any], quick: b
     # discretisation check (a refined solve; tests/gap/test_discretisation_gap.py has its own)
     report = diagnose(description, obs, free=list(forearm.FREE), max_effects=1, candidates=1 if quick else 2,
                       workers=workers, progress=say, error_estimate=not quick and not model_error,
-                      model_error=model_error)
+                      model_error=model_error, calibration=calibration)
     name = "gap-" + str(description.get("model", {}).get("name", "model"))
     with open_experiment(session, "a") as exp:
         exp.write_gap(name, report)
@@ -308,11 +312,11 @@ def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: 
     summary["acquire"] = timed("acquire", lambda: acquire(out, seed, quick, workers, progress, mesh))
     summary["lumped"] = timed("lumped", lambda: identify_lumped(session, progress))
     summary["cameras"] = timed("cameras", lambda: measure_cameras(session, progress))
-    fe, desc = timed("identify", lambda: identify_fe(session, quick, workers, progress))
+    fe, desc, calibration = timed("identify", lambda: identify_fe(session, quick, workers, progress))
     summary["identify"] = fe
     summary["diagnose"] = timed("diagnose",
                                 lambda: diagnose_gap(session, out, desc, quick, workers, progress,
-                                                     model_error=mesh == "own"))
+                                                     model_error=mesh == "own", calibration=calibration))
     report = timed("report", lambda: write_report(session, out / "report.html", overwrite=True))
     summary["report"] = str(report)
     progress("compare with the truth", 0.0)

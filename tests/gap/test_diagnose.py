@@ -107,6 +107,30 @@ def test_force_offset_is_named_in_the_fitted_protocols(offset_report):
     assert before > 1.5 and abs(after - 1) < 0.03
 
 
+@OFFSET_GROUP
+def test_a_calibration_given_is_the_calibration(offset_report):
+    """A fit of the same parameters on the same data (a session's identification) is taken as the
+    diagnosis's calibration: no calibration fit is made (the stage solves nothing) and the
+    diagnosis is the one that fits them itself, to the fit's tolerance."""
+    from skinkit.forward import load, stages
+    from skinkit.inverse import fit
+
+    obs = _lab({"name": "force-offset", "z": 0.01})(2)
+    model = load(SPEC)
+    try:
+        cal = fit(model, obs, model.parameters().free_names)
+    finally:
+        model.close()
+    with stages.recording() as clock:
+        rep = diagnose(SPEC, obs, candidates=2, calibration=cal)
+    s = {r["name"]: r for r in clock.to_dict()["stages"]}
+    assert s["calibration"]["forward_equivalents"] <= 1     # the calibrated state's one prediction
+    assert rep.named == offset_report.named == ["force-offset"]
+    a = rep.candidates[0].parameters["force-offset.z"]
+    b = offset_report.candidates[0].parameters["force-offset.z"]
+    assert abs(a["value"] - b["value"]) < 0.1 * b["se"]
+
+
 def test_null_sessions_name_nothing():
     """Truth = the model: nothing named, and the verdict says so plainly. Per session the chance of
     naming an effect is below K · P(χ²₁ > 12) ≈ 3e-3 (the AIC margin), so four seeds that name
