@@ -144,6 +144,11 @@ def compare(out: Path, summary: dict[str, Any]) -> list[dict[str, Any]]:
     if mesh:   # the truth's mesh is its own: the model's discretisation error is in the data
         row("acquire", f"truth mesh ({mesh['mode']}) unknowns", mesh["truth_unknowns"], None)
         row("acquire", "model mesh unknowns", mesh["model_unknowns"], None)
+        # the truth is itself a discretised solution: its own error (the lab's estimate) is part
+        # of what separates the fitted parameters from the truth's, beside the model's
+        for ch, d in (mesh.get("discretisation") or {}).items():
+            row("acquire", f"truth mesh error {ch} (×σ)", d["truth_over_noise"], None, "1")
+            row("acquire", f"model mesh error {ch} (×σ)", d["model_over_noise"], None, "1")
     tp = {p["name"]: p["value"] for p in truth["parameters"]}
     fe = summary["identify"]
     for name, par in fe["parameters"].items():

@@ -110,6 +110,8 @@ def _closing_table_compares_every_step(chain):
     # the closing table states both meshes (here the same: the truth on the model's mesh)
     truth_n = rows[("acquire", "truth mesh (shared) unknowns")]["found"]
     assert truth_n == rows[("acquire", "model mesh unknowns")]["found"]
+    # a truth on the model's mesh has no error of its own against the model's to state
+    assert not any("mesh error" in r["result"] for r in s["table"])
     assert s["diagnose"]["model_error"] is None
 
 
