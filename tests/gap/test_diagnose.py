@@ -131,6 +131,29 @@ def test_a_calibration_given_is_the_calibration(offset_report):
     assert abs(a["value"] - b["value"]) < 0.1 * b["se"]
 
 
+def test_a_candidate_that_could_not_win_is_screened_not_refitted(monkeypatch):
+    """After a qualifying refit, a candidate is refitted only when SCREEN_FACTOR times its score
+    could lower the AIC below that refit's. On the force-offset session the runners-up's refits
+    remove 0.4-1.2x their scores, so the product's factor (4) refits them all; a factor of 0.5
+    makes the rule bite: they are screened with the reason stated, and the verdict stands."""
+    import importlib
+
+    # the module, not the function the package exports under the same name
+    monkeypatch.setattr(importlib.import_module("skinkit.gap.diagnose"), "SCREEN_FACTOR", 0.5)
+    rep = diagnose(SPEC, _lab({"name": "force-offset", "z": 0.01})(2), candidates=3, max_effects=1)
+    r = rep.to_dict()["rounds"][0]
+    first = r["candidates"][0]
+    assert rep.named == ["force-offset"] and first["refitted"]
+    screened = r.get("screened", {})
+    assert screened, r["candidates"][:3]
+    for c in r["candidates"][1:3]:
+        if c["effect"] in screened:
+            assert not c["refitted"] and c["effect"] in r["not_named"]
+            assert -0.5 * c["score"] + 2 * len(c["tested"]) >= first["delta_aic"]
+        else:
+            assert c["refitted"]
+
+
 def test_null_sessions_name_nothing():
     """Truth = the model: nothing named, and the verdict says so plainly. Per session the chance of
     naming an effect is below K · P(χ²₁ > 12) ≈ 3e-3 (the AIC margin), so four seeds that name
