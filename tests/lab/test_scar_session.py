@@ -35,7 +35,7 @@ from skinkit.lab.session import LabError
 pytestmark = pytest.mark.needs_plugins
 
 P_TAIL = 1e-4 / 2
-REAL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real" / "invivo_extension_dic_healthy"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "invivo_extension_dic_healthy"
 
 
 def _sd_accepted(s: float, sigma: float, n: int) -> bool:
