@@ -38,9 +38,11 @@ RATIO_RANGE = (2.0, 10.0)
 #: each diameter of the scar [m] (semi-axes half of it)
 SPAN_RANGE_M = (4e-3, 12e-3)
 #: tracked points: grid spacing, half extents in x and y around the origin, clearance from a pad [m]
+#: (the bonded pads' edges and corners make the strain singular: points nearer than 2 mm, or well
+#: ahead of the moving pad, would measure the meshes' error there more than the skin)
 TRACK_SPACING_M = 2e-3
-TRACK_HALF_M = (26e-3, 10e-3)
-TRACK_CLEARANCE_M = 1e-3
+TRACK_HALF_M = (24e-3, 10e-3)
+TRACK_CLEARANCE_M = 2e-3
 #: draws of a scar before giving up on fitting one in the band (each fits with probability > 0.3)
 MAX_DRAWS = 1000
 #: random stream of the scar, apart from the noise's (protocol index i uses [seed, i])
