@@ -34,6 +34,9 @@ import numpy as np
 from skinkit.fem.errors import ModelError
 
 _CS = 1e-30
+#: q of a point 1e-12 semi-axes from an ellipse's centre: below it the distance's √(q/h) tends
+#: to the smooth minimum of the semi-axes instead of 0/0 (above it the term is below rounding)
+_CENTRE = 1e-24
 
 #: kind -> (required parameters, optional parameters); an inclusion also needs the keys of one
 #: of its :data:`SHAPES`
@@ -66,16 +69,19 @@ def ellipse_distance(dx: Any, dy: Any, a: Any, b: Any, angle: Any) -> Any:
     centre to the outline of the ellipse of semi-axes ``a``, ``b`` [m], the ``a`` axis at ``angle``
     [rad] from x: negative inside.
 
-    With u, v the offsets along the axes and ρ = sqrt((u/a)² + (v/b)²) the outline's level
-    (ρ = 1 on it), the distance is (ρ − 1)/|∇ρ| = (ρ − 1) ρ / sqrt(u²/a⁴ + v²/b⁴): the distance
-    to the outline to first order near it, exact along both axes (|u| − a and |v| − b) and
-    exactly r − a for a circle. It is analytic in every argument except at the centre itself
-    (0/0), where no quadrature point lies (as r = 0 for the disc)."""
+    With u, v the offsets along the axes, q = (u/a)² + (v/b)² and ρ = √q the outline's level
+    (ρ = 1 on it), the distance is (ρ − 1)/|∇ρ| = (ρ − 1) √(q/h), h = u²/a⁴ + v²/b⁴: the distance
+    to the outline to first order near it, exact along both axes (|u| − a and |v| − b) and exactly
+    r − a for a circle. √(q/h) lies between the semi-axes; at the centre, where it is 0/0, the tiny
+    :data:`_CENTRE` added to q and (over m², m the :func:`smooth_min`) to h makes it m (a for a
+    circle, exactly, everywhere). Analytic in every argument: a complex step through it is exact."""
     c, s = np.cos(angle), np.sin(angle)
     u = c * dx + s * dy
     v = -s * dx + c * dy
-    rho = np.sqrt((u / a) ** 2 + (v / b) ** 2)
-    return (rho - 1.0) * rho / np.sqrt(u ** 2 / a ** 4 + v ** 2 / b ** 4)
+    q = (u / a) ** 2 + (v / b) ** 2
+    h = u ** 2 / a ** 4 + v ** 2 / b ** 4
+    m = smooth_min(a, b)
+    return (np.sqrt(q) - 1.0) * np.sqrt((q + _CENTRE) / (h + _CENTRE / m ** 2))
 
 
 def inclusion_shape(params: Mapping[str, Any]) -> str:

@@ -16,10 +16,10 @@ stand beside the real record (``../shared/data/real/invivo_extension_dic_healthy
 
 The rest readings are the samples about the record's rest sample (its lowest displacement before
 the pull) whose displacement is within one resolution step of it: 5 samples (4 to 8), pad at 8 to
-9 µm, force 72 to 88 mN. Five samples give σ to within a factor of about 0.6 to 2.9 (95 %, χ²
+9 µm, force 72 to 88 mN. Five samples fix σ only to within a factor of about 0.6 to 2.9 (95 %, χ²
 with 4 degrees of freedom); the record's second differences over its whole length give 4.2 mN
-(1.4826 MAD / √6), inside that range at its lower end. The rest readings are what is used: the
-sensor's level with the skin still, as a tare would see it.
+(1.4826 MAD / √6), just below that range (they also miss what wanders slowly). The rest readings
+are what is used: the sensor's level with the skin still, as a tare would see it.
 
 Figures of the healthy record (``measure_record``): force 7.43 mN, displacement 0.548 µm, track
 16.97 µm (x) and 20.13 µm (y). The robot's logging rate (:data:`skinkit.lab.sensors.LOG_RATE_HZ`)

@@ -21,6 +21,7 @@ Tracked points: a grid of :data:`TRACK_SPACING_M` over the gap and around the pa
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 from collections.abc import Callable, Mapping
@@ -145,9 +146,7 @@ def model_spec() -> dict[str, Any]:
 
 
 def scar_truth(spec: Mapping[str, Any], scar: Scar | None) -> dict[str, Any]:
-    """``spec`` with the scar's ``inclusion`` effect added (a copy; ``spec`` itself when healthy)."""
-    import copy
-
+    """A copy of ``spec`` with the scar's ``inclusion`` effect added (unchanged when ``scar`` is None)."""
     out = copy.deepcopy(dict(spec))
     if scar is not None:
         out["effects"] = list(out.get("effects", []) or []) + [scar.effect()]

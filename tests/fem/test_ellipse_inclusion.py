@@ -178,3 +178,17 @@ def test_an_ellipse_angle_out_of_bounds_is_refused():
     spec["effects"][0]["angle"] = "120 deg"
     with pytest.raises(SkinkitError, match="angle"):
         load(spec, workers=1)
+
+
+def test_the_centre_itself_is_finite():
+    """A quadrature point exactly at the centre (a symmetric mesh can put one there): its distance
+    is minus the smooth minimum of the semi-axes (between them, as everywhere inside), so φ is the
+    inclusion's less the edge's tail, and every derivative is finite."""
+    params = dict(ELLIPSE, width=0.25e-3)
+    at = np.array([[[params["x"], params["y"], 0.0]]])
+    f = Field("inc", "inclusion", ["skin"], params)
+    m = smooth_min(params["a"], params["b"])
+    inside = 1 + (params["ratio"] - 1) * 0.5 * (1 + math.tanh(m / params["width"]))
+    assert f.value(at, np.zeros((1, 1)), 0.0)[0, 0] == pytest.approx(inside, rel=1e-14)
+    for k in params:
+        assert np.isfinite(f.derivative(k, at, np.zeros((1, 1)), 0.0)).all(), k
