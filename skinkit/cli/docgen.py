@@ -78,12 +78,31 @@ def effect_rows() -> list[list[str]]:
         except Exception as exc:  # listed with its error, as `skinkit plugins` does
             rows.append([f"`{name}`", "", "", f"failed to load: {type(exc).__name__}: {exc}"])
             continue
-        null = dict(e.null())
-        pars = "; ".join(f"`{p.name}` [{p.unit}] in [{_bound(p.lower)}, {_bound(p.upper)}], "
-                         f"null {_bound(null.get(p.name))}, typical {_bound(p.value)}"
-                         for p in e.parameters())
+        forms = tuple(getattr(e, "forms", ()) or ())
+        if len(forms) > 1:   # each form's parameters, the default first
+            pars = "; ".join(f"form `{f}`{' (default)' if i == 0 else ''}: {_parameters(_in_form(e, f))}"
+                             for i, f in enumerate(forms))
+        else:
+            pars = _parameters(e)
         rows.append([f"`{name}`", ", ".join(e.kinds), pars, _summary(e)])
     return rows
+
+
+def _in_form(effect: Any, form: str) -> Any:
+    """A shallow copy of ``effect`` in ``form`` (as an ``[[effects]]`` table choosing it gets)."""
+    import copy
+
+    inst = copy.copy(effect)
+    inst.form = form
+    return inst
+
+
+def _parameters(effect: Any) -> str:
+    """An effect's parameters: unit, bounds, null and typical value, ``; `` between them."""
+    null = dict(effect.null())
+    return "; ".join(f"`{p.name}` [{p.unit}] in [{_bound(p.lower)}, {_bound(p.upper)}], "
+                     f"null {_bound(null.get(p.name))}, typical {_bound(p.value)}"
+                     for p in effect.parameters())
 
 
 def render_effects() -> str:

@@ -59,3 +59,45 @@ def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | No
         for c, row in (mesh.get("discretisation") or {}).items():
             click.echo(f"  {c}: truth's own error at most {row['truth_over_noise']:.3g} noise levels RMS; "
                        f"the model's mesh about {row['model_over_noise']:.3g}")
+
+
+@lab.command("scar-session")
+@click.option("--seed", required=True, type=click.IntRange(min=0),
+              help="seed of every random draw: the scar (ratio, size, angle, position) and the noise")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False),
+              help="the session file to write (experiment file, recorded like the real two-pad record)")
+@click.option("--truth-out", "truth_out", required=True, type=click.Path(dir_okay=False),
+              help="the truth file to write (JSON: the scar and its outline, the truth model, the noise)")
+@click.option("--healthy", is_flag=True,
+              help="no scar: the same geometry, protocol and noise draws (a null session)")
+@click.option("--shared-mesh", is_flag=True,
+              help="solve the truth on the model file's own mesh (default: on a mesh of its own, 2x finer "
+                   "in-plane, 3x through the thickness)")
+def scar_session(seed: int, out: str, truth_out: str, healthy: bool, shared_mesh: bool) -> None:
+    """A two-pad extension session whose truth has a stiff elliptical scar between the pads.
+
+    The model is the coarse two-pad example extension_twopad_scar.toml; the scar's stiffness ratio
+    (2 to 10), diameters (4 to 12 mm), angle and position (inside the pads' gap band) are drawn from
+    SEED. Force, pad displacement and 2D tracks are recorded at the noise levels of the real healthy
+    two-pad record. The scar's outline is in the truth file only.
+    """
+    from skinkit.cli._progress import progress
+    from skinkit.lab.scar import make_scar_session
+    from skinkit.lab.session import check_options
+
+    check_options(out, truth_out)
+    check_out_file(out, "--out")
+    check_out_file(truth_out, "--truth-out")
+    with progress(transient=True, width=24) as bar:
+        doc = make_scar_session(out, truth_out, seed, healthy=healthy, progress=bar,
+                                mesh="shared" if shared_mesh else "own")
+    p = doc["protocols"][0]
+    click.echo(f"session {out}: {p['name']} ({p['samples']} samples, {p['frames']} frames, "
+               f"{p['points']} points)")
+    # the scar itself is not printed: whoever diagnoses the session should not see it
+    what = "healthy (no scar)" if doc.get("scar") is None else "a scar (its outline in this file only)"
+    click.echo(f"truth {truth_out}: {what}, seed {doc['seed']}")
+    mesh = doc.get("mesh") or {}
+    if mesh:
+        click.echo(f"truth mesh: {mesh['mode']}, {mesh['truth_unknowns']:,} unknowns; the model file's "
+                   f"{mesh['model_unknowns']:,}")

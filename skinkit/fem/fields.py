@@ -9,8 +9,11 @@ differentiable: φ is analytic in its parameters, so ∂φ/∂p comes from the c
 
 Kinds (see ``docs/guide/effects.md``):
 
-* ``inclusion``: φ = 1 + (ratio − 1) w, w = ½ [1 − tanh((r − radius)/δ)], r the in-plane
-  distance from (x, y), δ = ``width`` (default radius/4);
+* ``inclusion``, a disc (``radius``): φ = 1 + (ratio − 1) w, w = ½ [1 − tanh(s/δ)], s = r − radius,
+  r the in-plane distance from (x, y), δ = ``width`` (default radius/4); or an ellipse (semi-axes
+  ``a``, ``b``, the ``a`` axis at ``angle`` from x): the same w with s the ellipse's first-order
+  distance (:func:`ellipse_distance`: r − radius when a = b = radius), δ = ``width`` (default
+  :func:`smooth_min` (a, b)/4);
 * ``band``: φ = 1 + (ratio − 1) w, w = ½ [tanh((d − depth + hw)/δ) − tanh((d − depth − hw)/δ)],
   d the depth below the top surface, hw = ``half_width``, δ = ``width`` (default hw/2);
 * ``softening``: φ(t) = 1 − softening · level(t), level(t) in [0, 1] set by whoever drives the
@@ -31,15 +34,67 @@ import numpy as np
 from skinkit.fem.errors import ModelError
 
 _CS = 1e-30
+#: q of a point 1e-12 semi-axes from an ellipse's centre: below it the distance's √(q/h) tends
+#: to the smooth minimum of the semi-axes instead of 0/0 (above it the term is below rounding)
+_CENTRE = 1e-24
 
-#: kind -> (required parameters, optional parameters, default values of optional ones)
+#: kind -> (required parameters, optional parameters); an inclusion also needs the keys of one
+#: of its :data:`SHAPES`
 KINDS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "inclusion": (("x", "y", "radius", "ratio"), ("width",)),
+    "inclusion": (("x", "y", "ratio"), ("radius", "a", "b", "angle", "width")),
     "band": (("depth", "half_width", "ratio"), ("width",)),
     "softening": (("softening",), ("cycles",)),
 }
+#: an inclusion's outline: shape -> (its required keys, its optional keys)
+SHAPES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "disc": (("radius",), ()),
+    "ellipse": (("a", "b"), ("angle",)),
+}
 UNITS = {"x": "m", "y": "m", "radius": "m", "ratio": "1", "width": "m", "depth": "m",
-         "half_width": "m", "softening": "1", "cycles": "1"}
+         "half_width": "m", "softening": "1", "cycles": "1", "a": "m", "b": "m", "angle": "rad"}
+#: exponent of the power mean that stands for the smaller semi-axis (:func:`smooth_min`)
+SMOOTH_MIN_POWER = 4.0
+
+
+def smooth_min(a: Any, b: Any) -> Any:
+    """(2 / (a^−p + b^−p))^(1/p), p = :data:`SMOOTH_MIN_POWER` [m] of semi-axes ``a``, ``b`` [m]
+    (scalars or arrays, real or complex): ``a`` when a = b, between min(a, b) and 2^(1/p) = 1.19
+    times it otherwise, and analytic where min is not (a complex step through it is exact)."""
+    p = SMOOTH_MIN_POWER
+    return (2.0 / (a ** -p + b ** -p)) ** (1.0 / p)
+
+
+def ellipse_distance(dx: Any, dy: Any, a: Any, b: Any, angle: Any) -> Any:
+    """Signed first-order distance [m] of in-plane offsets ``dx``, ``dy`` [m] (any shape) from the
+    centre to the outline of the ellipse of semi-axes ``a``, ``b`` [m], the ``a`` axis at ``angle``
+    [rad] from x: negative inside.
+
+    With u, v the offsets along the axes, q = (u/a)² + (v/b)² and ρ = √q the outline's level
+    (ρ = 1 on it), the distance is (ρ − 1)/|∇ρ| = (ρ − 1) √(q/h), h = u²/a⁴ + v²/b⁴: the distance
+    to the outline to first order near it, exact along both axes (|u| − a and |v| − b) and exactly
+    r − a for a circle. √(q/h) lies between the semi-axes; at the centre, where it is 0/0, the tiny
+    :data:`_CENTRE` added to q and (over m², m the :func:`smooth_min`) to h makes it m (a for a
+    circle, exactly, everywhere). Analytic in every argument: a complex step through it is exact."""
+    c, s = np.cos(angle), np.sin(angle)
+    u = c * dx + s * dy
+    v = -s * dx + c * dy
+    q = (u / a) ** 2 + (v / b) ** 2
+    h = u ** 2 / a ** 4 + v ** 2 / b ** 4
+    m = smooth_min(a, b)
+    return (np.sqrt(q) - 1.0) * np.sqrt((q + _CENTRE) / (h + _CENTRE / m ** 2))
+
+
+def inclusion_shape(params: Mapping[str, Any]) -> str:
+    """``"disc"`` or ``"ellipse"``: the :data:`SHAPES` entry whose keys ``params`` uses (one,
+    complete, not mixed with the other's); a :class:`ModelError` naming what is wrong otherwise."""
+    used = [k for k, (need, opt) in SHAPES.items() if any(n in params for n in need + opt)]
+    if len(used) != 1:
+        raise ModelError("inclusion", "needs either radius (a disc) or a, b and optionally angle (an "
+                         f"ellipse), got {sorted(k for k in params if k in UNITS)}")
+    missing = [k for k in SHAPES[used[0]][0] if k not in params]
+    if missing:
+        raise ModelError("inclusion", f"an {used[0]} needs {missing} as well")
+    return used[0]
 
 
 @dataclass
@@ -67,9 +122,14 @@ class Field:
         if extra:
             raise ModelError(f"fields[{self.name}]", f"unknown parameter(s) {extra} for kind {self.kind!r}")
         p = self.params
+        if self.kind == "inclusion":
+            try:
+                inclusion_shape(p)
+            except ModelError as exc:
+                raise ModelError(f"fields[{self.name}]", exc.problem) from None
         if "ratio" in p and not p["ratio"] > 0:
             raise ModelError(f"fields[{self.name}].ratio", f"must be positive, got {p['ratio']}")
-        for k in ("radius", "half_width", "width", "cycles"):
+        for k in ("radius", "a", "b", "half_width", "width", "cycles"):
             if k in p and not p[k] > 0:
                 raise ModelError(f"fields[{self.name}].{k}", f"must be positive, got {p[k]}")
         if self.kind == "softening" and not 0 <= p["softening"] < 1:
@@ -86,11 +146,16 @@ class Field:
             return 1.0 - p["softening"] * (1.0 - np.exp(-a / p["cycles"])) + 0.0 * depth
         if self.kind == "softening":
             return 1.0 - p["softening"] * float(self.level(t)) + 0.0 * depth
-        if self.kind == "inclusion":
+        if self.kind == "inclusion" and "radius" in p:
             # sqrt of the squares, not hypot: complex-step safe (quadrature points never sit on r = 0)
             r = np.sqrt((Xq[..., 0] - p["x"]) ** 2 + (Xq[..., 1] - p["y"]) ** 2)
             d = p.get("width", p["radius"] / 4)
             w = 0.5 * (1 - np.tanh((r - p["radius"]) / d))
+        elif self.kind == "inclusion":
+            dist = ellipse_distance(Xq[..., 0] - p["x"], Xq[..., 1] - p["y"], p["a"], p["b"],
+                                    p.get("angle", 0.0))
+            d = p.get("width", smooth_min(p["a"], p["b"]) / 4)
+            w = 0.5 * (1 - np.tanh(dist / d))
         else:
             hw = p["half_width"]
             d = p.get("width", hw / 2)
@@ -152,4 +217,5 @@ def read_fields(tables: Any, layer_names: list[str],
     return out
 
 
-__all__ = ["KINDS", "Field", "read_fields"]
+__all__ = ["KINDS", "SHAPES", "SMOOTH_MIN_POWER", "Field", "ellipse_distance", "inclusion_shape",
+           "read_fields", "smooth_min"]

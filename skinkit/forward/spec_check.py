@@ -170,7 +170,7 @@ def check_fields(value: Any) -> None:
     """``[[fields]]``: ``name`` a string (each once), ``kind`` a known kind, ``layers`` names,
     and only the keys of that kind (nearest valid named)."""
     from skinkit.fem.errors import ModelError
-    from skinkit.fem.fields import KINDS, UNITS
+    from skinkit.fem.fields import KINDS, UNITS, inclusion_shape
 
     for i, t in enumerate(_tables(value, "fields", ModelError)):
         e = f"fields[{i}]"
@@ -190,17 +190,22 @@ def check_fields(value: Any) -> None:
         if missing:
             raise ModelError(f"{e}.{missing[0]}",
                              f"is required for a {kind!r} field (it takes {list(need + opt)})")
+        if kind == "inclusion":   # a disc or an ellipse, not both
+            try:
+                inclusion_shape(t)
+            except ModelError as exc:
+                raise ModelError(e, exc.problem) from None
         for k in (*need, *opt):
             if k in t:
                 _field_value(k, _quantity(t[k], UNITS[k], f"{e}.{k}", ModelError), f"{e}.{k}")
 
 
 def _field_value(key: str, x: float, entry: str) -> None:
-    """The ranges of ``[[fields]]`` parameters: a ratio, radius and widths above 0, a depth
+    """The ranges of ``[[fields]]`` parameters: a ratio, radius, semi-axes and widths above 0, a depth
     of at least 0, a softening in [0, 1)."""
     from skinkit.fem.errors import ModelError
 
-    if key in ("ratio", "radius", "half_width", "width") and not x > 0:
+    if key in ("ratio", "radius", "a", "b", "half_width", "width") and not x > 0:
         raise ModelError(entry, f"must be positive, got {x:g}")
     if key == "depth" and not x >= 0:
         raise ModelError(entry, f"must be at least 0 m (below the top surface), got {x:g}")

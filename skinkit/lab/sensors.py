@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -73,6 +73,8 @@ class SensorModel:
     """
 
     scale: float = 1.0
+    #: dimensions of the tracked points as the session file stores them (3: x, y, z tracked)
+    track_dimensions: ClassVar[int] = 3
 
     def __post_init__(self) -> None:
         if not (isinstance(self.scale, (int, float)) and math.isfinite(self.scale) and self.scale > 0):
@@ -97,6 +99,10 @@ class SensorModel:
         if channel == "points":
             return np.full(3, self.scale * TRACK_SIGMA_M)
         raise KeyError(channel)
+
+    def track_noise_m(self) -> list[float]:
+        """The track's ``noise_m`` attribute [m] per axis (x, y, z), as the session file holds it."""
+        return [float(v) for v in self.sigma("points")]
 
     @property
     def profile_sigma(self) -> float:

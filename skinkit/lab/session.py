@@ -391,8 +391,8 @@ def _json_ready(obj: Any) -> Any:
 
 
 def _write_session(path: Path, planned: Sequence[PlannedProtocol], recorded: dict[str, dict[str, Any]],
-                   profile: SurfaceProfile | None, track_noise: np.ndarray | None, progress: Progress | None,
-                   operator: str = "skinkit lab") -> None:
+                   profile: SurfaceProfile | None, track_noise: Sequence[float] | None,
+                   progress: Progress | None, operator: str = "skinkit lab", dimensions: int = 3) -> None:
     from skinkit.schemas import RobotRecord, SurfaceTrack
     from skinkit.schemas.robot import FLAG_CAMERA_TRIGGER
     from skinkit.store import create_experiment
@@ -416,7 +416,8 @@ def _write_session(path: Path, planned: Sequence[PlannedProtocol], recorded: dic
             if "points" in rec and track_noise is not None:
                 pts = rec["points"]
                 exp.write_track(p.protocol.name, SurfaceTrack(pts, np.ones(pts.shape[:2], bool), p.frames))
-                exp.set_track_attrs(p.protocol.name, noise_m=[float(v) for v in track_noise], dimensions=3)
+                exp.set_track_attrs(p.protocol.name, noise_m=[float(v) for v in track_noise],
+                                    dimensions=dimensions)
         if profile is not None:
             exp.write_profile("undeformed", profile)
 
@@ -478,17 +479,19 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
              protocols: str | Sequence[str] | None = None, noise_scale: float = 1.0,
              progress: Progress | None = None, workers: int | None = None,
              points: np.ndarray | None = None, mesh: str = "own",
-             mesh_factor: int = DEFAULT_MESH_FACTOR) -> VirtualSession:
+             mesh_factor: int = DEFAULT_MESH_FACTOR, sensors: SensorModel | None = None) -> VirtualSession:
     """Run ``truth`` through the protocols and record it (see :func:`make_session`); nothing is
     written. ``points`` ``(P, 3)`` [m]: material points of the top surface to follow instead of
     the tracked grid (e.g. a dense grid from which camera views are rendered). ``mesh``: a
     finite-element truth description is solved on a mesh of its own, ``mesh_factor`` times finer
     with its own node placement (``"own"``, :mod:`skinkit.lab.truth_mesh`), or on the mesh its
-    description gives, the model's (``"shared"``)."""
+    description gives, the model's (``"shared"``). ``sensors``: the instruments (default: the
+    robot's, :class:`SensorModel` at ``noise_scale``; when given, ``noise_scale`` is its own)."""
     check_mode(mesh, mesh_factor)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise LabError(f"--seed: expected a non-negative integer, got {seed!r}")
-    sensors = SensorModel(check_noise_scale(noise_scale))
+    if sensors is None:
+        sensors = SensorModel(check_noise_scale(noise_scale))
     names = parse_protocols(protocols)
     is_model = hasattr(truth, "predict")
     if is_model:
@@ -571,7 +574,8 @@ def write_session(vs: VirtualSession, out: str | os.PathLike[str], truth_out: st
     tmp_js = truth_out.with_name(f".{truth_out.name}.{os.getpid()}.tmp")
     done: list[Path] = []
     try:
-        _write_session(tmp_h5, vs.planned, vs.recorded, profile, vs.sensors.sigma("points"), progress)
+        _write_session(tmp_h5, vs.planned, vs.recorded, profile, vs.sensors.track_noise_m(), progress,
+                       dimensions=vs.sensors.track_dimensions)
         tmp_js.write_text(jsonio.dumps(doc, indent=1, allow_nan=False) + "\n")
         os.replace(tmp_h5, out)
         done.append(out)

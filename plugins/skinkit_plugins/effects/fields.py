@@ -69,23 +69,39 @@ class Fascia(BaseEffect):
 
 class Inclusion(BaseEffect):
     """A stiffer or softer region of the skin (a scar): an ``inclusion`` field on the skin layer,
-    centre ``x``, ``y`` [m] in the skin plane, ``radius`` [m], stiffness ``ratio`` [1] (null 1),
-    edge width the field's default (radius/4)."""
+    stiffness ``ratio`` [1] (null 1), centre ``x``, ``y`` [m] in the skin plane, a disc (form
+    ``disc``, the default) or an ellipse (form ``ellipse``); ``docs/guide/effects.md``.
+
+    The edge width is the field's default. The form is chosen in the ``[[effects]]`` table
+    (``form = "ellipse"``):
+
+    * ``"disc"`` (the default): ``radius`` [m]; edge width radius/4;
+    * ``"ellipse"``: semi-axes ``a``, ``b`` [m], the ``a`` axis at ``angle`` [rad] from x (in
+      [-90, 90] deg: an ellipse turned by 180 deg is itself); edge width a quarter of a smooth
+      minimum of a and b (:func:`skinkit.fem.fields.smooth_min`). A scar is usually elongated
+      (a healed incision): the ellipse's two extra parameters carry its length and direction.
+    """
 
     name = "inclusion"
     kinds = ("fe",)
     touches = {"fe": frozenset({"fields"})}
+    forms = ("disc", "ellipse")
 
     def _declared(self) -> list[Declared]:
-        return [declare("ratio", 3.0, 1.0, "1", 0.05, 50.0),
-                declare("x", 3.0, 0.0, "mm", -20.0, 20.0),
-                declare("y", 3.0, 0.0, "mm", -20.0, 20.0),
-                declare("radius", 2.0, 2.0, "mm", 0.2, 20.0)]
+        out = [declare("ratio", 3.0, 1.0, "1", 0.05, 50.0),
+               declare("x", 3.0, 0.0, "mm", -20.0, 20.0),
+               declare("y", 3.0, 0.0, "mm", -20.0, 20.0)]
+        if self.chosen_form() == "disc":
+            return out + [declare("radius", 2.0, 2.0, "mm", 0.2, 20.0)]
+        return out + [declare("a", 4.0, 2.0, "mm", 0.2, 20.0),
+                      declare("b", 2.0, 2.0, "mm", 0.2, 20.0),
+                      declare("angle", 30.0, 0.0, "deg", -90.0, 90.0)]
 
     def _apply_fe(self, model: dict[str, Any], v: dict[str, float]) -> None:
         skin = self.layers(model)[0]
+        shape = ("radius",) if self.chosen_form() == "disc" else ("a", "b", "angle")
         self.add_field(model, {"kind": "inclusion", "layers": [skin["name"]], "x": v["x"], "y": v["y"],
-                               "radius": v["radius"], "ratio": v["ratio"]})
+                               **{k: v[k] for k in shape}, "ratio": v["ratio"]})
 
 
 class Preconditioning(BaseEffect):
