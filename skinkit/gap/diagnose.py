@@ -51,7 +51,9 @@ import numpy as np
 from skinkit.errors import SkinkitError
 from skinkit.forward.stages import stage
 from skinkit.gap.checks import GapError, check_channels, check_effects
+from skinkit.gap.mesh_check import discretisation, mesh_only
 from skinkit.gap.report_files import write_report
+from skinkit.gap.scan_step import ScanOptions, check_regions, scan_round
 from skinkit.gap.score import (
     ScoreTest,
     Sensitivities,
@@ -269,6 +271,9 @@ class _Run:
     max_iterations: int = 50
     final: FitResult | None = None   # the final model refitted with its own model error
     regions: Any = None              # the model geometry's regions of the tracked surface (where.locate)
+    scan: ScanOptions | None = None  # region scans (skinkit.gap.scan_step): options, results, best regions
+    scans: list[dict[str, Any]] = field(default_factory=list)
+    held_regions: dict[str, float] = field(default_factory=dict)
 
     @property
     def final_fit(self) -> FitResult:
@@ -284,7 +289,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              progress: Callable[[str], None] | None = None,
              protocols: Sequence[str] | None = None, error_estimate: bool = True,
              min_share: float = MIN_SHARE, noise: str = "auto", max_iterations: int = 50,
-             model_error: bool = True) -> GapReport:
+             model_error: bool = True, scan: ScanOptions | None = None) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -305,7 +310,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     ``max_iterations``: evaluations each fit may make (the calibration and every refit);
     ``model_error``: a finite-element model's discretisation error is estimated at the
     calibration and carried as noise by every later step (:mod:`skinkit.inverse.approximation`;
-    it then replaces ``error_estimate``'s projection).
+    it then replaces ``error_estimate``'s projection); ``scan``: how candidates that declare a
+    region are scanned over the tracked points (:mod:`skinkit.gap.scan_step`; None: the defaults).
     """
     from skinkit.forward import load, model_kind, read_description, region_partitions
 
@@ -327,7 +333,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
 
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
                      until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations,
-                     model_error=model_error)
+                     model_error=model_error, scan=scan)
     if cal["model_error"] is not None:
         error_estimate = False     # the mesh's error is in the noise model already
     state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
@@ -336,7 +342,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
                max_effects=max_effects, error_estimate=error_estimate, state0=state0, current=state0,
                theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1,
                min_share=float(min_share), max_iterations=int(max_iterations),
-               regions=region_partitions(spec))
+               regions=region_partitions(spec), scan=scan)
     if effects is None:
         _more_of_the_same(run)     # a repeatable effect the model file already has: one more term
     for rnd in range(max(max_effects, 1)):
@@ -357,7 +363,8 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
                observations: Observations | str | os.PathLike[str], *, effects: Sequence[str] | None,
                holdout: Sequence[str], free: Sequence[str] | None, until: float | None,
                protocols: Sequence[str] | None, say: Callable[[str], None], noise: str = "auto",
-               max_iterations: int = 50, model_error: bool = False) -> dict[str, Any]:
+               max_iterations: int = 50, model_error: bool = False, scan: ScanOptions | None = None
+               ) -> dict[str, Any]:
     """The session read and checked, the candidate effects, and the model calibrated on it:
     ``name``, ``source``, ``observations``, ``held``, ``present`` (the model's effects),
     ``theta`` (free names), ``candidates``, ``result`` (the fit), ``state0`` (:func:`_state`),
@@ -390,6 +397,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
             raise GapError("session: every protocol is held out; the calibration needs fitted protocols")
         cands = check_effects(kind, present, list(effects) if effects is not None else None)
         check_channels(base, observations)
+        check_regions(spec, observations, scan)
         held = observations.held_out()
         say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
         with stage("calibration"):
@@ -430,7 +438,9 @@ def _round(run: _Run, rnd: int) -> bool:
     if not run.remaining:
         run.rounds.append(entry)
         return False
-    sens, tests, ok, mesh_only, top = _score(run, spec_r, values)
+    rs = scan_round(run, spec_r, values, rnd)
+    sens, tests, ok, mesh_only, top = _score(run, spec_r, values, rs)
+    values = {**values, **rs.values()}     # region candidates at their best regions: tested, refitted
     gate = _gate(loc, tests, run.alpha)
     if not gate["significant"]:
         top = []             # nothing will be named: no refit
@@ -460,7 +470,7 @@ def _round(run: _Run, rnd: int) -> bool:
     return _name(run, winner, states[winner.effect], rnd)
 
 
-def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
+def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float], rs: Any
            ) -> tuple[Sensitivities, list[ScoreTest], dict[str, bool], list[str], list[ScoreTest]]:
     """The score tests of the remaining candidates at the current model: ``(sensitivities, tests,
     significant after correction, explained by the mesh alone, the top ones to refit)``; makes
@@ -468,19 +478,19 @@ def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
     from skinkit.gap.score import score_all
 
     with stage("score sensitivities"):
-        sens = collect(spec_r, run.observations, values, run.theta_r, run.remaining, load=run.loader,
-                       progress=run.say)
+        sens = collect(spec_r, run.observations, {**values, **rs.values()}, run.theta_r, run.remaining,
+                       load=run.loader, progress=run.say)
     run.n_forward += sens.n_forward
-    tests = score_all(sens)
+    tests = rs.adjust(score_all(sens))
     ok = corrected(tests, run.alpha)
     if run.error_estimate and run.disc is None and any(ok.values()) and has_mesh(run.base):
         with stage("discretisation check"):
-            run.disc = _discretisation(run.base, run.observations, values, run.state0["prediction"], sens,
-                                       run.alpha, run.say)
+            run.disc = discretisation(run.base, run.observations, values, run.state0["prediction"], sens,
+                                      run.alpha, run.say)
         run.n_forward += 1
-    mesh_only = _mesh_only(run.disc, sens, tests, ok, run.alpha)
-    top = [t for t in tests if ok[t.effect] and t.effect not in mesh_only][:run.candidates]
-    return sens, tests, ok, mesh_only, top
+    explained = mesh_only(run.disc, sens, tests, ok, run.alpha, rs.adjust)
+    top = [t for t in tests if ok[t.effect] and t.effect not in explained][:run.candidates]
+    return sens, tests, ok, explained, top
 
 
 def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float], sens: Sensitivities,
@@ -638,8 +648,9 @@ def _alone(run: _Run, cal: Mapping[str, Any], label: str) -> float | None:
         return None
     sens, tests = run.first_scores
     try:
-        st = _refit(run.spec, [], run.observations, run.held, _values(cal["result"]), cal["theta"],
-                    tests[label], sens, load=run.loader, say=run.say, max_iterations=run.max_iterations)
+        start = {**_values(cal["result"]), **run.held_regions}
+        st = _refit(run.spec, [], run.observations, run.held, start, cal["theta"], tests[label], sens,
+                    load=run.loader, say=run.say, max_iterations=run.max_iterations)
     except SkinkitError as exc:
         run.say(f"refit of the first model with {label} alone failed: {exc}")
         return None
@@ -744,7 +755,7 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
              "final_model_error": None if run.final is None else run.final.extra.get("model_error"),
              "effects_model": [dict(t) for t in run.tables], "minor": v["minor"],
              "noise": v["noise"], "remaining": v["remaining"], "warnings": v["warnings"],
-             "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0,
+             "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0, "region_scan": run.scans,
              "series": diagnosis_series(observations, state0, final, run.additions)}
     gap_d = _gap_dict(loc0)
     gap_d.update(run.gap0 or {"significant": bool(loc0.significant),
@@ -759,37 +770,6 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
     report.extra["messages"] = messages(report.to_dict(), loc0, run.gap0 or {}, cpd, v["added"],
                                         run.min_share, sig_tests, refit_any)
     return report
-
-
-def _discretisation(model: Any, observations: Observations, values: Mapping[str, float], coarse: Prediction,
-                    sens: Any, alpha: float, say: Callable[[str], None]) -> dict[str, Any] | None:
-    """The calibrated model's discretisation error in the score step's residual space (``e``,
-    exact − coarse, whitened) with the residual figures of
-    :func:`skinkit.inverse.discretisation.residual_check`; None (said) when it cannot be made."""
-    from skinkit.inverse.discretisation import error_in_residual, residual_check
-    try:
-        e, summary, _ = error_in_residual(model, observations, dict(values), coarse, progress=say)
-    except SkinkitError as exc:
-        say(f"discretisation check not made: {exc}")
-        return None
-    if e.size != sens.z.size:
-        say("discretisation check not made: its residual does not match the score step's")
-        return None
-    chk = residual_check(sens.z, sens.J_theta, e)
-    return {**summary, **{k: v for k, v in chk.items() if k != "bias"}, "e": e, "explains": []}
-
-
-def _mesh_only(disc: Mapping[str, Any] | None, sens: Any, tests: Sequence[ScoreTest], ok: Mapping[str, bool],
-               alpha: float) -> list[str]:
-    """The candidates significant on the residual but no longer once the discretisation error's
-    signature ``e`` is projected out beside the fitted parameters' (at any size: the estimate's
-    size rests on an assumed order, its shape does not): what they would explain, a finer mesh
-    would explain too."""
-    if disc is None or not np.any(disc["e"]):
-        return []
-    from skinkit.gap.score import score_all
-    ok_exact = corrected(score_all(sens, nuisance=disc["e"][:, None]), alpha)
-    return [t.effect for t in tests if ok[t.effect] and not ok_exact.get(t.effect, False)]
 
 
 __all__ = ["AIC_MARGIN", "GapError", "check_effects", "diagnose", "write_report"]

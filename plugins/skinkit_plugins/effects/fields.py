@@ -75,6 +75,7 @@ class Inclusion(BaseEffect):
     name = "inclusion"
     kinds = ("fe",)
     touches = {"fe": frozenset({"fields"})}
+    region = ("x", "y", "radius")   # the diagnosis scans centres and radii over the tracked area
 
     def _declared(self) -> list[Declared]:
         return [declare("ratio", 3.0, 1.0, "1", 0.05, 50.0),
