@@ -47,6 +47,7 @@ from skinkit import registry
 from skinkit.errors import SkinkitError
 from skinkit.gap.score import (
     FLAT,
+    Colour,
     EffectColumns,
     ScoreTest,
     colour_of,
@@ -258,12 +259,24 @@ class RegionScan:
             return alpha / len(self.tests)
         return max(float(np.quantile(self.min_p, alpha)), alpha / len(self.tests))
 
+    def _log10(self, i: int, adjusted: bool = False) -> float:
+        """log10 of region ``i``'s raw (or adjusted) p, finite where p underflows: the χ²_q tail's
+        leading term, log Q(q/2, LM/2) ≈ (q/2 − 1) log(LM/2) − LM/2 − log Γ(q/2), then Bonferroni's
+        R for the adjusted one."""
+        t = self.tests[i]
+        lp = float(self.log_p_adjusted[i]) if adjusted else t.log_p
+        if math.isfinite(lp) or t.dof < 1:
+            return lp / math.log(10)
+        h = 0.5 * t.dof
+        raw = (h - 1) * math.log(0.5 * t.statistic) - 0.5 * t.statistic - math.lgamma(h)
+        return (raw + (math.log(len(self.tests)) if adjusted else 0.0)) / math.log(10)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the grid, every region's statistic and p-values, the best region, the cost."""
         regs = self.grid.regions()
         b = self.best
         t = self.tests[b]
-        ln10 = math.log(10)
+        n = range(len(self.tests))
         return {
             "effect": self.effect, "parameters": list(self.region), "tested": self.tested,
             "area": {"lower_m": self.area.lower.tolist(), "upper_m": self.area.upper.tolist(),
@@ -272,12 +285,12 @@ class RegionScan:
                      "sizes_m": self.grid.sizes.tolist(), "regions": int(len(regs))},
             "regions": {"x_m": regs[:, 0].tolist(), "y_m": regs[:, 1].tolist(), "size_m": regs[:, 2].tolist(),
                         "statistic": [x.statistic for x in self.tests], "dof": [x.dof for x in self.tests],
-                        "log10_p": [x.log_p / ln10 for x in self.tests],
-                        "log10_p_adjusted": [float(v) / ln10 for v in self.log_p_adjusted]},
+                        "log10_p": [self._log10(i) for i in n],
+                        "log10_p_adjusted": [self._log10(i, True) for i in n]},
             "best": {"x_m": float(regs[b, 0]), "y_m": float(regs[b, 1]), "size_m": float(regs[b, 2]),
-                     "statistic": t.statistic, "dof": t.dof, "p_value": t.p_value, "log10_p": t.log_p / ln10,
-                     "p_adjusted": float(self.p_adjusted[b]),
-                     "log10_p_adjusted": float(self.log_p_adjusted[b]) / ln10, "step": t.step},
+                     "statistic": t.statistic, "dof": t.dof, "p_value": t.p_value, "log10_p": self._log10(b),
+                     "p_adjusted": float(self.p_adjusted[b]), "log10_p_adjusted": self._log10(b, True),
+                     "step": t.step},
             "adjustment": {"method": "max-statistic over the scanned regions (joint Gaussian null of their "
                                      "score vector), bounded by Bonferroni", "draws": int(self.min_p.size),
                            "critical_p_05": self.critical_p(0.05)},
@@ -315,7 +328,6 @@ def scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[st
         raise ScanError(f"region scan of {label}: the session has no tracked points, so no imaged area "
                         "to scan")
     declared = {p.name: p for p in plugin.parameters()}
-    null = {k: float(v) for k, v in plugin.null().items()}
     xs, ys, ss = (declared[n] for n in region)
     grid = scan_grid(area, spacing, sizes, size_bounds=(ss.lower, ss.upper), size_name=f"{label}.{region[2]}",
                      centre_bounds=((xs.lower, xs.upper), (ys.lower, ys.upper)))
@@ -339,8 +351,11 @@ def scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[st
     finally:
         model.close()
     wall = time.perf_counter() - t0
-    tests, A = _region_tests(res.z, res.J, len(theta), label, tested, region, declared, null, pred, fitted)
-    min_p = _null_min_p(A, [t.dof for t in tests])
+    colour = colour_of(fitted, pred)
+    if colour is not None and colour.blocks[-1][0].stop != res.z.size:
+        colour = None          # not the residual's layout: test as if the coefficients were known
+    tests, A = region_tests(res.z, res.J, len(theta), label, plugin, colour, pred.methods)
+    min_p = null_min_p(A, [t.dof for t in tests])
     scan_r = RegionScan(label, tuple(f"{label}.{n}" for n in region), [f"{label}.{n}" for n in tested],  # type: ignore[arg-type]
                         grid, area, tests, np.ones(len(tests)), np.zeros(len(tests)), min_p)
     adj = [scan_r.adjusted(t.log_p) for t in tests]
@@ -357,16 +372,19 @@ def scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[st
     return scan_r
 
 
-def _region_tests(z: np.ndarray, J: np.ndarray, k: int, label: str, tested: list[str],
-                  region: tuple[str, ...], declared: Mapping[str, Any], null: Mapping[str, float],
-                  pred: Prediction, fitted: Observations) -> tuple[list[ScoreTest], list[np.ndarray]]:
-    """Every region's score test from the scan's residual ``z`` ``(m,)`` and Jacobian ``J``
-    ``(m, k + R·q)`` (θ first), and each region's projected unit columns ``(m, q_r)``."""
+def region_tests(z: np.ndarray, J: np.ndarray, k: int, label: str, plugin: Any, colour: Colour | None = None,
+                 methods: Mapping[str, str] | None = None) -> tuple[list[ScoreTest], list[np.ndarray]]:
+    """Every region's score test (:func:`skinkit.gap.score.score_test`) from the scan's whitened
+    residual ``z`` ``(m,)`` and Jacobian ``J`` ``(m, k + R·q)`` [1 per SI unit]: the k fitted
+    parameters first, then each region's q tested parameters (the effect ``plugin``'s parameters
+    other than its region, in declared order); and each region's projected unit columns
+    ``(m, q_r)`` (for :func:`null_min_p`). ``methods``: model name -> how its column was made."""
+    region = tuple(plugin.region)
+    declared = {p.name: p for p in plugin.parameters()}
+    null = {n: float(v) for n, v in plugin.null().items()}
+    tested = [n for n in declared if n not in region]
+    methods = methods or {}
     U = fitted_basis(J[:, :k])
-    methods = pred.methods
-    colour = colour_of(fitted, pred)
-    if colour is not None and colour.blocks[-1][0].stop != z.size:
-        colour = None          # not the residual's layout: test as if the coefficients were known
     q = len(tested)
     names = [f"{label}.{n}" for n in tested]
     typical = {f"{label}.{n}": float(declared[n].value) for n in declared}
@@ -391,8 +409,9 @@ def _region_tests(z: np.ndarray, J: np.ndarray, k: int, label: str, tested: list
     return tests, cols_out
 
 
-def _null_min_p(A: Sequence[np.ndarray], dofs: Sequence[int], draws: int = N_DRAWS) -> np.ndarray:
-    """Sorted ``(draws,)`` smallest p over the regions under the null: t = Aᵀz ~ N(0, G), G = AᵀA,
+def null_min_p(A: Sequence[np.ndarray], dofs: Sequence[int], draws: int = N_DRAWS) -> np.ndarray:
+    """Sorted ``(draws,)`` smallest p over the regions under the null, given each region's
+    projected unit columns ``A[r]`` ``(m, q_r)`` and its test's dof: t = Aᵀz ~ N(0, G), G = AᵀA,
     each region's LM = t_rᵀ G_rr⁺ t_r referred to χ² with its dof (module docstring)."""
     groups = [a.shape[1] for a in A]
     if not any(groups):
@@ -428,4 +447,4 @@ def _null_min_p(A: Sequence[np.ndarray], dofs: Sequence[int], draws: int = N_DRA
 
 
 __all__ = ["DEFAULT_CELLS", "DEFAULT_SIZES", "N_DRAWS", "ImagedArea", "RegionScan", "ScanError", "ScanGrid",
-           "imaged_area", "region_of", "scan", "scan_grid"]
+           "imaged_area", "null_min_p", "region_of", "region_tests", "scan", "scan_grid"]
