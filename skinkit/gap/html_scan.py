@@ -25,7 +25,7 @@ import numpy as np
 #: the panel's side [px] and its margin [px]
 SIDE, PAD = 360, 34
 #: colours of the scan's best region and of the refitted region
-BEST, REFIT = "#1e8449", "#7d3c98"
+BEST, REFIT = "#00c853", "#7d3c98"
 
 
 def _e(x: Any) -> str:

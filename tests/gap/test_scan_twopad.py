@@ -43,7 +43,8 @@ def _scan(path):
     from skinkit.gap.scan import scan
 
     spec, obs, values, plain = _calibrated(path)
-    return scan(spec, obs, values, FREE, "inclusion", load=lambda s: load(s, workers=1), reference_wall_s=plain)
+    return scan(spec, obs, values, FREE, "inclusion", load=lambda s: load(s, workers=1),
+                reference_wall_s=plain)
 
 
 def test_the_scan_finds_a_scar_it_did_not_make(tmp_path):
