@@ -134,6 +134,9 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         state_file = out / "checkpoint.json"
         params, bounds, given = _fit_parameters(model, free, bound_items, start_items)
         names = params.free_names
+        # a region effect's (a scar's) centre must lie where the points are
+        from skinkit.gap.scan_step import check_centres
+        check_centres(getattr(model, "effects", []), params.values(), obs, list(given))
         # what makes two runs the same fit: a resumed run must match it exactly
         identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
                     "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,

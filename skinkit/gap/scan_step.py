@@ -111,6 +111,26 @@ def check_regions(spec: Mapping[str, Any], observations: Observations, options: 
     scan_grid(area, options.spacing, options.sizes)
 
 
+def check_centres(effects: Sequence[Any], values: Mapping[str, float], observations: Observations,
+                  given: Sequence[str] = ()) -> None:
+    """Refuse, as one :class:`ScanError` line naming the parameters, a region effect of a loaded
+    model whose centre lies outside the tracked points' extent: ``effects`` the model's applied
+    effects (each with ``name``, its label, and ``plugin``), ``values`` model name -> SI (the
+    start or fixed values), ``given`` the names the user gave (``--start``: said so). Nothing
+    to check without tracked points."""
+    area = imaged_area(observations)
+    if area is None:
+        return
+    for e in effects:
+        reg = getattr(getattr(e, "plugin", None), "region", None)
+        nx, ny = (f"{e.name}.{reg[0]}", f"{e.name}.{reg[1]}") if reg else ("", "")
+        if nx in values and ny in values and not area.contains((values[nx], values[ny])):
+            how = "--start " if nx in given or ny in given else ""
+            x, y = values[nx] * 1e3, values[ny] * 1e3
+            raise ScanError(f"{how}{nx}, {ny}: centre x {x:.3g} mm, y {y:.3g} mm "
+                            f"lies outside the imaged area: the tracked points span {area.describe()}")
+
+
 def scan_round(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float], rnd: int) -> RoundScan:
     """Scan every remaining candidate of the diagnosis ``run`` that declares a region (module
     docstring) on the current model ``spec_r`` at ``values``; each scan is said, counted in
@@ -160,4 +180,4 @@ def scan_options(spacing_mm: float | None, sizes_mm: Sequence[float] | None, ena
     return ScanOptions(None if spacing_mm is None else mm(spacing_mm, "--scan-grid"), sizes, enabled)
 
 
-__all__ = ["RoundScan", "ScanOptions", "check_regions", "scan_options", "scan_round"]
+__all__ = ["RoundScan", "ScanOptions", "check_centres", "check_regions", "scan_options", "scan_round"]

@@ -111,8 +111,8 @@ def test_scan_options_from_the_command_line_are_checked():
 @pytest.mark.needs_plugins
 def test_bad_regions_are_refused_before_anything_runs():
     obs = session(grid_points())
-    spec = {"effects": [{"name": "inclusion", "x": "30 mm", "ratio": 3.0}]}
-    with pytest.raises(ScanError, match=r"^effects\[0\] \(inclusion\): centre x 30 mm, y 0 mm lies outside "
+    spec = {"effects": [{"name": "inclusion", "x": "12 mm", "ratio": 3.0}]}
+    with pytest.raises(ScanError, match=r"^effects\[0\] \(inclusion\): centre x 12 mm, y 0 mm lies outside "
                                         r"the imaged area: the tracked points span x -8.0 to 8.0 mm, "
                                         r"y -8.0 to 8.0 mm$"):
         check_regions(spec, obs, None)

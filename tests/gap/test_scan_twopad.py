@@ -84,3 +84,33 @@ def test_a_scan_without_tracked_points_is_refused(healthy):
                          for po in obs}, obs.profile, obs.source)
     with pytest.raises(ScanError, match=r"^region scan of inclusion: the session has no tracked points"):
         scan(spec, bare, values, FREE, "inclusion", load=lambda s: pytest.fail("nothing may be loaded"))
+
+
+def test_bad_region_input_is_one_line_before_anything_runs(healthy, tmp_path):
+    """Through the command line, on the healthy session (1 mm points within 8 mm): a grid finer
+    than the points, a scar placed outside them in the model file, and one started there."""
+    import tomli_w
+
+    from tests.core._cli import in_process, one_error
+
+    model = tmp_path / "twopad.toml"
+    model.write_text(tomli_w.dumps(twopad_spec()))
+    one_error(in_process("gap", "diagnose", str(model), str(healthy), "--scan-grid", "0.5"),
+              "--scan-grid 0.5 mm is finer than the tracked points resolve: their typical spacing is")
+    one_error(in_process("gap", "diagnose", str(model), str(healthy), "--scan-sizes", "2,-1"),
+              "--scan-sizes: expected a positive number of mm, got '-1'")
+    one_error(in_process("gap", "diagnose", str(model), str(healthy), "--no-scan", "--scan-grid", "2"),
+              "--no-scan: cannot be given with --scan-grid or --scan-sizes")
+    scarred = tmp_path / "scarred.toml"
+    spec = twopad_spec()
+    spec["effects"] = [{"name": "inclusion", "x": "12 mm", "ratio": 3.0}]
+    scarred.write_text(tomli_w.dumps(spec))
+    one_error(in_process("gap", "diagnose", str(scarred), str(healthy)),
+              "effects[0] (inclusion): centre x 12 mm, y 0 mm lies outside the imaged area: the tracked "
+              "points span x -8.0 to 8.0 mm, y -8.0 to 8.0 mm")
+    spec["effects"] = [{"name": "inclusion"}]
+    scarred.write_text(tomli_w.dumps(spec))
+    one_error(in_process("fit", str(scarred), str(healthy), "--free", "skin.E,inclusion.x",
+                         "--start", "inclusion.x=12 mm", "--out", str(tmp_path / "fit")),
+              "--start inclusion.x, inclusion.y: centre x 12 mm, y 0 mm lies outside the imaged area")
+    assert not (tmp_path / "fit").exists()
