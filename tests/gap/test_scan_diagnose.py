@@ -57,7 +57,7 @@ def test_the_diagnosis_finds_names_and_sizes_the_scar(tmp_path):
 
 
 def test_a_healthy_session_names_nothing_and_finds_no_region(tmp_path):
-    d = _diagnose(make(tmp_path / "healthy", twopad_spec(), seed=3))
+    d = _diagnose(make(tmp_path / "healthy", twopad_spec(), seed=5))
     assert d["named"] == [], d["messages"]
     best = d["region_scan"][0]["best"]
     assert best["p_adjusted"] >= 0.05, best
