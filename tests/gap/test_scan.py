@@ -201,3 +201,16 @@ def test_a_signal_is_found_at_its_region():
     p_adj, log_p_adj = s.adjusted(s.tests[s.best].log_p)
     assert p_adj < 1e-6
     assert log_p_adj >= s.tests[s.best].log_p        # adjusting never makes a p smaller
+
+
+@pytest.mark.needs_plugins
+def test_a_region_effect_takes_instance_labels():
+    """Two scars in one model (what a scan's model holds, one per candidate region)."""
+    from skinkit.forward.effects import apply_all, resolve
+
+    second = {"name": "inclusion", "instance": "inclusion-b", "x": "3 mm"}
+    eff = resolve([{"name": "inclusion"}, second], "fe")
+    assert [(e.name, e.effect) for e in eff] == [("inclusion", "inclusion"), ("inclusion-b", "inclusion")]
+    spec = {"layers": [{"name": "skin", "thickness": "1 mm"}]}
+    fields = apply_all(spec, eff)["fields"]
+    assert [(f["name"], f["x"]) for f in fields] == [("inclusion", 0.0), ("inclusion-b", pytest.approx(3e-3))]
