@@ -149,3 +149,12 @@ def test_the_browser_draws_the_outline(tmp_path):
     # two circles of r > 10 px drawn 2.5 px wide: at least 2 x 2π x 10 x 2 px of the outline's colour
     assert pixels > 250, pixels
     assert pages["bare"] == ([], 0)
+
+
+def test_the_session_report_nests_the_region_section_only_when_scanned():
+    from skinkit.report.gaps import _gap
+
+    nested = _gap("scar", report())
+    assert 'id="gap-scar-scan"' in nested and nested.count('class="scan-region"') == 2
+    bare = {k: v for k, v in report().items() if k != "region_scan"}
+    assert "scan-region" not in _gap("bare", bare) and "gap-bare-scan" not in _gap("bare", bare)
