@@ -250,7 +250,8 @@ class RegionScan:
         n = self.min_p.size
         count = int(np.searchsorted(self.min_p, math.exp(log_p), side="right")) if n else 0
         log_mc = math.log((count + 1) / (n + 1)) if n else 0.0
-        log_adj = min(log_p + math.log(len(self.tests)), log_mc, 0.0)
+        # never below the raw p (the draws' noise could put a share a little under it)
+        log_adj = max(min(log_p + math.log(len(self.tests)), log_mc, 0.0), log_p)
         return math.exp(log_adj), log_adj
 
     def critical_p(self, alpha: float = 0.05) -> float:
