@@ -214,3 +214,23 @@ def test_a_region_effect_takes_instance_labels():
     spec = {"layers": [{"name": "skin", "thickness": "1 mm"}]}
     fields = apply_all(spec, eff)["fields"]
     assert [(f["name"], f["x"]) for f in fields] == [("inclusion", 0.0), ("inclusion-b", pytest.approx(3e-3))]
+
+
+def test_the_diagnosis_tests_a_scanned_candidate_with_the_adjusted_p():
+    from skinkit.gap.scan_step import RoundScan
+    from skinkit.gap.score import ScoreTest
+
+    J, bumps = residual_space()
+    u = bumps[:, 4] / np.linalg.norm(bumps[:, 4])
+    s = scanned(np.random.default_rng(2).standard_normal(J.shape[0]) + 4.0 * u, J)
+    b = s.tests[s.best]
+    other = ScoreTest("other", 9.0, 1, 2.7e-3, math.log(2.7e-3), {}, np.zeros(1), ["other.k"], {}, [], {},
+                      False)
+    out = RoundScan({"spot": s}).adjust([b, other])
+    adj = next(t for t in out if t.effect == "spot")
+    p, log_p = s.adjusted(b.log_p)
+    assert (adj.p_value, adj.log_p, adj.statistic) == (p, log_p, b.statistic) and p > b.p_value
+    assert all("best region" in adj.held[n] for n in ("spot.x", "spot.y", "spot.radius"))
+    assert next(t for t in out if t.effect == "other") is other
+    order = {"spot": log_p, "other": other.log_p}
+    assert [t.effect for t in out] == sorted(order, key=order.get)
