@@ -9,7 +9,9 @@ held-out protocols stay out of the fit), then in rounds:
    to the model, at its null, from one prediction with sensitivities; the top candidates
    (``candidates``, default 3) whose test survives the Bonferroni correction are refitted with
    the effect added (its parameters free, started a linearised step from the null) and compared
-   by AIC and held-out error. An effect is **added** to the model only when all of these hold:
+   by AIC and held-out error (a candidate that declares a region is first scanned over the tracked
+   points and tested and refitted at its best region: :mod:`skinkit.gap.scan_step`). An effect
+   is **added** to the model only when all of these hold:
 
    * the gap is significant: the residual's family (step 1: the whole residual and every cell,
      Holm) or the score tests' family (the best candidate's p·K) rejects, each at α/2, so that
@@ -53,7 +55,7 @@ from skinkit.forward.stages import stage
 from skinkit.gap.checks import GapError, check_channels, check_effects
 from skinkit.gap.mesh_check import discretisation, mesh_only
 from skinkit.gap.report_files import write_report
-from skinkit.gap.scan_step import ScanOptions, check_regions, scan_round
+from skinkit.gap.scan_step import RoundScan, ScanOptions, check_regions, scan_round
 from skinkit.gap.score import (
     ScoreTest,
     Sensitivities,
@@ -470,7 +472,7 @@ def _round(run: _Run, rnd: int) -> bool:
     return _name(run, winner, states[winner.effect], rnd)
 
 
-def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float], rs: Any
+def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float], rs: RoundScan
            ) -> tuple[Sensitivities, list[ScoreTest], dict[str, bool], list[str], list[ScoreTest]]:
     """The score tests of the remaining candidates at the current model: ``(sensitivities, tests,
     significant after correction, explained by the mesh alone, the top ones to refit)``; makes
