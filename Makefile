@@ -61,6 +61,11 @@ test-gap-quick: venv-test
 test-gap-alternative-fe: venv-test
 	SKINKIT_GAP_ALTERNATIVE_FE=1 $(BIN)/python -m pytest -q -s tests/gap/test_benchmark_alternative_fe_quick.py
 
+# the region scan through whole diagnoses of two two-pad sessions (a scar, and none): about 8
+# minutes on one core, kept out of `make test`
+test-gap-scan: venv-test
+	SKINKIT_GAP_SCAN=1 $(BIN)/python -m pytest -q -s tests/gap/test_scan_diagnose.py
+
 lint: venv-test
 	$(BIN)/ruff check skinkit plugins hardware tests
 

@@ -134,6 +134,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         state_file = out / "checkpoint.json"
         params, bounds, given = _fit_parameters(model, free, bound_items, start_items)
         names = params.free_names
+        _check_centres(model, params, obs, given)
         # what makes two runs the same fit: a resumed run must match it exactly
         identity = {"model": str(Path(model_file).resolve()), "session": str(Path(session).resolve()),
                     "free": names, "objective": weighting, "optimiser": optimiser, "starts": starts,
@@ -193,6 +194,14 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         click.echo(jsonio.dumps(best, indent=2, default=float))
         return
     _echo_summary(best, model.name, session, best_result.wall_s, names, out)
+
+
+def _check_centres(model, params, obs, given: dict[str, float]) -> None:
+    """A region effect's (a scar's) centre, from the model file or --start, lies where the session's
+    points are tracked (:func:`skinkit.gap.scan_step.check_centres`)."""
+    from skinkit.gap.scan_step import check_centres
+
+    check_centres(getattr(model, "effects", []), params.values(), obs, list(given))
 
 
 def _result_json(best_result, results: list, model_name: str, session: str, stored_as: str | None) -> dict:

@@ -64,12 +64,21 @@ def gap() -> None:
 @click.option("--model-error/--no-model-error", default=True, show_default=True,
               help="a finite-element model: estimate its mesh's discretisation error at the calibration "
                    "(a mesh refined 2x) and carry it as noise through every later step")
+@click.option("--scan-grid", "scan_grid_mm", type=FiniteFloat(min=0, min_open=True), default=None,
+              help="spacing [mm] of the centres a region effect (inclusion) is scanned at over the tracked "
+                   "points (default: an eighth of their extent, at least their spacing)")
+@click.option("--scan-sizes", default=None,
+              help="sizes [mm] a region effect is scanned at (comma-separated radii; default: one and two "
+                   "grid spacings)")
+@click.option("--no-scan", is_flag=True,
+              help="do not scan region effects: test them at their declared null position")
 @click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
 def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: str | None, max_effects: int,
                  candidates: int, free: str | None, out_dir: str | None, gap_name: str | None,
                  overwrite: bool, workers: int | None, until_s: float | None, no_error_estimate: bool,
                  model_error: bool, as_json: bool, protocols: str | None, min_share: float, noise: str,
-                 max_iterations: int) -> None:
+                 max_iterations: int, scan_grid_mm: float | None, scan_sizes: str | None,
+                 no_scan: bool) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
     then refits of the best), and how far the gap shrinks with it.
@@ -107,6 +116,10 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
     if out_dir:   # an earlier report in --out is not replaced silently either
         check_result_files(out_dir, ("gap.json", "gap.html", "model.toml"), "--out", overwrite=overwrite)
 
+    if no_scan and (scan_grid_mm is not None or scan_sizes is not None):
+        raise SkinkitError("--no-scan: cannot be given with --scan-grid or --scan-sizes")
+    from skinkit.gap.scan_step import scan_options
+    scan = scan_options(scan_grid_mm, None if scan_sizes is None else split_names(scan_sizes), not no_scan)
     wanted = split_names(effects) if effects is not None else None
     if effects is not None and not wanted:
         raise SkinkitError("--effects: no effect named")
@@ -117,7 +130,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
                           candidates=candidates, workers=workers, until=until_s,
                           progress=lambda line: bar.say(f"  {line}"),
                           error_estimate=not no_error_estimate, min_share=min_share, noise=noise,
-                          max_iterations=max_iterations, model_error=model_error)
+                          max_iterations=max_iterations, model_error=model_error, scan=scan)
     if stores:
         from skinkit.store import open_experiment
         with open_experiment(session, "a") as exp:

@@ -180,9 +180,11 @@ class Problem:
         f = target[0]
         Xq, dq = self._field_points[k]
         d = f.derivative(name[len(f.name) + 1:], Xq, dq, self.t)
-        for g in fs:
-            if g is not f:
-                d = d * g.value(Xq, dq, self.t)
+        if len(fs) > 1:
+            # the other fields' product as every field's over this one's (φ > 0 always: a ratio is
+            # positive, a softening below 1): one division, not each other field evaluated again —
+            # a region scan puts hundreds of fields on one layer
+            d = d * (self.scale(k) / f.value(Xq, dq, self.t))
         return d
 
     def scale_shape_derivative(self, k: int, Vq: np.ndarray, Vd: np.ndarray) -> np.ndarray | None:

@@ -11,6 +11,9 @@ that label, which names its parameters (``"viscoelastic-2.g1"``), bindings, fiel
 instrument entries in place of the effect's name. Labels are unique and no other installed
 effect's name.
 
+An effect that declares a ``region`` (its centre and size parameters) takes ``instance`` labels
+too: several regions of one effect in one model (two scars; the gap diagnosis's region scan).
+
 An effect that declares ``forms`` (its first the default) may be given in another form
 (``{name = "preconditioning", form = "largest-load"}``): the plugin is applied as a copy whose
 ``form`` is the chosen one, with that form's parameters.
@@ -72,8 +75,9 @@ def _label(t: Mapping[str, Any], name: str, plugin: Any, entry: str, seen: set[s
         return name
     label = t["instance"]
     e = f"{entry}.instance"
-    if not getattr(plugin, "repeatable", False):
-        raise EffectError(e, f"effect {name!r} is not repeatable: it takes no instance label")
+    if not (getattr(plugin, "repeatable", False) or getattr(plugin, "region", None)):
+        raise EffectError(e, f"effect {name!r} is not repeatable and declares no region: it takes no "
+                          "instance label")
     if not isinstance(label, str) or not label or "." in label or label != label.strip():
         # the label heads parameter names "<label>.<local>"
         raise EffectError(e, f"must be a non-empty name without '.' or surrounding spaces, got {label!r}")

@@ -234,8 +234,9 @@ def check_effects(value: Any) -> None:
             declared = [p.name for p in plugin.parameters()]
         except Exception:  # a broken plugin is reported by the reader, with its own error
             continue
-        # settings the reader checks itself: an instance label (repeatable effects), a form
-        settings = ["instance"] if getattr(plugin, "repeatable", False) else []
+        # settings the reader checks itself: an instance label (repeatable or region effects), a form
+        labelled = getattr(plugin, "repeatable", False) or getattr(plugin, "region", None)
+        settings = ["instance"] if labelled else []
         settings += ["form"] if forms else []
         _keys(t, ["name", *settings, *declared], e, EffectError)
 

@@ -9,7 +9,9 @@ held-out protocols stay out of the fit), then in rounds:
    to the model, at its null, from one prediction with sensitivities; the top candidates
    (``candidates``, default 3) whose test survives the Bonferroni correction are refitted with
    the effect added (its parameters free, started a linearised step from the null) and compared
-   by AIC and held-out error. An effect is **added** to the model only when all of these hold:
+   by AIC and held-out error (a candidate that declares a region is first scanned over the tracked
+   points and tested and refitted at its best region: :mod:`skinkit.gap.scan_step`). An effect
+   is **added** to the model only when all of these hold:
 
    * the gap is significant: the residual's family (step 1: the whole residual and every cell,
      Holm) or the score tests' family (the best candidate's p·K) rejects, each at α/2, so that
@@ -50,9 +52,18 @@ import numpy as np
 
 from skinkit.errors import SkinkitError
 from skinkit.forward.stages import stage
+from skinkit.gap.candidates import (
+    AIC_MARGIN,
+    best_qualifying,
+    candidate_record,
+    fraction,
+    qualifies,
+    screened,
+)
 from skinkit.gap.checks import GapError, check_channels, check_effects
-from skinkit.gap.mesh_check import discretisation_check, mesh_only_effects
+from skinkit.gap.mesh_check import discretisation, mesh_only
 from skinkit.gap.report_files import write_report
+from skinkit.gap.scan_step import RoundScan, ScanOptions, check_regions, scan_round
 from skinkit.gap.score import (
     ScoreTest,
     Sensitivities,
@@ -80,17 +91,8 @@ from skinkit.gap.verdict import (
 from skinkit.inverse.discretisation import has_mesh
 from skinkit.schemas import EffectScore, FitResult, GapReport, Observations, Prediction
 
-#: an effect is named only if its refit lowers the AIC by more than this (module docstring)
-AIC_MARGIN = 10.0
-#: held-out χ² allowance per added parameter (module docstring)
-HELD_OUT_ALLOWANCE = 2.0
 #: a refit starts at most this many typical magnitudes from the null
 MAX_START = 2.0
-#: a candidate is refitted after a qualifying refit of its round only if this many times its score
-#: statistic (the first-order drop of χ² its refit brings) could lower the AIC below that refit's:
-#: otherwise it could not win the round. A full refit removed 0.97x (tracking bias) to 2.0x
-#: (pre-stress, nonlinear) its score on the virtual forearm; 4 keeps that margin twice over.
-SCREEN_FACTOR = 4.0
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -104,11 +106,6 @@ def _chi2(observations: Observations, prediction: Prediction, protocols: Sequenc
     pred = Prediction({p: prediction.protocols[p] for p in keep}, prediction.methods, prediction.inputs)
     res = Objective(None, observations.select(keep), [], "noise").residual(pred, jacobian=False)
     return float(res.z @ res.z), int(res.z.size)
-
-
-def _fraction(before: float, after: float) -> float | None:
-    """Fraction of the excess ``before`` removed (None when there was no excess)."""
-    return None if before <= 0 else float(min((before - after) / before, 1.0))
 
 
 def _predict_all(model: Any, params: Any, observations: Observations) -> Prediction:
@@ -202,42 +199,6 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
     return state
 
 
-def _candidate(test: ScoreTest, survives: bool, state: dict[str, Any] | None,
-               base: dict[str, Any]) -> EffectScore:
-    extra = test.record()
-    extra["significant"] = survives
-    if state is None:
-        return EffectScore(test.effect, test.statistic, test.p_value, test.dof, extra=extra)
-    r: FitResult = state["result"]
-    pars = {}
-    for n in state["added"]:
-        se = r.se.get(n)
-        se = float(se) if se is not None and np.isfinite(se) else None
-        v = float(r.parameters[n])
-        pars[n] = {"value": v, "se": se, "unit": r.parameters.param(n).unit,
-                   "interval": None if se is None else [v - 1.96 * se, v + 1.96 * se]}
-    d_aic = float(r.aic - base["result"].aic)
-    extra.update({"chi2_per_dof": state["chi2"] / state["dof"], "chi2_refit": state["chi2"],
-                  "held_out_chi2": state["held_chi2"],
-                  "held_out_chi2_before": base["held_chi2"], "converged": r.converged,
-                  "n_forward": r.n_forward})
-    shrink = _fraction(base["chi2"] - base["dof"], state["chi2"] - state["dof"])
-    return EffectScore(test.effect, test.statistic, test.p_value, test.dof, refitted=True, delta_aic=d_aic,
-                       shrinkage=shrink, parameters=pars, extra=extra)
-
-
-def _qualifies(c: EffectScore, state: dict[str, Any], base: dict[str, Any]) -> tuple[bool, str]:
-    if not c.extra.get("significant"):
-        return False, "its score test does not survive the correction"
-    if c.delta_aic is None or not c.delta_aic < -AIC_MARGIN:
-        return False, f"its refit does not lower the AIC by more than {AIC_MARGIN:g} (ΔAIC {c.delta_aic:.1f})"
-    if base["held_n"]:
-        allowed = base["held_chi2"] + HELD_OUT_ALLOWANCE * len(state["added"])
-        if state["held_chi2"] > allowed:
-            return False, f"it worsens the held-out χ² ({base['held_chi2']:.1f} -> {state['held_chi2']:.1f})"
-    return True, ""
-
-
 @dataclass
 class _Run:
     """What the rounds share: the inputs (fixed) and the diagnosis so far (updated by each round)."""
@@ -275,6 +236,9 @@ class _Run:
     max_iterations: int = 50
     final: FitResult | None = None   # the final model refitted with its own model error
     regions: Any = None              # the model geometry's regions of the tracked surface (where.locate)
+    scan: ScanOptions | None = None  # region scans (skinkit.gap.scan_step): options, results, best regions
+    scans: list[dict[str, Any]] = field(default_factory=list)
+    held_regions: dict[str, float] = field(default_factory=dict)
 
     @property
     def final_fit(self) -> FitResult:
@@ -290,7 +254,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              progress: Callable[[str], None] | None = None,
              protocols: Sequence[str] | None = None, error_estimate: bool = True,
              min_share: float = MIN_SHARE, noise: str = "auto", max_iterations: int = 50,
-             model_error: bool = True, calibration: FitResult | None = None) -> GapReport:
+             model_error: bool = True, scan: ScanOptions | None = None,
+             calibration: FitResult | None = None) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -311,9 +276,10 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     ``max_iterations``: evaluations each fit may make (the calibration and every refit);
     ``model_error``: a finite-element model's discretisation error is estimated at the
     calibration and carried as noise by every later step (:mod:`skinkit.inverse.approximation`;
-    it then replaces ``error_estimate``'s projection); ``calibration``: a fit of the same ``free``
-    parameters on the same observations already made (e.g. the session's identification), used
-    as the calibration instead of fitting again.
+    it then replaces ``error_estimate``'s projection); ``scan``: how candidates that declare a
+    region are scanned over the tracked points (:mod:`skinkit.gap.scan_step`; None: the defaults);
+    ``calibration``: a fit of the same ``free`` parameters on the same observations already made
+    (e.g. the session's identification), used as the calibration instead of fitting again.
     """
     from skinkit.forward import load, model_kind, read_description, region_partitions
 
@@ -335,7 +301,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
 
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
                      until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations,
-                     model_error=model_error, calibration=calibration)
+                     model_error=model_error, scan=scan, calibration=calibration)
     if cal["model_error"] is not None:
         error_estimate = False     # the mesh's error is in the noise model already
     state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
@@ -344,7 +310,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
                max_effects=max_effects, error_estimate=error_estimate, state0=state0, current=state0,
                theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1,
                min_share=float(min_share), max_iterations=int(max_iterations),
-               regions=region_partitions(spec))
+               regions=region_partitions(spec), scan=scan)
     if effects is None:
         _more_of_the_same(run)     # a repeatable effect the model file already has: one more term
     for rnd in range(max(max_effects, 1)):
@@ -365,7 +331,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
                observations: Observations | str | os.PathLike[str], *, effects: Sequence[str] | None,
                holdout: Sequence[str], free: Sequence[str] | None, until: float | None,
                protocols: Sequence[str] | None, say: Callable[[str], None], noise: str = "auto",
-               max_iterations: int = 50, model_error: bool = False,
+               max_iterations: int = 50, model_error: bool = False, scan: ScanOptions | None = None,
                calibration: FitResult | None = None) -> dict[str, Any]:
     """The session read and checked, the candidate effects, and the model calibrated on it:
     ``name``, ``source``, ``observations``, ``held``, ``present`` (the model's effects),
@@ -399,6 +365,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
             raise GapError("session: every protocol is held out; the calibration needs fitted protocols")
         cands = check_effects(kind, present, list(effects) if effects is not None else None)
         check_channels(base, observations)
+        check_regions(spec, observations, scan)
         held = observations.held_out()
         say(f"calibrating {name}: {', '.join(theta)} on {len(observations.fitted())} protocol(s)")
         with stage("calibration"):
@@ -440,13 +407,15 @@ def _round(run: _Run, rnd: int) -> bool:
     if not run.remaining:
         run.rounds.append(entry)
         return False
-    sens, tests, ok, mesh_only, top = _score(run, spec_r, values)
+    rs = scan_round(run, spec_r, values, rnd)
+    sens, tests, ok, mesh_only, top = _score(run, spec_r, values, rs)
+    values = {**values, **rs.values()}     # region candidates at their best regions: tested, refitted
     gate = _gate(loc, tests, run.alpha)
     if not gate["significant"]:
         top = []             # nothing will be named: no refit
     seps = separability(sens, tests, run.alpha, [t.effect for t in top])
     states = _refit_top(run, top, values, sens, entry)
-    records = [_candidate(t, ok[t.effect], states.get(t.effect), current) for t in tests]
+    records = [candidate_record(t, ok[t.effect], states.get(t.effect), current) for t in tests]
     with stage("separation"):
         _separate(run, seps, records, spec_r, values, sens, tests, rnd)
     if rnd == 0:
@@ -472,7 +441,7 @@ def _round(run: _Run, rnd: int) -> bool:
     return _name(run, winner, states[winner.effect], rnd)
 
 
-def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
+def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float], rs: RoundScan
            ) -> tuple[Sensitivities, list[ScoreTest], dict[str, bool], list[str], list[ScoreTest]]:
     """The score tests of the remaining candidates at the current model: ``(sensitivities, tests,
     significant after correction, explained by the mesh alone, the top ones to refit)``; makes
@@ -480,19 +449,19 @@ def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float]
     from skinkit.gap.score import score_all
 
     with stage("score sensitivities"):
-        sens = collect(spec_r, run.observations, values, run.theta_r, run.remaining, load=run.loader,
-                       progress=run.say)
+        sens = collect(spec_r, run.observations, {**values, **rs.values()}, run.theta_r, run.remaining,
+                       load=run.loader, progress=run.say)
     run.n_forward += sens.n_forward
-    tests = score_all(sens)
+    tests = rs.adjust(score_all(sens))
     ok = corrected(tests, run.alpha)
     if run.error_estimate and run.disc is None and any(ok.values()) and has_mesh(run.base):
         with stage("discretisation check"):
-            run.disc = discretisation_check(run.base, run.observations, values, run.state0["prediction"],
-                                            sens, run.alpha, run.say)
+            run.disc = discretisation(run.base, run.observations, values, run.state0["prediction"], sens,
+                                      run.alpha, run.say)
         run.n_forward += 1
-    mesh_only = mesh_only_effects(run.disc, sens, tests, ok, run.alpha)
-    top = [t for t in tests if ok[t.effect] and t.effect not in mesh_only][:run.candidates]
-    return sens, tests, ok, mesh_only, top
+    explained = mesh_only(run.disc, sens, tests, ok, run.alpha, rs.adjust)
+    top = [t for t in tests if ok[t.effect] and t.effect not in explained][:run.candidates]
+    return sens, tests, ok, explained, top
 
 
 def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float], sens: Sensitivities,
@@ -503,10 +472,8 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
     if run.max_effects <= 0:
         return states
     for t in top:
-        best = _best_qualifying(run, states, top)
-        if best is not None and -SCREEN_FACTOR * t.statistic + 2 * len(t.tested) >= best[1]:
-            why = (f"not refitted: {SCREEN_FACTOR:g}x its score ({t.statistic:.4g}) would not lower the AIC "
-                   f"below the refit with {best[0]} (ΔAIC {best[1]:.1f}), so it could not be named instead")
+        why = screened(t, best_qualifying(states, top, run.current))
+        if why is not None:
             run.say(f"{t.effect} {why}")
             entry.setdefault("screened", {})[t.effect] = why
             continue
@@ -522,18 +489,6 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
             run.warnings.append({"kind": "refit-failed", "where": t.effect, "message":
                                  f"the refit with {t.effect} failed in round {entry['round']}: {exc}"})
     return states
-
-
-def _best_qualifying(run: _Run, states: Mapping[str, dict[str, Any]], top: Sequence[ScoreTest]
-                     ) -> tuple[str, float] | None:
-    """The refitted candidate of ``states`` that qualifies with the lowest ΔAIC: ``(effect, ΔAIC)``."""
-    out = None
-    for t in top:
-        if t.effect in states:
-            c = _candidate(t, True, states[t.effect], run.current)
-            if _qualifies(c, states[t.effect], run.current)[0] and (out is None or c.delta_aic < out[1]):
-                out = (t.effect, float(c.delta_aic))
-    return out
 
 
 def _separate(run: _Run, seps: Sequence[dict[str, Any]], records: Sequence[EffectScore],
@@ -580,7 +535,7 @@ def _choose(run: _Run, entry: dict[str, Any], gate: Mapping[str, Any], tests: Se
         for c in records:
             if c.effect not in states:
                 continue
-            good, why = _qualifies(c, states[c.effect], run.current)
+            good, why = qualifies(c, states[c.effect], run.current)
             if not good:
                 reasons[c.effect] = why
             elif winner is None or _priority(run, c) < _priority(run, winner):
@@ -669,8 +624,9 @@ def _alone(run: _Run, cal: Mapping[str, Any], label: str) -> float | None:
         return None
     sens, tests = run.first_scores
     try:
-        st = _refit(run.spec, [], run.observations, run.held, _values(cal["result"]), cal["theta"],
-                    tests[label], sens, load=run.loader, say=run.say, max_iterations=run.max_iterations)
+        start = {**_values(cal["result"]), **run.held_regions}
+        st = _refit(run.spec, [], run.observations, run.held, start, cal["theta"], tests[label], sens,
+                    load=run.loader, say=run.say, max_iterations=run.max_iterations)
     except SkinkitError as exc:
         run.say(f"refit of the first model with {label} alone failed: {exc}")
         return None
@@ -692,12 +648,12 @@ def _how_far(run: _Run) -> dict[str, Any]:
         a2, d2 = after.get((c.axis, c.label), (c.chi2, c.dof))
         row = {"axis": c.axis, "label": c.label, "before": c.chi2_per_dof,
                "after": a2 / d2 if d2 > 0 else None,
-               "shrinkage": _fraction(c.chi2 - c.dof, a2 - d2) if named else 0.0}
+               "shrinkage": fraction(c.chi2 - c.dof, a2 - d2) if named else 0.0}
         shrink_cells.append(row)
-    overall = _fraction(state0["chi2"] - state0["dof"], final["chi2"] - final["dof"]) if named else 0.0
+    overall = fraction(state0["chi2"] - state0["dof"], final["chi2"] - final["dof"]) if named else 0.0
     held_out = None
     if state0["held_n"]:
-        held_out = _fraction(state0["held_chi2"] - state0["held_n"], final["held_chi2"] - final["held_n"]) \
+        held_out = fraction(state0["held_chi2"] - state0["held_n"], final["held_chi2"] - final["held_n"]) \
             if named else 0.0
     loc_after = (locate(run.observations, final["prediction"], n_params=final["k"], alpha=run.alpha,
                         regions=run.regions) if named else None)
@@ -775,7 +731,7 @@ def _assemble_report(run: _Run, cal: Mapping[str, Any], far: Mapping[str, Any], 
              "final_model_error": None if run.final is None else run.final.extra.get("model_error"),
              "effects_model": [dict(t) for t in run.tables], "minor": v["minor"],
              "noise": v["noise"], "remaining": v["remaining"], "warnings": v["warnings"],
-             "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0,
+             "n_forward": run.n_forward, "wall_s": time.perf_counter() - t0, "region_scan": run.scans,
              "series": diagnosis_series(observations, state0, final, run.additions)}
     gap_d = _gap_dict(loc0)
     gap_d.update(run.gap0 or {"significant": bool(loc0.significant),

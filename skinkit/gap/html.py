@@ -12,7 +12,8 @@ time per protocol and channel (:mod:`skinkit.gap.html_series`, from ``series``);
 by protocol, phase, channel (and region, frequency) as χ²/dof per cell against the noise
 level 1, with a ranked table; the residual maps per tracked point before and after the named
 effect(s), drawn only where there are points (matplotlib, and a pyvista surface rendering when
-VTK renders off screen here); the score ranking of the candidate effects; the shrinkage table;
+VTK renders off screen here); the region scan's map with the found region's outline
+(:mod:`skinkit.gap.html_scan`); the score ranking of the candidate effects; the shrinkage table;
 the non-separable pairs with the protocol that would separate them; the whiteness and input
 cross-correlation tests; the naming rounds; the raw JSON. Pre-stress is shown in one convention
 (:func:`skinkit.gap.sentences.display_parameters`: λ1 ≥ λ2, θ of λ1 in degrees).
@@ -36,6 +37,7 @@ import numpy as np
 
 from skinkit import jsonio
 from skinkit.errors import SchemaError, StoreError
+from skinkit.gap.html_scan import section_scan
 from skinkit.gap.html_series import section_series
 from skinkit.gap.sentences import display_parameters
 from skinkit.inverse.map_mask import hole_triangles
@@ -733,12 +735,12 @@ def render_html(report: Mapping[str, Any], *, title: str | None = None) -> str:
     if title is None:
         title = "Gap diagnosis" + (f": {model}" if model else "") + (f" on {session}" if session else "")
     sections = [f(report) for f in (_section_verdict, _section_fit, section_series, _section_residual,
-                                    _section_maps,
+                                    _section_maps, section_scan,
                                     _section_scores, _section_shrinkage, _section_separation, _section_tests,
                                     _section_rounds)]
     nav = "".join(f'<a href="#{i}">{_e(t)}</a>' for i, t in
                   (("verdict", "verdict"), ("fit", "fit"), ("series", "measured vs predicted"),
-                   ("residual", "where"), ("maps", "maps"),
+                   ("residual", "where"), ("maps", "maps"), ("scan", "region"),
                    ("scores", "which"), ("shrinkage", "how far"), ("separation", "not separable")))
     raw = jsonio.dumps(report, indent=1, default=_json_default)
     sub = " · ".join(x for x in (f"model {model}" if model else "", f"session {session}" if session else "")

@@ -1,5 +1,12 @@
-"""The discretisation check of a diagnosis without a carried model error: the calibrated model's
-mesh error in the score step's residual space, and the candidates it alone would explain."""
+"""The finite-element diagnosis's discretisation check: the calibrated model's mesh error in the
+score step's residual space, and the candidates that explain only what a finer mesh would.
+
+When a candidate's score test is significant and the mesh's error is not carried as noise, the
+calibrated model is solved once on a mesh with every element count doubled
+(:func:`skinkit.inverse.discretisation.error_in_residual`); the difference to the coarse
+prediction, whitened as the residual, is a direction whose size rests on an assumed convergence
+order but whose shape does not, so it is projected out at any size (:func:`mesh_only`).
+"""
 
 from __future__ import annotations
 
@@ -13,9 +20,8 @@ from skinkit.gap.score import ScoreTest, corrected
 from skinkit.schemas import Observations, Prediction
 
 
-def discretisation_check(model: Any, observations: Observations, values: Mapping[str, float],
-                         coarse: Prediction, sens: Any, alpha: float,
-                         say: Callable[[str], None]) -> dict[str, Any] | None:
+def discretisation(model: Any, observations: Observations, values: Mapping[str, float], coarse: Prediction,
+                   sens: Any, alpha: float, say: Callable[[str], None]) -> dict[str, Any] | None:
     """The calibrated model's discretisation error in the score step's residual space (``e``,
     exact − coarse, whitened) with the residual figures of
     :func:`skinkit.inverse.discretisation.residual_check`; None (said) when it cannot be made."""
@@ -32,18 +38,19 @@ def discretisation_check(model: Any, observations: Observations, values: Mapping
     return {**summary, **{k: v for k, v in chk.items() if k != "bias"}, "e": e, "explains": []}
 
 
-def mesh_only_effects(disc: Mapping[str, Any] | None, sens: Any, tests: Sequence[ScoreTest],
-                      ok: Mapping[str, bool], alpha: float) -> list[str]:
+def mesh_only(disc: Mapping[str, Any] | None, sens: Any, tests: Sequence[ScoreTest], ok: Mapping[str, bool],
+              alpha: float, adjust: Callable[[list[ScoreTest]], list[ScoreTest]] | None = None) -> list[str]:
     """The candidates significant on the residual but no longer once the discretisation error's
     signature ``e`` is projected out beside the fitted parameters' (at any size: the estimate's
     size rests on an assumed order, its shape does not): what they would explain, a finer mesh
-    would explain too."""
+    would explain too. ``adjust``: what the score step does to its tests' p-values (a region
+    scan's adjustment, :mod:`skinkit.gap.scan_step`), done to these tests too."""
     if disc is None or not np.any(disc["e"]):
         return []
     from skinkit.gap.score import score_all
-
-    ok_exact = corrected(score_all(sens, nuisance=disc["e"][:, None]), alpha)
+    exact = score_all(sens, nuisance=disc["e"][:, None])
+    ok_exact = corrected(adjust(exact) if adjust is not None else exact, alpha)
     return [t.effect for t in tests if ok[t.effect] and not ok_exact.get(t.effect, False)]
 
 
-__all__ = ["discretisation_check", "mesh_only_effects"]
+__all__ = ["discretisation", "mesh_only"]

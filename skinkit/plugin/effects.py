@@ -100,6 +100,14 @@ class BaseEffect:
     design velocity dX/dp read off the meshes built at neighbouring values (geometry, no solve);
     a parameter not declared here is differentiated by central differences of whole solves
     unless the engine knows it otherwise (a binding).
+
+    ``region``, the local names ``(x, y, size)`` of an effect confined to a region of the skin
+    plane: its centre [m] in the skin frame and its size [m] (a radius). The gap diagnosis then
+    scans candidate regions over the tracked points' extent for the effect's other parameters
+    (:mod:`skinkit.gap.scan`) instead of testing it at the declared null position, and refuses a
+    centre given outside that extent. Such an effect may be applied more than once under
+    ``instance`` labels (several candidate regions in one model), so, as a repeatable effect,
+    it names everything after ``self.name``.
     """
 
     name: str = ""
@@ -110,6 +118,7 @@ class BaseEffect:
     forms: ClassVar[tuple[str, ...]] = ()
     form: str = ""
     geometry: ClassVar[frozenset[str]] = frozenset()
+    region: ClassVar[tuple[str, str, str] | None] = None
 
     def _declared(self) -> list[Declared]:
         raise NotImplementedError

@@ -1,7 +1,7 @@
 """The gap reports (``/gaps/<name>``), each drawn by the gap report's own section renderers
 (:mod:`skinkit.gap.html`: verdict, fit, measured against predicted, residual by
-protocol/phase/channel, surface maps, score ranking, shrinkage, non-separable pairs, whiteness
-tests, naming rounds) nested in one section.
+protocol/phase/channel, surface maps, the region scan's map when there was one, score ranking,
+shrinkage, non-separable pairs, whiteness tests, naming rounds) nested in one section.
 """
 
 from __future__ import annotations
@@ -11,13 +11,20 @@ from collections.abc import Mapping
 from typing import Any
 
 from skinkit.gap import html as gap_html
+from skinkit.gap.html_scan import section_scan
 from skinkit.gap.html_series import section_series
 from skinkit.report.common import Section, e, plural, slug
 from skinkit.store.experiment import Experiment
 
+
+def _scan(report: Mapping[str, Any]) -> str:
+    """The region section, only for a report that scanned a region (the others have nothing to say)."""
+    return section_scan(report) if report.get("region_scan") else ""
+
+
 #: the gap report's sections, in its own order
 RENDERERS = (gap_html._section_verdict, gap_html._section_fit, section_series, gap_html._section_residual,
-             gap_html._section_maps, gap_html._section_scores, gap_html._section_shrinkage,
+             gap_html._section_maps, _scan, gap_html._section_scores, gap_html._section_shrinkage,
              gap_html._section_separation, gap_html._section_tests, gap_html._section_rounds)
 
 

@@ -84,6 +84,12 @@ class NullOutside(Bias):
         return {"offset": 5.0}
 
 
+class RegionNotInMetres(Bias):
+    """Declares its force offset as a region's centre: the region scan needs lengths."""
+
+    region = ("offset", "offset", "offset")
+
+
 @pytest.mark.parametrize("plugin, failing", [
     (Mutating(), {"lumped: input unchanged", "lumped: tables"}),
     (InexactNull(), {"lumped: null"}),
@@ -91,6 +97,7 @@ class NullOutside(Bias):
     (WrongEntry(), {"fe: refused"}),
     (StiffnessEdit(), {"lumped: sensitivity"}),
     (NullOutside(), {"parameters"}),
+    (RegionNotInMetres(), {"parameters"}),
 ])
 def test_the_effects_kit_names_the_fault(plugin, failing):
     report = check_effect(plugin)

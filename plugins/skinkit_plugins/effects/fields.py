@@ -86,6 +86,8 @@ class Inclusion(BaseEffect):
     kinds = ("fe",)
     touches = {"fe": frozenset({"fields"})}
     forms = ("disc", "ellipse")
+    # the diagnosis scans centres and radii over the tracked area (with the disc, the default form)
+    region = ("x", "y", "radius")
 
     def _declared(self) -> list[Declared]:
         out = [declare("ratio", 3.0, 1.0, "1", 0.05, 50.0),

@@ -7,7 +7,8 @@ author (and skinkit's own tests) checks an effect with.
   ``"fe"`` and ``"lumped"``;
 - ``parameters``: at least one, unique local names without a dot, SI units, ``lower < upper``,
   the null and the typical magnitude (the declared value) inside the bounds, the names of
-  ``null()`` those of ``parameters()``, and a typical magnitude that differs from the null;
+  ``null()`` those of ``parameters()``, and a typical magnitude that differs from the null; a
+  declared ``region`` names three of them in metres and leaves at least one other;
 - per model kind the effect supports, on a small model of that kind (:mod:`.testbeds`):
   ``<kind>: input unchanged`` (``apply`` at the null and at the typical magnitude leaves its
   input alone), ``<kind>: tables`` (only the top-level tables the effect declares in
@@ -122,7 +123,24 @@ def _parameters(plugin: Any, report: Report) -> bool:
             problems.append(f"{where}: typical {p.value} outside [{p.lower}, {p.upper}]")
     if params and not problems and all(p.value == null[p.name] for p in params):
         problems.append("the typical magnitude equals the null: the effect could never be seen")
+    problems += _region_problems(plugin, {p.name: p for p in params})
     return report.add("parameters", not problems, "; ".join(problems))
+
+
+def _region_problems(plugin: Any, params: Mapping[str, Any]) -> list[str]:
+    """What is wrong with a declared ``region``: three declared parameters in metres (centre x, y,
+    size), and at least one other parameter for the region scan to test."""
+    region = getattr(plugin, "region", None)
+    if region is None:
+        return []
+    names = tuple(region) if isinstance(region, (tuple, list)) else ()
+    if len(names) != 3 or not all(isinstance(n, str) for n in names):
+        return [f"region must name three parameters (x, y, size), got {region!r}"]
+    out = [f"region: {n!r} is not a declared parameter in m" for n in names
+           if n not in params or params[n].unit != "m"]
+    if not set(params) - set(names):
+        out.append("region: no parameter besides the region's to test at each region")
+    return out
 
 
 def _typical(plugin: Any) -> dict[str, float]:

@@ -1,0 +1,183 @@
+"""The diagnosis's region step: scan each candidate that declares a region, then test and refit it
+at its best region.
+
+For every remaining candidate whose effect declares a region (``region = (x, y, size)``) and a
+session with tracked points, each round first scans candidate regions over the imaged area
+(:func:`skinkit.gap.scan.scan`, one prediction). The candidate's score test is then made with
+its position and size held at the best region (instead of the declared null position), and its
+p-value is replaced by the one adjusted for the number of regions scanned — the best of many
+regions is tested, and its raw p would open the gate on pure noise. Its refit starts at the best
+region with the position and size freed, so that it estimates centre, size and strength with
+their intervals. Each scan goes to the report's ``region_scan``.
+
+Bad input is refused before the calibration: a region effect the model file places (start or
+fixed values) with its centre outside the tracked points' extent, and scan options
+(``--scan-grid``, ``--scan-sizes``) given for a session without tracked points or finer than its
+points resolve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from skinkit import registry
+from skinkit.errors import SkinkitError
+from skinkit.forward.stages import stage
+from skinkit.gap.scan import RegionScan, ScanError, imaged_area, region_of, scan, scan_grid
+from skinkit.gap.score import ScoreTest
+from skinkit.schemas import Observations
+
+
+@dataclass(frozen=True)
+class ScanOptions:
+    """How the diagnosis scans region effects: ``spacing`` [m] of the grid of centres and
+    ``sizes`` [m] (None: :func:`skinkit.gap.scan.scan_grid`'s defaults); ``enabled`` False: no
+    scan (a region effect is tested at its declared null position)."""
+
+    spacing: float | None = None
+    sizes: tuple[float, ...] | None = None
+    enabled: bool = True
+
+    @property
+    def explicit(self) -> bool:
+        """Whether the grid was asked for (a spacing or sizes given)."""
+        return self.spacing is not None or self.sizes is not None
+
+
+@dataclass
+class RoundScan:
+    """One round's scans: candidate label -> its :class:`RegionScan` (empty: nothing scanned)."""
+
+    scans: dict[str, RegionScan] = field(default_factory=dict)
+
+    def values(self) -> dict[str, float]:
+        """Every scanned candidate's best region as model values ``"<label>.<local>"`` [m]."""
+        return {k: v for s in self.scans.values() for k, v in s.values().items()}
+
+    def adjust(self, tests: Sequence[ScoreTest]) -> list[ScoreTest]:
+        """``tests`` with each scanned candidate's p-value adjusted for its scan (its position and
+        size held at the best region, said in ``held``), most significant first again."""
+        out = []
+        for t in tests:
+            s = self.scans.get(t.effect)
+            if s is None:
+                out.append(t)
+                continue
+            p, log_p = s.adjusted(t.log_p)
+            where = _where(s)
+            held = {**t.held, **{n: f"held at the region scan's best region ({where}); p adjusted for the "
+                                 f"{len(s.tests)} regions scanned" for n in s.region}}
+            out.append(dataclasses.replace(t, p_value=p, log_p=log_p, held=held))
+        return sorted(out, key=lambda t: (t.log_p, -t.statistic))
+
+
+def _where(s: RegionScan) -> str:
+    v = s.values()
+    x, y, r = (v[n] * 1e3 for n in s.region)
+    return f"x {x:.3g} mm, y {y:.3g} mm, {s.region[2].partition('.')[2]} {r:.3g} mm"
+
+
+def check_regions(spec: Mapping[str, Any], observations: Observations, options: ScanOptions | None) -> None:
+    """Refuse, as one :class:`ScanError` line: an ``[[effects]]`` table of ``spec`` whose effect
+    declares a region and whose centre (given, or the null where only one coordinate is)
+    lies outside the tracked points' extent; scan ``options`` asked of a session without
+    tracked points, or finer than its points resolve."""
+    area = imaged_area(observations)
+    for i, t in enumerate(spec.get("effects") or []):
+        if not isinstance(t, Mapping):
+            continue
+        try:
+            plugin = registry.create("skinkit.effects", str(t.get("name")))
+        except SkinkitError:
+            continue            # the model's reader names an unknown effect
+        reg = getattr(plugin, "region", None)
+        if not reg or area is None or not (reg[0] in t or reg[1] in t):
+            continue
+        v = plugin.values({k: t[k] for k in reg[:2] if k in t})
+        if not area.contains((v[reg[0]], v[reg[1]])):
+            what = t.get("instance", t.get("name"))
+            raise ScanError(f"effects[{i}] ({what}): centre x {v[reg[0]] * 1e3:.3g} mm, "
+                            f"y {v[reg[1]] * 1e3:.3g} mm lies outside the imaged area: the tracked points "
+                            f"span {area.describe()}")
+    if options is None or not options.enabled or not options.explicit:
+        return
+    if area is None:
+        raise ScanError("--scan-grid/--scan-sizes: the session has no tracked points, so no imaged area to "
+                        "scan for a region")
+    scan_grid(area, options.spacing, options.sizes)
+
+
+def check_centres(effects: Sequence[Any], values: Mapping[str, float], observations: Observations,
+                  given: Sequence[str] = ()) -> None:
+    """Refuse, as one :class:`ScanError` line naming the parameters, a region effect of a loaded
+    model whose centre lies outside the tracked points' extent: ``effects`` the model's applied
+    effects (each with ``name``, its label, and ``plugin``), ``values`` model name -> SI (the
+    start or fixed values), ``given`` the names the user gave (``--start``: said so). Nothing
+    to check without tracked points."""
+    area = imaged_area(observations)
+    if area is None:
+        return
+    for e in effects:
+        reg = getattr(getattr(e, "plugin", None), "region", None)
+        nx, ny = (f"{e.name}.{reg[0]}", f"{e.name}.{reg[1]}") if reg else ("", "")
+        if nx in values and ny in values and not area.contains((values[nx], values[ny])):
+            how = "--start " if nx in given or ny in given else ""
+            x, y = values[nx] * 1e3, values[ny] * 1e3
+            raise ScanError(f"{how}{nx}, {ny}: centre x {x:.3g} mm, y {y:.3g} mm "
+                            f"lies outside the imaged area: the tracked points span {area.describe()}")
+
+
+def scan_round(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float], rnd: int) -> RoundScan:
+    """Scan every remaining candidate of the diagnosis ``run`` that declares a region (module
+    docstring) on the current model ``spec_r`` at ``values``; each scan is said, counted in
+    ``run.n_forward``, appended to ``run.scans`` and its best region kept in
+    ``run.held_regions`` (the first found). Empty without tracked points or when disabled."""
+    opts = run.scan or ScanOptions()
+    labels = [c for c in run.remaining if region_of(c)]
+    out = RoundScan()
+    if not labels or not opts.enabled:
+        return out
+    if imaged_area(run.observations.fitted()) is None:
+        run.say(f"no tracked points: {', '.join(labels)} tested at the declared null position")
+        return out
+    wall = dict(run.current["prediction"].info or {}).get("wall_s")
+    for label in labels:
+        with stage("region scan"):
+            try:
+                s = scan(spec_r, run.observations, values, run.theta_r, label, load=run.loader,
+                         spacing=opts.spacing, sizes=opts.sizes, reference_wall_s=wall, progress=run.say)
+            except ScanError as exc:
+                if opts.explicit:
+                    raise
+                run.say(f"region scan of {label} not made: {exc}")
+                continue
+        run.n_forward += int(s.cost["n_forward"])
+        out.scans[label] = s
+        run.scans.append({"round": rnd + 1, **s.to_dict()})
+        for k, v in s.values().items():
+            run.held_regions.setdefault(k, v)
+    return out
+
+
+def scan_options(spacing_mm: float | None, sizes_mm: Sequence[float] | None, enabled: bool = True
+                 ) -> ScanOptions:
+    """:class:`ScanOptions` from the command line's millimetres (checked: positive and finite)."""
+    def mm(v: Any, what: str) -> float:
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            raise ScanError(f"{what}: expected a positive number of mm, got {v!r}") from None
+        if not (math.isfinite(x) and x > 0):
+            raise ScanError(f"{what}: expected a positive number of mm, got {v!r}")
+        return x * 1e-3
+    sizes = None if sizes_mm is None else tuple(mm(v, "--scan-sizes") for v in sizes_mm)
+    if sizes is not None and not sizes:
+        raise ScanError("--scan-sizes: no size given")
+    return ScanOptions(None if spacing_mm is None else mm(spacing_mm, "--scan-grid"), sizes, enabled)
+
+
+__all__ = ["RoundScan", "ScanOptions", "check_centres", "check_regions", "scan_options", "scan_round"]
