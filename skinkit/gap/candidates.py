@@ -3,6 +3,7 @@ a candidate is worth refitting at all once another has qualified (the screen).""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -15,10 +16,11 @@ from skinkit.schemas import EffectScore, FitResult
 AIC_MARGIN = 10.0
 #: held-out χ² allowance per added parameter (:mod:`skinkit.gap.diagnose`)
 HELD_OUT_ALLOWANCE = 2.0
-#: a candidate is refitted after a qualifying refit of its round only if this many times its score
-#: statistic (the first-order drop of χ² its refit brings) could lower the AIC below that refit's:
-#: otherwise it could not win the round. A full refit removed 0.97x (tracking bias) to 2.0x
-#: (pre-stress, nonlinear) its score on the virtual forearm; 4 keeps that margin twice over.
+#: a candidate is refitted after a qualifying refit of its round only if a drop of Σz² this many
+#: times its score statistic (the first-order drop its refit brings) could lower the AIC below that refit's:
+#: otherwise it could not win the round. A full refit removed 0.97x (tracking bias), 1.14x (an
+#: inclusion at its scanned region) and 2.0x (pre-stress, nonlinear) its score on the virtual
+#: forearm; 4 keeps that margin twice over.
 SCREEN_FACTOR = 4.0
 
 
@@ -78,14 +80,29 @@ def best_qualifying(states: Mapping[str, dict[str, Any]], top: Sequence[ScoreTes
     return out
 
 
-def screened(test: ScoreTest, best: tuple[str, float] | None) -> str | None:
-    """Why ``test``'s candidate is not worth refitting after the qualifying refit ``best``
-    (``(effect, ΔAIC)``, :func:`best_qualifying`), or None when its refit could still win."""
-    if best is None or -SCREEN_FACTOR * test.statistic + 2 * len(test.tested) < best[1]:
+def best_case_aic(test: ScoreTest, chi2: float, n: int) -> float | None:
+    """The lowest AIC change [1] a refit of ``test``'s candidate could bring to a fit of Σz²
+    ``chi2`` over ``n`` observations, were its drop :data:`SCREEN_FACTOR` times its score
+    statistic (AIC = n ln(Σz²/n) + 2(k + 1), :func:`skinkit.inverse.fit.aic`); None when that
+    drop would take Σz² to zero."""
+    drop = SCREEN_FACTOR * test.statistic
+    if not (chi2 > drop and n > 0):
         return None
-    return (f"not refitted: {SCREEN_FACTOR:g}x its score ({test.statistic:.4g}) would not lower the AIC "
-            f"below the refit with {best[0]} (ΔAIC {best[1]:.1f}), so it could not be named instead")
+    return n * math.log((chi2 - drop) / chi2) + 2 * len(test.tested)
 
 
-__all__ = ["AIC_MARGIN", "HELD_OUT_ALLOWANCE", "SCREEN_FACTOR", "best_qualifying", "candidate_record",
-           "fraction", "qualifies", "screened"]
+def screened(test: ScoreTest, best: tuple[str, float] | None, fit: FitResult) -> str | None:
+    """Why ``test``'s candidate is not worth refitting after the qualifying refit ``best``
+    (``(effect, ΔAIC)``, :func:`best_qualifying`) of the model fitted as ``fit``, or None when
+    its refit could still win."""
+    chi2, n = fit.extra.get("chi2"), fit.extra.get("n_observations")
+    could = None if best is None or chi2 is None or n is None else best_case_aic(test, float(chi2), int(n))
+    if could is None or could < best[1]:
+        return None
+    return (f"not refitted: {SCREEN_FACTOR:g}x its score ({test.statistic:.4g}) would change the AIC by "
+            f"{could:.1f} at best, not below the refit with {best[0]} (ΔAIC {best[1]:.1f}), so it could "
+            "not be named instead")
+
+
+__all__ = ["AIC_MARGIN", "HELD_OUT_ALLOWANCE", "SCREEN_FACTOR", "best_case_aic", "best_qualifying",
+           "candidate_record", "fraction", "qualifies", "screened"]

@@ -472,7 +472,7 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
     if run.max_effects <= 0:
         return states
     for t in top:
-        why = screened(t, best_qualifying(states, top, run.current))
+        why = screened(t, best_qualifying(states, top, run.current), run.current["result"])
         if why is not None:
             run.say(f"{t.effect} {why}")
             entry.setdefault("screened", {})[t.effect] = why
