@@ -322,7 +322,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
         from skinkit.gap.final_model import refit_final
         with stage("final model"):
             run.final = refit_final(with_effects(spec, run.tables), run.observations, run.current["result"],
-                                    run.theta_r, run.loader, say, run.max_iterations)
+                                    run.theta_r, run.loader, say, run.max_iterations, run.warnings)
     with stage("reporting"):
         return _assemble_report(run, cal, far, t0)
 

@@ -28,10 +28,11 @@ from skinkit.schemas import FitResult, Observations
 
 def refit_final(spec: Mapping[str, Any], observations: Observations, result: FitResult, free: Sequence[str],
                 load: Callable[[Mapping[str, Any]], Any], say: Callable[[str], None],
-                max_iterations: int) -> FitResult | None:
+                max_iterations: int, warnings: list[dict[str, Any]] | None = None) -> FitResult | None:
     """``result`` (the final model ``spec``'s fit of ``free``) refitted with the model error
-    estimated at it; its ``extra["model_error"]`` holds the estimate's summary. None (said) when
-    the estimate or the refit fails: the diagnosis's own final fit then stands."""
+    estimated at it; its ``extra["model_error"]`` holds the estimate's summary. None (said, and a
+    ``refit-failed`` warning appended to ``warnings``) when the estimate or the refit fails: the
+    diagnosis's own final fit then stands."""
     from skinkit.inverse import fit
     from skinkit.inverse.approximation import refit
 
@@ -41,7 +42,10 @@ def refit_final(spec: Mapping[str, Any], observations: Observations, result: Fit
         out, _ = refit(model, observations, result, list(free), fit, progress=say,
                        max_iterations=max_iterations)
     except SkinkitError as exc:
-        say(f"final model not refitted with its own discretisation error: {exc}")
+        message = f"final model not refitted with its own discretisation error: {exc}"
+        say(message)
+        if warnings is not None:
+            warnings.append({"kind": "refit-failed", "where": "final model", "message": message})
         return None
     finally:
         model.close()

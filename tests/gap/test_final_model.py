@@ -10,8 +10,8 @@ from skinkit.inverse.coverage import LabSessions
 
 
 def test_a_model_without_a_mesh_keeps_its_own_final_fit():
-    """The re-estimate needs a refinable mesh: for a lumped model it is refused, said, and the
-    diagnosis's own final fit stands (None)."""
+    """The re-estimate needs a refinable mesh: for a lumped model it is refused, said, recorded as
+    a warning for the report, and the diagnosis's own final fit stands (None)."""
     spec, free = lumped_spec()
     lab = LabSessions(spec)
     obs = lab(0)
@@ -21,6 +21,9 @@ def test_a_model_without_a_mesh_keeps_its_own_final_fit():
     finally:
         model.close()
     said: list[str] = []
-    assert refit_final(lab.model_spec, obs, result, free, load, said.append, 5) is None
+    warnings: list[dict] = []
+    assert refit_final(lab.model_spec, obs, result, free, load, said.append, 5, warnings) is None
     assert "not refitted with its own discretisation error" in said[-1]
     assert "no mesh" in said[-1]
+    got = [(w["kind"], w["where"], w["message"]) for w in warnings]
+    assert got == [("refit-failed", "final model", said[-1])]
