@@ -143,13 +143,15 @@ class ScanGrid:
         return np.column_stack([c, np.tile(self.sizes, len(self.centres))])
 
 
-def _positive(value: Any, what: str) -> float:
+def positive(value: Any, what: str, expected: str = "a positive length") -> float:
+    """``value`` as a positive finite float, else a :class:`ScanError` naming ``what`` and the
+    ``expected`` kind of value."""
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ScanError(f"{what}: expected a positive length, got {value!r}") from None
+        raise ScanError(f"{what}: expected {expected}, got {value!r}") from None
     if not (math.isfinite(v) and v > 0):
-        raise ScanError(f"{what}: expected a positive length, got {value!r}")
+        raise ScanError(f"{what}: expected {expected}, got {value!r}")
     return v
 
 
@@ -168,7 +170,7 @@ def scan_grid(area: ImagedArea, spacing: float | None = None, sizes: Sequence[fl
     res = area.spacing
     if spacing is None:
         spacing = max(res, float(np.max(area.upper - area.lower)) / DEFAULT_CELLS)
-    spacing = _positive(spacing, "--scan-grid")
+    spacing = positive(spacing, "--scan-grid")
     if spacing < res * (1 - 1e-6):
         raise ScanError(f"--scan-grid {spacing * 1e3:g} mm is finer than the tracked points resolve: "
                         f"their typical spacing is {res * 1e3:.3g} mm")
@@ -176,7 +178,7 @@ def scan_grid(area: ImagedArea, spacing: float | None = None, sizes: Sequence[fl
     if sizes is None:
         sz = np.unique(np.clip(np.array(DEFAULT_SIZES) * spacing, max(lo_s, res), hi_s))
     else:
-        sz = np.array([_positive(s, "--scan-sizes") for s in sizes])
+        sz = np.array([positive(s, "--scan-sizes") for s in sizes])
         if not sz.size:
             raise ScanError("--scan-sizes: no size given")
         for s in sz:
@@ -448,4 +450,4 @@ def null_min_p(A: Sequence[np.ndarray], dofs: Sequence[int], draws: int = N_DRAW
 
 
 __all__ = ["DEFAULT_CELLS", "DEFAULT_SIZES", "N_DRAWS", "ImagedArea", "RegionScan", "ScanError", "ScanGrid",
-           "imaged_area", "null_min_p", "region_of", "region_tests", "scan", "scan_grid"]
+           "imaged_area", "null_min_p", "positive", "region_of", "region_tests", "scan", "scan_grid"]

@@ -19,7 +19,6 @@ points resolve.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,7 +26,7 @@ from typing import Any
 from skinkit import registry
 from skinkit.errors import SkinkitError
 from skinkit.forward.stages import stage
-from skinkit.gap.scan import RegionScan, ScanError, imaged_area, region_of, scan, scan_grid
+from skinkit.gap.scan import RegionScan, ScanError, imaged_area, positive, region_of, scan, scan_grid
 from skinkit.gap.score import ScoreTest
 from skinkit.schemas import Observations
 
@@ -167,13 +166,7 @@ def scan_options(spacing_mm: float | None, sizes_mm: Sequence[float] | None, ena
                  ) -> ScanOptions:
     """:class:`ScanOptions` from the command line's millimetres (checked: positive and finite)."""
     def mm(v: Any, what: str) -> float:
-        try:
-            x = float(v)
-        except (TypeError, ValueError):
-            raise ScanError(f"{what}: expected a positive number of mm, got {v!r}") from None
-        if not (math.isfinite(x) and x > 0):
-            raise ScanError(f"{what}: expected a positive number of mm, got {v!r}")
-        return x * 1e-3
+        return positive(v, what, "a positive number of mm") * 1e-3
     sizes = None if sizes_mm is None else tuple(mm(v, "--scan-sizes") for v in sizes_mm)
     if sizes is not None and not sizes:
         raise ScanError("--scan-sizes: no size given")
