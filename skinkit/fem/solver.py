@@ -183,7 +183,7 @@ class NewtonSolver:
             u, r, ref = self._predict(u, t, dt)
         norm = float(np.linalg.norm(r))
         tol = max(o.rtol * ref, o.atol)
-        last, stalled = math.inf, 0
+        last, stalled, ascents = math.inf, 0, 0
         # frozen-tangent steps only on a tangent factorised in this increment: an extrapolated
         # start has already corrected with the previous increment's until that stopped paying
         frozen = guess is None
@@ -222,10 +222,13 @@ class NewtonSolver:
             self.timings.solve += time.perf_counter() - t0
             self.timings.iterations += 1
             self.timings.factorisations += 1
+            ascents += float(du @ r) >= 0
+            r_before = r
             u, r = self._line_search(u, du, r, t, dt)
             if u is None:
                 raise SolverError(f"line search failed at t = {t:g} (|r| = {norm:.3g} N): "
-                                  "every trial step inverted an element or diverged")
+                                  "every trial step inverted an element or diverged"
+                                  f"{self._where(r_before)}")
             norm = float(np.linalg.norm(r))
             stalled = stalled + 1 if norm > 0.5 * last else 0
             # the new tangent may finish the increment only if its own step paid as a frozen
@@ -233,7 +236,26 @@ class NewtonSolver:
             # predicts too poorly for a frozen step to pay
             frozen = FROZEN_GAIN * norm <= last
         raise SolverError(f"no convergence in {o.max_iter} iterations at t = {t:g} "
-                          f"(|r| = {norm:.3g} N, reference {ref:.3g} N)")
+                          f"(|r| = {norm:.3g} N, reference {ref:.3g} N){self._where(r)}"
+                          f"{_why(ascents, o.max_iter)}")
+
+    def _where(self, r: np.ndarray) -> str:
+        """Where an increment failed: the node carrying the largest unbalance of the residual
+        ``r`` (reduced unknowns) [N], its reference position [mm] and the regions of the elements
+        around it; ``""`` when it cannot be said."""
+        try:
+            full = np.zeros(self.problem.n_dof)
+            idx = np.flatnonzero(self.dofmap.map >= 0)
+            full[idx] = r[self.dofmap.map[idx]]
+            node = int(np.argmax(np.linalg.norm(full.reshape(-1, 3), axis=1)))
+            mesh = self.problem.mesh
+            x, y, z = mesh.nodes[node] * 1e3
+            around = np.unique(mesh.region[np.any(mesh.elements == node, axis=1)])
+            names = ", ".join(mesh.regions[i] for i in around)
+            return (f"; largest unbalance {np.linalg.norm(full[3 * node:3 * node + 3]):.3g} N at "
+                    f"({x:.3g}, {y:.3g}, {z:.3g}) mm ({names})")
+        except Exception:   # the message must not fail where the solve did
+            return ""
 
     def _frozen_step(self, u: np.ndarray, r: np.ndarray, norm: float, t: float, dt: float | None):
         """A Newton step on the tangent last factorised (modified Newton), no line search.
@@ -478,6 +500,16 @@ class NewtonSolver:
             sol.extra["sensitivities"] = sens_out
             sol.extra["sensitivity_solves"] = dict(tracker.stats)
         return sol
+
+
+def _why(ascents: int, iterations: int) -> str:
+    """Why Newton failed, when its steps say so: steps that did not descend the energy mean
+    the tangent was indefinite at those iterates."""
+    if ascents * 4 < iterations:
+        return ""
+    return (f"; in {ascents} of {iterations} iterations the tangent was indefinite (Newton's step "
+            "did not descend the energy): the body is near an instability there (buckling or "
+            "wrinkling under compression, a very soft layer sheared far beyond its thickness)")
 
 
 def _extrapolate(hist: list[tuple[float, np.ndarray]], t: float) -> np.ndarray | None:

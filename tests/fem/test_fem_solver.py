@@ -77,6 +77,27 @@ def test_inverting_load_is_cut_then_reported():
         NewtonSolver(prob, bc, SolverOptions(max_cuts=3, max_iter=8)).run([1.0])
 
 
+def test_a_failed_increment_says_where_the_body_is_out_of_balance():
+    """The report names the node with the largest unbalance and its layer: for a punch pushed
+    to 4x the skin's thickness it is at the punch's bonded edge (radius 2 mm), where the strain
+    concentrates, within one element (1 mm) of it."""
+    import re
+    prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.02])
+    with pytest.raises(SolverError) as info:
+        NewtonSolver(prob, bc, SolverOptions(max_cuts=3, max_iter=8)).run([1.0])
+    m = re.search(r"largest unbalance \S+ N at \((\S+), (\S+), (\S+)\) mm \((skin|subdermal)",
+                  str(info.value))
+    assert m, str(info.value)
+    x, y = float(m.group(1)), float(m.group(2))
+    assert abs(np.hypot(x, y) - 2.0) <= 1.0
+
+
+def test_an_indefinite_tangent_is_named_as_the_reason():
+    from skinkit.fem.solver import _why
+    assert _why(0, 20) == "" and _why(4, 20) == ""
+    assert "tangent was indefinite" in _why(5, 20) and "5 of 20" in _why(5, 20)
+
+
 def test_step_cutting_recovers():
     """A load too large for one increment converges after cuts (the history shows it)."""
     m = block_mesh((0.01, 0.01, 0.01), (2, 2, 2))
