@@ -32,3 +32,13 @@ BENCHES: dict[str, str] = {
 @click.group("bench", cls=LazyGroup, table=BENCHES)
 def bench() -> None:
     """Run a side-by-side benchmark (skinkit against a peer, same input, one process)."""
+    _no_solve_cache()
+
+
+def _no_solve_cache() -> None:
+    """Benchmarks measure solves: a solve cache named in the environment is not used by them
+    (nor by the worker processes they start)."""
+    import os
+
+    from skinkit.forward.solve_cache import ENVIRONMENT
+    os.environ.pop(ENVIRONMENT, None)

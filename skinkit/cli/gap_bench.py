@@ -57,6 +57,8 @@ def benchmark(quick: bool, scheduler: str | None, as_json: bool, seeds: int | No
               model: str | None, nulls: int | None, parallel: int, journal: str | None, recorded_only: bool,
               alternative: bool, forms: str | None, shared_mesh: bool, page: Path | None) -> None:
     """Withheld-effect benchmark: diagnose virtual sessions whose truth has an effect the model lacks."""
+    from skinkit.cli.bench import _no_solve_cache
+    _no_solve_cache()
     from skinkit.bench.gap_benchmark import run as benchmark_run
     from skinkit.bench.gap_benchmark import summary_lines
     from skinkit.bench.gap_cases import BenchmarkError

@@ -38,7 +38,7 @@ import numpy as np
 
 from skinkit.errors import ForwardError, SchemaError
 from skinkit.forward import drive as drive_mod
-from skinkit.forward import stages
+from skinkit.forward import solve_cache, stages
 from skinkit.forward.effects import AppliedEffect, apply_all
 from skinkit.forward.solve_progress import SolveProgress, gather, init_worker, step_reporter
 from skinkit.interfaces import ForwardModel
@@ -588,7 +588,7 @@ class FEForwardModel(ForwardModel):
                                     options={"vtu": str(fields_dir)} if fields_dir is not None else {},
                                     shapes={n: (g.nodes, g.depth) for n, g in geo.items()},
                                     shape_points={n: g.points[po.name] for n, g in geo.items()}))
-        results = self._run(jobs)
+        results = solve_cache.solve_jobs(jobs, self._run)
         return results, meta
 
     def _run(self, jobs: list[ProtocolJob]) -> dict[str, dict[str, Any]]:

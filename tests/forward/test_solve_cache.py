@@ -1,0 +1,129 @@
+"""Protocol solves kept on disk for a second run (``skinkit.forward.solve_cache``).
+
+A second prediction of the same model on the same session reads every protocol back, to the
+bit, without solving; any change of a parameter or of the code is a miss; a damaged entry is
+solved again; the directory keeps at most its size, least recently used entries going first;
+without the environment variable nothing is written.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from skinkit.forward import fe, solve_cache
+from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
+
+pytestmark = pytest.mark.needs_plugins
+
+SPEC = {
+    "model": {"name": "cached"},
+    "geometry": {"kind": "disc", "diameter": "20 mm", "indenter_diameter": "4 mm", "n_inner": 2,
+                 "n_ring": 2},
+    "layers": [{"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "neo-hookean-enu",
+                "parameters": {"E": "40 kPa", "nu": 0.45}},
+               {"name": "subdermal", "thickness": "3.5 mm", "elements": 1, "law": "neo-hookean-enu",
+                "parameters": {"E": "10 kPa", "nu": 0.45}}],
+    "indenter": {"mode": "displacement"},
+    "drive": {"max_step": "1 s"},
+}
+
+
+def _session() -> Observations:
+    T = np.arange(0, 2.0001, 0.01)
+    X = np.zeros((T.size, 3))
+    X[:, 2] = -2e-4 * T
+    tf = np.array([0.0, 1.0, 2.0])
+    ref = np.array([[3e-3, 0, 0], [0, 4e-3, 0]])
+    chans = {"tip_force": Channel("tip_force", T, 0 * X, noise=1e-4),
+             "tip_position": Channel("tip_position", T, X, noise=1e-6),
+             "points": Channel("points", tf, np.repeat(ref[:, None], tf.size, 1), noise=5e-6,
+                               reference=ref)}
+    return Observations({"a": ProtocolObservations(Protocol("a"), chans),
+                         "b": ProtocolObservations(Protocol("b"), dict(chans))}, None, "test")
+
+
+@pytest.fixture
+def counted(monkeypatch, tmp_path):
+    """The cache in ``tmp_path``, and the number of protocol solves made so far."""
+    monkeypatch.setenv(solve_cache.ENVIRONMENT, str(tmp_path / "cache"))
+    calls = []
+    real = fe.solve_protocol
+
+    def solve(job, *a, **k):
+        calls.append(job.name)
+        return real(job, *a, **k)
+
+    monkeypatch.setattr(fe, "solve_protocol", solve)
+    return calls
+
+
+def _predict(params=None, sens=None):
+    from skinkit.forward import load
+    with load(SPEC, workers=1) as model:
+        p = model.parameters() if params is None else params(model.parameters())
+        return model.predict(p, _session(), sensitivities=sens)
+
+
+def _same(a, b):
+    for name, chans in a.protocols.items():
+        for c, pred in chans.items():
+            np.testing.assert_array_equal(pred.values, b.protocols[name][c].values)
+            for k, d in pred.d.items():
+                np.testing.assert_array_equal(d, b.protocols[name][c].d[k])
+
+
+def test_a_second_prediction_is_read_back_to_the_bit(counted, tmp_path):
+    first = _predict(sens=["skin.E"])
+    assert sorted(counted) == ["a", "b"]
+    second = _predict(sens=["skin.E"])
+    assert sorted(counted) == ["a", "b"]           # nothing solved again
+    _same(first, second)
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == 2
+
+
+def test_another_parameter_value_or_code_is_a_miss(counted, monkeypatch):
+    _predict()
+    _predict(params=lambda p: p.with_values({"skin.E": 41e3}))
+    assert len(counted) == 4
+    monkeypatch.setattr(solve_cache, "code_fingerprint", lambda: "another release")
+    _predict()
+    assert len(counted) == 6
+
+
+def test_a_damaged_entry_is_solved_again(counted, tmp_path):
+    first = _predict()
+    for p in (tmp_path / "cache").glob("*.npz"):
+        p.write_bytes(b"not an archive")
+    again = _predict()
+    assert len(counted) == 4
+    _same(first, again)
+    assert _predict() is not None and len(counted) == 4     # replaced by good entries
+
+
+def test_the_directory_keeps_its_size(tmp_path):
+    """Over its size, the least recently used entry goes, and a read makes an entry recent."""
+    from types import SimpleNamespace
+    jobs = [SimpleNamespace(name=n, options={}) for n in ("x", "y", "z")]
+    result = {"times": np.zeros(1000), "info": {}}
+    probe = solve_cache.SolveCache(tmp_path / "probe")
+    probe.put(jobs[0], result)
+    size = next((tmp_path / "probe").glob("*.npz")).stat().st_size
+    cache = solve_cache.SolveCache(tmp_path / "c", max_bytes=int(2.5 * size))
+    for age, job in zip((30, 20), jobs[:2], strict=True):
+        cache.put(job, result)
+        path = cache._path(cache.key(job))
+        os.utime(path, (path.stat().st_mtime - age,) * 2)
+    assert cache.get(jobs[0]) is not None          # x is now the most recently used
+    cache.put(jobs[2], result)                     # three entries: one must go, the oldest (y)
+    assert cache.get(jobs[1]) is None
+    assert cache.get(jobs[0]) is not None and cache.get(jobs[2]) is not None
+
+
+def test_without_the_variable_nothing_is_written(monkeypatch, tmp_path):
+    monkeypatch.delenv(solve_cache.ENVIRONMENT, raising=False)
+    monkeypatch.chdir(tmp_path)
+    _predict()
+    assert not list(tmp_path.rglob("*.npz"))
