@@ -93,16 +93,17 @@ def is_loaded(model: Any) -> bool:
 
 
 @contextmanager
-def loaded(model: ModelLike, workers: int | None = None) -> Iterator[Any]:
+def loaded(model: ModelLike, workers: int | None = None, scheduler: Any = None) -> Iterator[Any]:
     """The forward model of ``model``: a loaded one as it is (left open: it is the caller's),
-    a path or description loaded (``workers``: processes of a finite-element model) and closed
-    after the ``with`` block."""
+    a path or description loaded (``workers``: processes of a finite-element model;
+    ``scheduler``: a Dask scheduler address or cluster to solve its protocols on instead) and
+    closed after the ``with`` block."""
     if is_loaded(model):
         yield model
         return
     from skinkit.forward import load
 
-    m = load(_checked_model(model), workers=workers)
+    m = load(_checked_model(model), workers=workers, scheduler=scheduler)
     try:
         yield m
     finally:
@@ -182,7 +183,7 @@ def fit(model: ModelLike, session: SessionLike, *, free: Names = None, holdout: 
         start: Mapping[str, float] | None = None, bounds: Mapping[str, tuple[float, float]] | None = None,
         ftol: float = 1e-6, xtol: float = 1e-3, max_iterations: int = 50, jacobian: str = "analytic",
         checkpoint: str | os.PathLike[str] | None = None, workers: int | None = None,
-        progress: ProgressLike = True) -> FitResult:
+        scheduler: Any = None, progress: ProgressLike = True) -> FitResult:
     """Fit a model's free parameters to a session.
 
     ``model``: a model file's path, its description (dict) or a loaded forward model (left open).
@@ -195,7 +196,8 @@ def fit(model: ModelLike, session: SessionLike, *, free: Names = None, holdout: 
     record's noise is modelled (``"auto"``, ``"white"``, ``"ar"``). ``start``, ``bounds``: name
     -> value [SI] / (lower, upper) [SI]. ``weighting``, ``optimiser``, ``ftol``, ``xtol``,
     ``max_iterations``, ``jacobian``, ``checkpoint``: as :func:`skinkit.inverse.fit.fit`.
-    ``workers``: processes of a finite-element model loaded here. ``progress``: True (lines on
+    ``workers``: processes of a finite-element model loaded here; ``scheduler``: a Dask scheduler
+    address (or cluster) to solve its protocols on instead. ``progress``: True (lines on
     standard error), False, or a callable taking each line.
 
     Returns the :class:`~skinkit.schemas.FitResult`: ``parameters`` (values [SI]), ``se``
@@ -205,7 +207,7 @@ def fit(model: ModelLike, session: SessionLike, *, free: Names = None, holdout: 
     from skinkit.inverse.fit import fit as fit_observations
 
     say = Progress(progress)
-    with loaded(model, workers) as m:
+    with loaded(model, workers, scheduler) as m:
         if not isinstance(session, Observations):
             say.stage(f"reading {os.fspath(session)} for {m.name}")
         obs = observations(m, session, holdout=holdout, protocols=protocols, segments=segments, until=until,
@@ -232,7 +234,7 @@ def diagnose(model: ModelLike, session: SessionLike, *, effects: Names = None, h
              free: Names = None, protocols: Names = None, until: float | None = None, noise: str = "auto",
              max_effects: int = 2, candidates: int = 3, alpha: float = 0.05, max_iterations: int = 50,
              min_share: float | None = None, error_estimate: bool = True, model_error: bool = True,
-             workers: int | None = None, progress: ProgressLike = True) -> GapReport:
+             workers: int | None = None, scheduler: Any = None, progress: ProgressLike = True) -> GapReport:
     """Diagnose the sim-to-real gap of a model on a session: calibrate it, locate where its
     noise-normalised residual exceeds the noise, test the candidate unmodelled effects, refit the
     best and name those that explain the excess.
@@ -248,7 +250,8 @@ def diagnose(model: ModelLike, session: SessionLike, *, effects: Names = None, h
     ``candidates``: refits per round; ``alpha``: the level of every test; ``max_iterations``:
     evaluations each fit may make; ``min_share``: the share of the excess an effect must remove
     to be named (default 0.5); ``error_estimate``, ``model_error``: a finite-element model's
-    discretisation error (:func:`skinkit.gap.diagnose.diagnose`); ``workers``: its processes.
+    discretisation error (:func:`skinkit.gap.diagnose.diagnose`); ``workers``: its processes;
+    ``scheduler``: a Dask scheduler address (or cluster) to solve its protocols on instead.
     ``progress``: True (lines on standard error), False, or a callable taking each line.
 
     Returns the :class:`~skinkit.schemas.GapReport`; print it, or ``to_dataframe("candidates")``
@@ -285,7 +288,7 @@ def diagnose(model: ModelLike, session: SessionLike, *, effects: Names = None, h
                               max_effects=max_effects, candidates=candidates, alpha=alpha, workers=workers,
                               until=until, progress=say.stage, protocols=only,
                               error_estimate=error_estimate, noise=noise, max_iterations=max_iterations,
-                              model_error=model_error, **more)
+                              model_error=model_error, scheduler=scheduler, **more)
     named = ", ".join(report.named) or "no effect"
     say.stage(f"diagnosis done: {named} named, {time.perf_counter() - t0:.1f} s")
     return report

@@ -12,6 +12,7 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._paths import check_name, check_result_files, name_callback
+from skinkit.cli._scheduler import scheduler_callback
 from skinkit.cli._types import FiniteFloat
 from skinkit.errors import SkinkitError
 from skinkit.forward.session import read_session, split_names
@@ -93,13 +94,17 @@ def _bound(item: str, params) -> tuple[str, float, float]:
                    "mesh refined 2x), carry it as noise and fit again (the approximation-error "
                    "approach); the result states it per channel against the noise")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes")
+@click.option("--scheduler", default=None, metavar="ADDRESS", callback=scheduler_callback,
+              help="a Dask scheduler address to solve the protocols on instead of --workers (reached "
+                   "before any work starts)")
 @click.option("--json", "as_json", is_flag=True, help="print the result as JSON")
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,
         start_items: tuple[str, ...], bound_items: tuple[str, ...], starts: int,
         holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
         max_iterations: int, protocols: str | None,
         resume: bool, out_dir: str | None, plots: bool, fit_name: str | None, overwrite: bool,
-        error_estimate: bool, model_error: bool, workers: int | None, as_json: bool) -> None:
+        error_estimate: bool, model_error: bool, workers: int | None, scheduler: str | None,
+        as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
 
     --out receives fit.json and model.toml: the calibrated model, MODEL_FILE with the fitted values
@@ -115,7 +120,7 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
     from skinkit.forward import load
 
     _check_choices(weighting, optimiser)
-    model = load(model_file, workers=workers)
+    model = load(model_file, workers=workers, scheduler=scheduler)
     bar = progress(stage="fit").start()   # on stderr, also with --json
     try:
         if error_estimate:

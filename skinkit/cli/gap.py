@@ -8,6 +8,7 @@ import click
 
 from skinkit import jsonio
 from skinkit.cli._paths import check_result_files, name_callback
+from skinkit.cli._scheduler import scheduler_callback
 from skinkit.cli._types import FiniteFloat
 from skinkit.cli.registry import LazyGroup
 from skinkit.errors import SkinkitError
@@ -56,6 +57,9 @@ def gap() -> None:
               help="replace a report of that name already stored in SESSION, and gap.json/gap.html/"
                    "model.toml in --out")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="worker processes (FE models)")
+@click.option("--scheduler", default=None, metavar="ADDRESS", callback=scheduler_callback,
+              help="a Dask scheduler address to solve the protocols on instead of --workers (FE models; "
+                   "reached before any work starts)")
 @click.option("--until", "until_s", type=FiniteFloat(min=0, min_open=True), default=None,
               help="diagnose only the session's first seconds [s] (e.g. the imaged part of a record)")
 @click.option("--no-error-estimate", "no_error_estimate", is_flag=True,
@@ -78,7 +82,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
                  overwrite: bool, workers: int | None, until_s: float | None, no_error_estimate: bool,
                  model_error: bool, as_json: bool, protocols: str | None, min_share: float, noise: str,
                  max_iterations: int, scan_grid_mm: float | None, scan_sizes: str | None,
-                 no_scan: bool) -> None:
+                 no_scan: bool, scheduler: str | None) -> None:
     """Calibrate MODEL_FILE on SESSION (experiment file or CSV record), then say where the residual
     is above the noise, which installed effect explains it (score tests at every effect's null,
     then refits of the best), and how far the gap shrinks with it.
@@ -127,7 +131,7 @@ def diagnose_cmd(model_file: str, session: str, effects: str | None, holdout: st
         report = diagnose(model_file, session, effects=wanted, holdout=split_names(holdout),
                           protocols=split_names(protocols) or None,
                           free=None if free is None else split_names(free), max_effects=max_effects,
-                          candidates=candidates, workers=workers, until=until_s,
+                          candidates=candidates, workers=workers, scheduler=scheduler, until=until_s,
                           progress=lambda line: bar.say(f"  {line}"),
                           error_estimate=not no_error_estimate, min_share=min_share, noise=noise,
                           max_iterations=max_iterations, model_error=model_error, scan=scan)

@@ -255,7 +255,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
              protocols: Sequence[str] | None = None, error_estimate: bool = True,
              min_share: float = MIN_SHARE, noise: str = "auto", max_iterations: int = 50,
              model_error: bool = True, scan: ScanOptions | None = None,
-             calibration: FitResult | None = None) -> GapReport:
+             calibration: FitResult | None = None, scheduler: Any = None) -> GapReport:
     """Diagnose the sim-to-real gap of ``model`` (a model file or description) on ``observations``
     (an :class:`Observations`, or a session path: experiment file or CSV record).
 
@@ -279,7 +279,9 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     it then replaces ``error_estimate``'s projection); ``scan``: how candidates that declare a
     region are scanned over the tracked points (:mod:`skinkit.gap.scan_step`; None: the defaults);
     ``calibration``: a fit of the same ``free`` parameters on the same observations already made
-    (e.g. the session's identification), used as the calibration instead of fitting again.
+    (e.g. the session's identification), used as the calibration instead of fitting again;
+    ``scheduler``: a Dask scheduler address (or cluster) to solve every prediction's protocols on
+    instead of ``workers``.
     """
     from skinkit.forward import load, model_kind, read_description, region_partitions
 
@@ -297,7 +299,7 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     kind = model_kind(spec)
 
     def loader(s: Mapping[str, Any]) -> Any:
-        return load(s, workers=workers)
+        return load(s, workers=workers, scheduler=scheduler)
 
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
                      until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations,
