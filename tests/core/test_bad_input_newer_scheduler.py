@@ -90,3 +90,14 @@ def test_the_benchmark_pool_refuses_an_unreachable_scheduler_by_name():
     address = f"tcp://127.0.0.1:{_unused_port()}"
     with pytest.raises(BenchmarkError, match="cannot reach the Dask scheduler"):
         _Pool(1, address)
+
+
+@pytest.mark.parametrize("command", [["fit"], ["gap", "diagnose"]])
+def test_fit_and_diagnose_refuse_a_bad_scheduler_before_any_work(model, record, tmp_path, command):
+    out = tmp_path / "out"
+    one_error(_run(*command, model, record, "--scheduler", "garbage", "--out", str(out)),
+              "--scheduler 'garbage'", "not a Dask scheduler address")
+    address = f"tcp://127.0.0.1:{_unused_port()}"
+    one_error(_run(*command, model, record, "--scheduler", address, "--out", str(out)),
+              f"--scheduler '{address}'", "cannot reach the Dask scheduler")
+    assert not out.exists()
