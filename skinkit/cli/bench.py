@@ -26,6 +26,7 @@ BENCHES: dict[str, str] = {
     "coverage": "skinkit.cli.bench_ident:bench_coverage",
     "mesh-nulls": "skinkit.cli.bench_ident:bench_mesh_nulls",
     "diagnose": "skinkit.cli.bench_ident:bench_diagnose",
+    "scar": "skinkit.cli.bench_ident:bench_scar",
 }
 
 

@@ -1,4 +1,4 @@
-"""``skinkit bench forward | fit | fit-invivo | coverage | mesh-nulls | diagnose``: the cost and the
+"""``skinkit bench forward | fit | fit-invivo | coverage | mesh-nulls | diagnose | scar``: the cost and the
 honesty of identification, beside the ways peers do it.
 
 Each command runs :mod:`skinkit.bench`'s plain functions and prints their figures (JSON with
@@ -14,6 +14,7 @@ import click
 
 from skinkit.cli._bench_out import emit, page_option, write_page
 from skinkit.cli._progress import progress
+from skinkit.cli._scheduler import scheduler_callback
 
 #: the coverage study's cases (kept here so that ``--help`` imports no benchmark)
 COVERAGE_CASES = ("gel", "invivo", "twopad", "lumped")
@@ -135,3 +136,33 @@ def bench_diagnose(cases: str, shared_mesh: bool, workers: int, as_json: bool, p
     lines = diagnose_profile.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Where a gap diagnosis spends its time", res, lines)
+
+
+@click.command("scar")
+@click.option("--seeds", type=click.IntRange(0), default=10, show_default=True,
+              help="sessions with a scar (seeds first-seed, first-seed + 1, ...)")
+@click.option("--healthy", type=click.IntRange(0), default=10, show_default=True,
+              help="healthy sessions (the same seeds, no scar)")
+@click.option("--first-seed", type=click.IntRange(0), default=0, show_default=True, help="the first seed")
+@click.option("--parallel", type=click.IntRange(1), default=1, show_default=True,
+              help="cases run at once (worker processes; without --scheduler)")
+@click.option("--scheduler", default=None, metavar="ADDRESS", callback=scheduler_callback,
+              help="run the cases on this Dask scheduler (reached before any case starts)")
+@click.option("--journal", type=click.Path(dir_okay=False), default=None,
+              help="record each finished case in this file (JSON lines); a run with the same file "
+                   "goes on where an earlier one stopped")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+@page_option
+def bench_scar(seeds: int, healthy: int, first_seed: int, parallel: int, scheduler: str | None,
+               journal: str | None, as_json: bool, page: Path | None) -> None:
+    """Scar sessions: is a stiff elliptical scar between two pads named, is its centre found inside
+    its outline and its stiffness ratio inside the 95 % interval; is nothing named on healthy skin."""
+    from skinkit.bench import scar
+
+    if seeds + healthy == 0:
+        raise click.BadParameter("no case to run: give --seeds or --healthy above 0", param_hint="--seeds")
+    with progress(stage="bench scar") as bar:
+        res = scar.run(seeds, healthy, first_seed, parallel, scheduler, journal, say=bar.say)
+    lines = scar.summary_lines(res)
+    emit(res, as_json, lines, indent=1)
+    write_page(page, "Scar sessions: finding a stiff scar between two pads", res, lines)

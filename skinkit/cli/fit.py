@@ -101,10 +101,9 @@ def _bound(item: str, params) -> tuple[str, float, float]:
 def fit(model_file: str, session: str, free: str | None, weighting: str, optimiser: str,
         start_items: tuple[str, ...], bound_items: tuple[str, ...], starts: int,
         holdout: str | None, segments: str | None, until_s: float | None, ftol: float, xtol: float,
-        max_iterations: int, protocols: str | None,
-        resume: bool, out_dir: str | None, plots: bool, fit_name: str | None, overwrite: bool,
-        error_estimate: bool, model_error: bool, workers: int | None, scheduler: str | None,
-        as_json: bool) -> None:
+        max_iterations: int, protocols: str | None, resume: bool, out_dir: str | None, plots: bool,
+        fit_name: str | None, overwrite: bool, error_estimate: bool, model_error: bool,
+        workers: int | None, scheduler: str | None, as_json: bool) -> None:
     """Fit MODEL_FILE's free parameters to SESSION (experiment file or CSV record).
 
     --out receives fit.json and model.toml: the calibrated model, MODEL_FILE with the fitted values
