@@ -16,7 +16,8 @@ session or release. Jobs that write field files (``options["vtu"]``) are always 
 
 **Store.** One file per job (``<key>.npz``, written to a temporary name and renamed, so a crash
 leaves no partial entry); an entry that cannot be read is solved again and replaced. When the
-directory holds more than :data:`MAX_BYTES`, the least recently used entries go. A hit's
+directory holds more than :data:`MAX_BYTES` (8 GiB; ``SKINKIT_SOLVE_CACHE_GB`` sets another size),
+the least recently used entries go. A hit's
 ``info`` says ``"cached": True`` (its ``wall_s`` is the original solve's): benchmarks, which
 measure solves, run without a cache.
 """
@@ -26,6 +27,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import io
+import math
 import os
 import pickle
 import sys
@@ -35,10 +37,16 @@ from typing import Any
 
 import numpy as np
 
+from skinkit.errors import SkinkitError
+
 #: the environment variable naming the cache directory (unset or empty: no cache)
 ENVIRONMENT = "SKINKIT_SOLVE_CACHE"
-#: the most bytes the cache directory keeps; beyond, least recently used entries are removed
-MAX_BYTES = 2 * 1024**3
+#: the most bytes the cache directory keeps by default (a quick demo stores about 3 GB: a
+#: region scan's prediction carries a hundred sensitivity columns); beyond, least recently used
+#: entries are removed
+MAX_BYTES = 8 * 1024**3
+#: the environment variable overriding :data:`MAX_BYTES`, in GiB
+ENVIRONMENT_SIZE = "SKINKIT_SOLVE_CACHE_GB"
 #: numerical libraries whose version is part of the key (their arithmetic is in every answer)
 LIBRARIES = ("numpy", "scipy", "scikit-fem", "pypardiso", "mkl")
 
@@ -87,9 +95,22 @@ class SolveCache:
 
     @classmethod
     def from_environment(cls) -> SolveCache | None:
-        """The cache named by ``SKINKIT_SOLVE_CACHE``, or None when it is unset or empty."""
+        """The cache named by ``SKINKIT_SOLVE_CACHE`` (at most ``SKINKIT_SOLVE_CACHE_GB`` GiB), or
+        None when it is unset or empty. Raises :class:`SkinkitError` for a size that is not a
+        positive number."""
         d = os.environ.get(ENVIRONMENT, "").strip()
-        return cls(d) if d else None
+        if not d:
+            return None
+        size = os.environ.get(ENVIRONMENT_SIZE, "").strip()
+        if not size:
+            return cls(d)
+        try:
+            gib = float(size)
+        except ValueError:
+            gib = float("nan")
+        if not (math.isfinite(gib) and gib > 0):
+            raise SkinkitError(f"{ENVIRONMENT_SIZE}={size!r}: expected a positive number of GiB")
+        return cls(d, int(gib * 1024**3))
 
     def key(self, job: Any) -> str:
         """SHA-256 [hex] of the code fingerprint and the job's pickled content."""
@@ -165,4 +186,4 @@ def solve_jobs(jobs: Sequence[Any], solve: Callable[[list[Any]], dict[str, dict[
     return {job.name: found.get(job.name, solved.get(job.name)) for job in jobs}
 
 
-__all__ = ["ENVIRONMENT", "MAX_BYTES", "SolveCache", "code_fingerprint", "solve_jobs"]
+__all__ = ["ENVIRONMENT", "ENVIRONMENT_SIZE", "MAX_BYTES", "SolveCache", "code_fingerprint", "solve_jobs"]

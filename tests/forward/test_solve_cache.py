@@ -127,3 +127,14 @@ def test_without_the_variable_nothing_is_written(monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)
     _predict()
     assert not list(tmp_path.rglob("*.npz"))
+
+
+def test_a_size_that_is_not_a_positive_number_is_refused(monkeypatch, tmp_path):
+    from skinkit.errors import SkinkitError
+    monkeypatch.setenv(solve_cache.ENVIRONMENT, str(tmp_path))
+    monkeypatch.setenv(solve_cache.ENVIRONMENT_SIZE, "0.5")
+    assert solve_cache.SolveCache.from_environment().max_bytes == 1024**3 // 2
+    for bad in ("lots", "-1", "nan"):
+        monkeypatch.setenv(solve_cache.ENVIRONMENT_SIZE, bad)
+        with pytest.raises(SkinkitError, match="SKINKIT_SOLVE_CACHE_GB"):
+            solve_cache.SolveCache.from_environment()
