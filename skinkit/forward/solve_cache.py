@@ -3,8 +3,8 @@
 A finite-element prediction solves one job per protocol (:class:`skinkit.forward.fe.ProtocolJob`):
 the model description with its effects, the mesh fitted to the session, the drive at the solver's
 steps, the tracked points' embedding and the parameters differentiated. A second run of a command
-on the same model and session (a diagnosis run again with other options, the demo run again, a
-benchmark repeated) solves many of the same jobs. With a cache directory — the environment
+on the same model and session file (a diagnosis run again with other options, a fit after a
+crash) solves many of the same jobs. With a cache directory — the environment
 variable ``SKINKIT_SOLVE_CACHE`` — each job's outputs are
 stored under a key of its content and read back instead of solved.
 
@@ -41,7 +41,7 @@ from skinkit.errors import SkinkitError
 
 #: the environment variable naming the cache directory (unset or empty: no cache)
 ENVIRONMENT = "SKINKIT_SOLVE_CACHE"
-#: the most bytes the cache directory keeps by default (a quick demo stores about 3 GB: a
+#: the most bytes the cache directory keeps by default (a quick demo stores about 2.5 GB: a
 #: region scan's prediction carries a hundred sensitivity columns); beyond, least recently used
 #: entries are removed
 MAX_BYTES = 8 * 1024**3
