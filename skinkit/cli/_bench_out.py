@@ -24,13 +24,19 @@ def emit(res: Any, as_json: bool, lines: list[str] | None = None, indent: int = 
 
 
 def page_option(f: Callable[..., Any]) -> Callable[..., Any]:
-    """The ``--page PATH`` option (parameter ``page``), its folder checked before any work."""
+    """The ``--page PATH`` option (parameter ``page``), its folder checked before any work; with a
+    page the solve cache (``SKINKIT_SOLVE_CACHE``) is not used."""
 
     def check(ctx: click.Context, param: click.Parameter, value: Path | None) -> Path | None:
         if value is not None:
+            import os
+
             from skinkit.cli._paths import check_out_file
+            from skinkit.forward.solve_cache import ENVIRONMENT
 
             check_out_file(value, "--page")
+            # a results page states what the work costs: solves read back would understate it
+            os.environ.pop(ENVIRONMENT, None)
         return value
 
     return click.option("--page", type=click.Path(dir_okay=False, path_type=Path), default=None,

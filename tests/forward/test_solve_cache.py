@@ -138,3 +138,22 @@ def test_a_size_that_is_not_a_positive_number_is_refused(monkeypatch, tmp_path):
         monkeypatch.setenv(solve_cache.ENVIRONMENT_SIZE, bad)
         with pytest.raises(SkinkitError, match="SKINKIT_SOLVE_CACHE_GB"):
             solve_cache.SolveCache.from_environment()
+
+
+def test_a_results_page_is_written_without_the_cache(monkeypatch, tmp_path):
+    """A command writing a results page measures its work: the cache variable is dropped."""
+    import os
+
+    import click
+    from click.testing import CliRunner
+
+    from skinkit.cli._bench_out import page_option
+
+    @click.command()
+    @page_option
+    def cmd(page):
+        click.echo(os.environ.get(solve_cache.ENVIRONMENT, "unset"))
+
+    monkeypatch.setenv(solve_cache.ENVIRONMENT, str(tmp_path / "c"))
+    assert CliRunner().invoke(cmd, []).output.strip() == str(tmp_path / "c")
+    assert CliRunner().invoke(cmd, ["--page", str(tmp_path / "p.md")]).output.strip() == "unset"
