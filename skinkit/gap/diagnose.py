@@ -279,7 +279,9 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     it then replaces ``error_estimate``'s projection); ``scan``: how candidates that declare a
     region are scanned over the tracked points (:mod:`skinkit.gap.scan_step`; None: the defaults);
     ``calibration``: a fit of the same ``free`` parameters on the same observations already made
-    (e.g. the session's identification), used as the calibration instead of fitting again;
+    (e.g. the session's identification), used as the calibration instead of fitting again (one
+    made with the model's error carried, on ``observations`` that carry it, as
+    :func:`skinkit.inverse.approximation.refit` returns them, is not estimated again);
     ``scheduler``: a Dask scheduler address (or cluster) to solve every prediction's protocols on
     instead of ``workers``.
     """
@@ -374,7 +376,10 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
             given = calibration is not None and sorted(calibration.parameters.free_names) == sorted(theta)
             r0 = calibration if given else fit(base, observations, theta, max_iterations=max_iterations)
         carried = None
-        if model_error and has_mesh(base):
+        if given and observations.model_error is not None and calibration.extra.get("model_error"):
+            # a calibration made with the mesh's error carried, on observations that carry it
+            carried = calibration.extra["model_error"]
+        elif model_error and has_mesh(base):
             from skinkit.inverse.approximation import refit
             with stage("model error"):
                 r0, observations = refit(base, observations, r0, theta, fit, progress=say,
