@@ -45,3 +45,27 @@ def test_the_cases_record_both_meshes(base: gc._Base) -> None:
     m = gc.meshes(base.lab)
     assert m["mesh"] == "own" and m["truth_unknowns"] >= 8 * m["model_unknowns"], m
     assert np.isfinite(base.critical_excess)
+
+
+def test_the_oracle_measures_chi2_with_the_diagnosis_noise_model() -> None:
+    """The oracle (the model with the truth's structure) nests the calibrated model: on the noise
+    model the diagnosis used — the session carrying the model's mesh error — its χ² cannot exceed
+    the calibration's, and an effect whose projected signature is many detection thresholds must
+    read visible. Fitted on the raw session instead, the mesh error (tens of noise levels) would
+    make its χ² far above the diagnosis's and every effect case "not visible"."""
+    from skinkit.bench.gap_score import assess
+
+    spec, free = CASES["disc-two-layers"]()
+    payload = {"id": "drift", "kind": "effect", "magnitude": "moderate", "seed": 0,
+               "effects": [gc.effect_at("force-drift", 1.0)], "spec": spec, "free": free, "workers": 1,
+               "mesh": "own", "diagnose": {"max_effects": 1, "candidates": 2}}
+    try:
+        rec = gc.run_case(payload)
+    finally:
+        gc.release()
+    assert "error" not in rec, rec.get("error")
+    assert rec["signature"]["multiple"] > 10, rec["signature"]
+    before, orc = rec["report"]["chi2"], rec["oracle"]
+    assert orc["dof"] == before["dof_before"] - 3
+    assert orc["chi2"] <= before["before"] * (1 + 1e-6), (orc["chi2"], before["before"])
+    assert assess(rec)["visible"] is True
