@@ -112,13 +112,14 @@ SPECS: dict[str, Callable[[], tuple[dict[str, Any], list[str]]]] = {
 def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int | None = None,
              first_seed: int = 0,
              progress: Callable[[int, int, dict[str, Any]], None] | None = None,
-             mesh: str = "shared") -> dict[str, Any]:
+             mesh: str = "shared", truth_factor: int = 2) -> dict[str, Any]:
     """One case's coverage study (JSON-ready; :func:`skinkit.inverse.coverage.coverage`'s fields
     plus the case's description, DOF, protocols and the truth run's wall time).
 
     ``mesh``: ``"shared"`` (the truth on the model's mesh) or ``"own"`` (a finite-element truth on
     a mesh of its own, :mod:`skinkit.lab.truth_mesh`; every fit then carries the model's
-    discretisation error, :func:`model_error`)."""
+    discretisation error, :func:`model_error`), ``truth_factor`` times finer
+    (:func:`skinkit.lab.truth_mesh.own_mesh`)."""
     from skinkit.forward import load
     from skinkit.inverse.coverage import LabSessions, coverage, perturbed_start
 
@@ -127,7 +128,7 @@ def run_case(case: str, seeds: int = 20, start: str = "perturbed", workers: int 
     if mesh not in MESHES:
         raise SkinkitError(f"--mesh: expected one of {', '.join(MESHES)}, got {mesh!r}")
     spec, free = SPECS[case]()
-    lab = LabSessions(spec, workers=workers, mesh=mesh)
+    lab = LabSessions(spec, workers=workers, mesh=mesh, mesh_factor=truth_factor)
     model = load(lab.model_spec, workers=workers)
     carried: dict[str, Any] | None = None
     dof = _dof_of(lab.model_spec)
@@ -196,9 +197,10 @@ def _line(res: dict[str, Any]) -> str:
 
 def run(case: str = "all", seeds: int = 20, start: str = "perturbed", first_seed: int = 0,
         workers: int | None = None, say: Callable[[str], None] | None = None,
-        mesh: str = "shared") -> dict[str, Any]:
+        mesh: str = "shared", truth_factor: int = 2) -> dict[str, Any]:
     """Every case named by ``case`` (one of :data:`CASES` or ``"all"``): ``{"cases": {name:
-    run_case(...)}, "wall_s": ...}``; ``say`` receives one progress line per fitted seed."""
+    run_case(...)}, "wall_s": ...}``; ``say`` receives one progress line per fitted seed;
+    ``truth_factor``: the own-mesh truth's refinement (:func:`run_case`)."""
     cases = list(CASES) if case == "all" else [case]
     out: dict[str, Any] = {}
     t0 = time.perf_counter()
@@ -209,8 +211,9 @@ def run(case: str = "all", seeds: int = 20, start: str = "perturbed", first_seed
             k = sum(rec["inside"].values())
             status = "failed" if "error" in rec else f"{k}/{len(rec['inside'])} inside"
             say(f"  {c}: seed {rec['seed']} ({i}/{n}) {status}, {rec['wall_s']:.1f} s")
-        out[c] = run_case(c, seeds, start, workers, first_seed, progress, mesh)
-    return {"cases": out, "mesh": mesh, "wall_s": time.perf_counter() - t0}
+        out[c] = run_case(c, seeds, start, workers, first_seed, progress, mesh, truth_factor)
+    return {"cases": out, "mesh": mesh, "truth_factor": truth_factor if mesh == "own" else None,
+            "wall_s": time.perf_counter() - t0}
 
 
 def summary_lines(res: dict[str, Any]) -> list[str]:
@@ -227,7 +230,10 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
             tm, me = res["cases"][c].get("truth_mesh") or {}, res["cases"][c].get("model_error") or {}
             if tm:
                 ratio = me.get("largest_over_noise")
-                out.append(f"  {c}: truth {tm.get('truth_unknowns', 0):,} unknowns, model "
-                           f"{tm.get('model_unknowns', 0):,}; model error "
+                own = max(((row or {}).get("truth_over_noise") or 0.0
+                           for row in (tm.get("discretisation") or {}).values()), default=None)
+                out.append(f"  {c}: truth {tm.get('truth_unknowns', 0):,} unknowns ({tm.get('factor')}x), "
+                           f"its own error at most {'-' if own is None else f'{own:.3g}'} noise levels; "
+                           f"model {tm.get('model_unknowns', 0):,}; model error "
                            f"{'-' if ratio is None else f'{ratio:.3g}'} noise levels at most")
     return out

@@ -81,16 +81,23 @@ def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool
 @click.option("--mesh", type=click.Choice(["shared", "own"]), default="shared", show_default=True,
               help="finite-element truths on the model's mesh, or on meshes of their own (every fit then "
                    "carries the model's discretisation error)")
+@click.option("--truth-factor", type=click.IntRange(2), default=2, show_default=True,
+              help="with --mesh own: the truth's refinement over the model's mesh (element counts along "
+                   "each in-plane axis times this, element layers times this + 1)")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 @page_option
 def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None, mesh: str,
-                   as_json: bool, page: Path | None) -> None:
+                   truth_factor: int, as_json: bool, page: Path | None) -> None:
     """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
     from skinkit.bench import coverage
 
+    if truth_factor != 2 and mesh != "own":
+        raise click.BadParameter("applies to truths on meshes of their own: add --mesh own",
+                                 param_hint="--truth-factor")
     # progress goes to stderr, also with --json
     with progress(stage="bench coverage") as bar:
-        res = coverage.run(case, seeds, start, first_seed, workers, say=bar.say, mesh=mesh)
+        res = coverage.run(case, seeds, start, first_seed, workers, say=bar.say, mesh=mesh,
+                           truth_factor=truth_factor)
     lines = coverage.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Coverage of the reported 95 % intervals", res, lines)

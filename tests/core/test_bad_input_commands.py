@@ -135,6 +135,8 @@ def test_sysid_physical_options(tmp_path, args, option):
     (["fem", "--n", "0"], "'--n'"), (["robot", "--duration", "-1"], "'--duration'"),
     (["vision", "--trials", "0"], "'--trials'"), (["vision", "--subset", "-4"], "'--subset'"),
     (["sysid", "--repeat", "0"], "'--repeat'"), (["fit", "--seed", "-1"], "'--seed'"),
+    (["coverage", "--mesh", "own", "--truth-factor", "1"], "'--truth-factor'"),
+    (["coverage", "--truth-factor", "3"], "--truth-factor"),
 ])
 def test_bench_bad_counts(args, option):
     one_error(_run("bench", *args), option)
