@@ -121,10 +121,11 @@ class SolveCache:
     def _path(self, key: str) -> Path:
         return self.directory / f"{key}.npz"
 
-    def get(self, job: Any) -> dict[str, Any] | None:
+    def get(self, job: Any, key: str | None = None) -> dict[str, Any] | None:
         """The stored outputs of ``job`` (a :func:`skinkit.forward.fe.solve_protocol` result), or
-        None (not stored, or unreadable: then removed)."""
-        path = self._path(self.key(job))
+        None (not stored, or unreadable: then removed); ``key``: :meth:`key` of ``job`` when
+        already known."""
+        path = self._path(key or self.key(job))
         try:
             with np.load(path, allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files if k != "__meta__"}
@@ -142,14 +143,15 @@ class SolveCache:
         out["info"] = {**out.get("info", {}), "cached": True}
         return out
 
-    def put(self, job: Any, result: dict[str, Any]) -> None:
-        """Store ``result`` for ``job`` (atomically), then trim the directory to ``max_bytes``."""
+    def put(self, job: Any, result: dict[str, Any], key: str | None = None) -> None:
+        """Store ``result`` for ``job`` (atomically; ``key``: :meth:`key` of ``job`` when already
+        known), then trim the directory to ``max_bytes``."""
         self.directory.mkdir(parents=True, exist_ok=True)
         arrays = {k: v for k, v in result.items() if isinstance(v, np.ndarray)}
         meta = {k: v for k, v in result.items() if not isinstance(v, np.ndarray)}
         buf = io.BytesIO()
         np.savez(buf, __meta__=np.frombuffer(pickle.dumps(meta, protocol=5), dtype=np.uint8), **arrays)
-        path = self._path(self.key(job))
+        path = self._path(key or self.key(job))
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_bytes(buf.getvalue())
         os.replace(tmp, path)
@@ -172,17 +174,22 @@ def solve_jobs(jobs: Sequence[Any], solve: Callable[[list[Any]], dict[str, dict[
     cache = cache if cache is not None else SolveCache.from_environment()
     if cache is None:
         return solve(list(jobs))
-    found, todo = {}, []
+    found, todo, keys = {}, [], {}
     for job in jobs:
-        hit = None if job.options.get("vtu") else cache.get(job)
+        if job.options.get("vtu"):      # files written as a side effect: always solved
+            todo.append(job)
+            continue
+        # hashing pickles the job's mesh and state: once per job
+        keys[job.name] = cache.key(job)
+        hit = cache.get(job, keys[job.name])
         if hit is None:
             todo.append(job)
         else:
             found[job.name] = hit
     solved = solve(todo) if todo else {}
     for job in todo:
-        if not job.options.get("vtu"):
-            cache.put(job, solved[job.name])
+        if job.name in keys:
+            cache.put(job, solved[job.name], keys[job.name])
     return {job.name: found.get(job.name, solved.get(job.name)) for job in jobs}
 
 
