@@ -38,9 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from skinkit.bench.gap_benchmark import _open_journal, _Pool
+from skinkit.bench.gap_benchmark import _open_journal
 from skinkit.bench.gap_cases import ALPHA, BenchmarkError
 from skinkit.bench.gap_score import clopper_pearson
+from skinkit.bench.task_pool import TaskPool
 from skinkit.errors import SkinkitError
 
 #: the diagnosed model's free parameters: the element's a, b and the force zero
@@ -381,7 +382,7 @@ def run(quick: bool, *, seeds: int | None = None, forms_: Sequence[str] | None =
         if jr is not None:
             jr.add_case(r)
 
-    pool = _Pool(1 if recorded_only else (2 if parallel is None else int(parallel)), scheduler)
+    pool = TaskPool(1 if recorded_only else (2 if parallel is None else int(parallel)), scheduler)
     try:
         fresh = {r["id"]: r for r in pool.map(run_case, todo, case_line)}
     finally:

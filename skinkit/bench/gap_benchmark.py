@@ -25,14 +25,13 @@ from skinkit.bench.gap_cases import (
     calibrate,
     effect_at,
     lumped_spec,
-    mark_worker,
     model_spec,
     quick_spec,
     release,
     run_case,
 )
 from skinkit.bench.gap_score import assess, clopper_pearson, score
-from skinkit.errors import SkinkitError
+from skinkit.bench.task_pool import TaskPool
 
 
 # -- planning and running -----------------------------------------------------------------------
@@ -75,65 +74,6 @@ def execution_order(cases: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any
     return sorted(cases, key=key)
 
 
-class _Pool:
-    """Tasks run in this process (``parallel <= 1``), in a pool of processes, or on a Dask cluster."""
-
-    def __init__(self, parallel: int, scheduler: str | None) -> None:
-        self.client = self.executor = None
-        if scheduler:
-            from dask.distributed import Client
-
-            from skinkit.forward.scheduler import check_scheduler
-
-            try:    # a caller that skips the command line's check still gets a prompt, named refusal
-                check_scheduler(scheduler, "scheduler")
-                self.client = Client(scheduler, timeout="10s", set_as_default=False)
-            except SkinkitError as exc:
-                raise BenchmarkError(str(exc)) from None
-            except (OSError, TimeoutError, ValueError) as exc:
-                raise BenchmarkError(f"scheduler {scheduler!r}: cannot reach the Dask scheduler "
-                                     f"({exc})") from None
-        elif parallel > 1:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-
-            self.executor = ProcessPoolExecutor(parallel, mp_context=multiprocessing.get_context("spawn"),
-                                                initializer=mark_worker)
-
-    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], done: Callable[[Any], None]) -> list[Any]:
-        """``fn`` over ``items`` (results in the items' order); ``done(result)`` as each finishes."""
-        if self.client is not None:
-            from dask.distributed import as_completed
-
-            futs = [self.client.submit(fn, it, pure=False) for it in items]
-            index = {f.key: i for i, f in enumerate(futs)}
-            out: list[Any] = [None] * len(items)
-            for f in as_completed(futs):
-                out[index[f.key]] = r = f.result()
-                done(r)
-            return out
-        if self.executor is not None:
-            from concurrent.futures import as_completed as done_order
-
-            futs = {self.executor.submit(fn, it): i for i, it in enumerate(items)}
-            out = [None] * len(items)
-            for f in done_order(futs):
-                out[futs[f]] = r = f.result()
-                done(r)
-            return out
-        res = []
-        for it in items:
-            res.append(fn(it))
-            done(res[-1])
-        return res
-
-    def close(self) -> None:
-        if self.executor is not None:
-            self.executor.shutdown()
-        if self.client is not None:
-            self.client.close()
-
-
 def _open_journal(journal: str | os.PathLike[str] | None, settings: Mapping[str, Any],
                   say: Callable[[str], None], read_only: bool = False) -> Any:
     if journal is None:
@@ -146,7 +86,7 @@ def _open_journal(journal: str | os.PathLike[str] | None, settings: Mapping[str,
     return jr
 
 
-def _calibrations(pool: _Pool, tasks: Sequence[Mapping[str, Any]], jr: Any,
+def _calibrations(pool: TaskPool, tasks: Sequence[Mapping[str, Any]], jr: Any,
                   say: Callable[[str], None], recorded_only: bool = False) -> list[dict[str, Any]]:
     """The calibrations of ``tasks`` (one per effect, in order): from the journal ``jr`` when it
     holds them, else run on ``pool`` (and recorded) — or left out (``recorded_only``)."""
@@ -167,7 +107,7 @@ def _calibrations(pool: _Pool, tasks: Sequence[Mapping[str, Any]], jr: Any,
             if t["effect"] in new or t["effect"] in known]
 
 
-def _run_cases(pool: _Pool, payloads: Sequence[Mapping[str, Any]], jr: Any,
+def _run_cases(pool: TaskPool, payloads: Sequence[Mapping[str, Any]], jr: Any,
                say: Callable[[str], None], recorded_only: bool = False) -> tuple[list[dict[str, Any]], int]:
     """The records of ``payloads`` in their order, and how many came from the journal ``jr``;
     the others run on ``pool`` in :func:`execution_order`, each recorded as it finishes (or,
@@ -265,7 +205,7 @@ def run(quick: bool, scheduler: str | None = None, workers: int | None = None, s
                                  "magnitudes": {m: MAGNITUDES[m] for m in mags},
                                  "diagnose": opts, "alpha": ALPHA, "definitions": DEFINITIONS}, say,
                       read_only=recorded_only)
-    pool = _Pool(1, None) if recorded_only else _Pool(parallel, scheduler)
+    pool = TaskPool(1, None) if recorded_only else TaskPool(parallel, scheduler)
     try:
         tasks = [{"spec": spec, "free": free, "effect": n, "workers": workers, "mesh": mesh,
                   "magnitudes": {m: MAGNITUDES[m] for m in mags}} for n in names]

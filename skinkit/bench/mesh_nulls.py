@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from scipy.stats import beta
+from skinkit.bench.gap_score import clopper_pearson
 
 #: candidate effects every null is diagnosed against (ones a mesh too stiff would imitate)
 CANDIDATES = ("support-compliance", "inclusion", "thickness", "force-offset")
@@ -59,12 +59,6 @@ CASES: dict[str, Callable[[], tuple[dict[str, Any], list[str]]]] = {
     "disc-two-layers": _disc, "disc-gel": _gel}
 
 
-def _interval(k: int, n: int) -> list[float]:
-    lo = 0.0 if k == 0 else float(beta.ppf(0.025, k, n - k + 1))
-    hi = 1.0 if k == n else float(beta.ppf(0.975, k + 1, n - k))
-    return [lo, hi]
-
-
 def run(cases: Sequence[str], seeds: int, first_seed: int = 0, workers: int = 1,
         say: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Diagnose ``seeds`` sessions of each case with and without the carried model error; per
@@ -102,7 +96,7 @@ def run(cases: Sequence[str], seeds: int, first_seed: int = 0, workers: int = 1,
         sel = [r for r in rows if r["model_error"] is carried]
         k = sum(1 for r in sel if r["named"])
         out[key] = {"named": k, "n": len(sel), "rate": k / len(sel) if sel else None,
-                    "interval_95": _interval(k, len(sel)) if sel else None}
+                    "interval_95": clopper_pearson(k, len(sel))}
     return out
 
 

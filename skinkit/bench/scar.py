@@ -29,7 +29,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from skinkit.bench.mesh_nulls import _interval
+from skinkit.bench.gap_score import clopper_pearson
 
 #: the effect whose naming, position and stiffness are scored
 EFFECT = "inclusion"
@@ -115,7 +115,7 @@ def case_id(task: Mapping[str, Any]) -> str:
 
 
 def _rate(k: int, n: int) -> dict[str, Any]:
-    return {"count": k, "n": n, "rate": k / n if n else None, "interval_95": _interval(k, n) if n else None}
+    return {"count": k, "n": n, "rate": k / n if n else None, "interval_95": clopper_pearson(k, n)}
 
 
 def summarise(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -136,8 +136,8 @@ def run(scars: int, healthy: int, first_seed: int = 0, parallel: int = 1, schedu
     """Run ``scars`` scar and ``healthy`` healthy cases (seeds from ``first_seed``) on ``parallel``
     processes or a Dask ``scheduler``; cases recorded in ``journal`` are read back, not run.
     Returns the records and :func:`summarise`'s rates."""
-    from skinkit.bench.gap_benchmark import _Pool
     from skinkit.bench.gap_journal import Journal
+    from skinkit.bench.task_pool import TaskPool
 
     say = say or (lambda _m: None)
     t0 = time.perf_counter()
@@ -157,7 +157,7 @@ def run(scars: int, healthy: int, first_seed: int = 0, parallel: int = 1, schedu
                                       f"ratio {'covered' if rec.get('ratio_covered') else 'missed'}")
         say(f"{rec['id']}: {what} ({rec['wall_s']:.0f} s)")
 
-    pool = _Pool(parallel, scheduler)
+    pool = TaskPool(parallel, scheduler)
     try:
         new = {r["id"]: r for r in pool.map(case, todo, done)}
     finally:

@@ -84,12 +84,12 @@ def test_gap_benchmark_refuses_a_bad_scheduler_before_any_case(tmp_path, alterna
 
 def test_the_benchmark_pool_refuses_an_unreachable_scheduler_by_name():
     """A Python caller that skips the command line's check: a prompt, named refusal, no hang."""
-    from skinkit.bench.gap_benchmark import _Pool
     from skinkit.bench.gap_cases import BenchmarkError
+    from skinkit.bench.task_pool import TaskPool
 
     address = f"tcp://127.0.0.1:{_unused_port()}"
     with pytest.raises(BenchmarkError, match="cannot reach the Dask scheduler"):
-        _Pool(1, address)
+        TaskPool(1, address)
 
 
 @pytest.mark.parametrize("command", [["fit"], ["gap", "diagnose"]])
