@@ -16,38 +16,18 @@ import pytest
 
 import skinkit
 from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
+from tests.forward._bilayer import SPEC, channels
 
 pytestmark = pytest.mark.needs_plugins
 distributed = pytest.importorskip("distributed")
-
-SPEC = {
-    "model": {"name": "subject"},
-    "geometry": {"kind": "disc", "diameter": "20 mm", "indenter_diameter": "4 mm", "n_inner": 2,
-                 "n_ring": 2},
-    "layers": [{"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "neo-hookean-enu",
-                "parameters": {"E": "40 kPa", "nu": 0.45}},
-               {"name": "subdermal", "thickness": "3.5 mm", "elements": 1, "law": "neo-hookean-enu",
-                "parameters": {"E": "10 kPa", "nu": 0.45}}],
-    "indenter": {"mode": "displacement"},
-    "drive": {"max_step": "1 s"},
-}
-NOISE_F = 1e-4      # N
-NOISE_X = 1e-6      # m
 
 
 def _subject(E: float, seed: int) -> Observations:
     """A session of the model with skin modulus ``E`` [Pa]: its force and points plus noise."""
     rng = np.random.default_rng(seed)
-    T = np.arange(0, 2.0001, 0.01)
-    tf = np.array([0.0, 1.0, 2.0])
-    ref = np.array([[3e-3, 0, 0], [0, 4e-3, 0]])
     protos = {}
     for name, direc in (("normal", (0, 0, -1)), ("oblique", (0.3, 0, -1))):
-        X = 2e-4 * T[:, None] * np.asarray(direc, float)
-        chans = {"tip_force": Channel("tip_force", T, 0 * X, noise=NOISE_F),
-                 "tip_position": Channel("tip_position", T, X, noise=NOISE_X),
-                 "points": Channel("points", tf, np.repeat(ref[:, None], tf.size, 1), noise=5e-6,
-                                   reference=ref)}
+        chans = channels(direc)
         protos[name] = ProtocolObservations(Protocol(name), chans)
     obs = Observations(protos, None, f"subject E={E:g}")
     from skinkit.forward import load

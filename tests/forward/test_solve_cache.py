@@ -14,33 +14,13 @@ import numpy as np
 import pytest
 
 from skinkit.forward import fe, solve_cache
-from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations
+from skinkit.schemas import Observations, Protocol, ProtocolObservations
+from tests.forward._bilayer import SPEC, channels
 
 pytestmark = pytest.mark.needs_plugins
 
-SPEC = {
-    "model": {"name": "cached"},
-    "geometry": {"kind": "disc", "diameter": "20 mm", "indenter_diameter": "4 mm", "n_inner": 2,
-                 "n_ring": 2},
-    "layers": [{"name": "skin", "thickness": "1.5 mm", "elements": 1, "law": "neo-hookean-enu",
-                "parameters": {"E": "40 kPa", "nu": 0.45}},
-               {"name": "subdermal", "thickness": "3.5 mm", "elements": 1, "law": "neo-hookean-enu",
-                "parameters": {"E": "10 kPa", "nu": 0.45}}],
-    "indenter": {"mode": "displacement"},
-    "drive": {"max_step": "1 s"},
-}
-
-
 def _session() -> Observations:
-    T = np.arange(0, 2.0001, 0.01)
-    X = np.zeros((T.size, 3))
-    X[:, 2] = -2e-4 * T
-    tf = np.array([0.0, 1.0, 2.0])
-    ref = np.array([[3e-3, 0, 0], [0, 4e-3, 0]])
-    chans = {"tip_force": Channel("tip_force", T, 0 * X, noise=1e-4),
-             "tip_position": Channel("tip_position", T, X, noise=1e-6),
-             "points": Channel("points", tf, np.repeat(ref[:, None], tf.size, 1), noise=5e-6,
-                               reference=ref)}
+    chans = channels()
     return Observations({"a": ProtocolObservations(Protocol("a"), chans),
                          "b": ProtocolObservations(Protocol("b"), dict(chans))}, None, "test")
 
