@@ -25,6 +25,7 @@ BENCHES: dict[str, str] = {
     "fit-invivo": "skinkit.cli.bench_ident:bench_fit_invivo",
     "coverage": "skinkit.cli.bench_ident:bench_coverage",
     "mesh-nulls": "skinkit.cli.bench_ident:bench_mesh_nulls",
+    "mesh-error": "skinkit.cli.bench_ident:bench_mesh_error",
     "diagnose": "skinkit.cli.bench_ident:bench_diagnose",
     "scar": "skinkit.cli.bench_ident:bench_scar",
 }

@@ -1,5 +1,5 @@
-"""``skinkit bench forward | fit | fit-invivo | coverage | mesh-nulls | diagnose | scar``: the cost and the
-honesty of identification, beside the ways peers do it.
+"""``skinkit bench forward | fit | fit-invivo | coverage | mesh-nulls | mesh-error | diagnose | scar``:
+the cost and the honesty of identification, beside the ways peers do it.
 
 Each command runs :mod:`skinkit.bench`'s plain functions and prints their figures (JSON with
 ``--json``; a Markdown results page with ``--page``; progress on stderr); the benchmark modules
@@ -122,6 +122,28 @@ def bench_mesh_nulls(cases: str, seeds: int, first_seed: int, as_json: bool, pag
     lines = mesh_nulls.summary_lines(res)
     emit(res, as_json, lines, indent=1)
     write_page(page, "Nulls with the mesh gap only", res, lines)
+
+
+@click.command("mesh-error")
+@click.option("--case", "cases", type=click.Choice(["gel", "invivo", "twopad", "all"]), multiple=True,
+              help="which finite-element truth (the coverage study's; repeat for several)  [default: gel]")
+@click.option("--truth-factor", type=click.IntRange(2), default=2, show_default=True,
+              help="the truth's refinement over the model's mesh (element counts along each in-plane "
+                   "axis times this, element layers times this + 1)")
+@click.option("--json", "as_json", is_flag=True, help="print JSON")
+@page_option
+def bench_mesh_error(cases: tuple[str, ...], truth_factor: int, as_json: bool, page: Path | None) -> None:
+    """How well the carried model error matches a truth on a mesh of its own: per channel the
+    truth-minus-model error along the model's own refinement, and the excess per sample a
+    noiseless null would show."""
+    from skinkit.bench import mesh_error
+
+    names = ["gel", "invivo", "twopad"] if "all" in cases else list(dict.fromkeys(cases or ["gel"]))
+    with progress(stage="bench mesh-error") as bar:
+        res = mesh_error.run(names, truth_factor, say=bar.say)
+    lines = mesh_error.summary_lines(res)
+    emit(res, as_json, lines, indent=1)
+    write_page(page, "The carried model error against a truth of its own", res, lines)
 
 
 @click.command("diagnose")

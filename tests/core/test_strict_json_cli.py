@@ -34,6 +34,8 @@ EXPENSIVE: dict[str, str] = {
     "bench fit": "three fits of a finite-element model (minutes)",
     "bench fit-invivo": "fits at in vivo scale (hours)",
     "bench mesh-nulls": "diagnoses 40 finite-element sessions, truths on their own meshes (tens of minutes)",
+    "bench mesh-error": "solves a truth on a mesh of its own and the model on its mesh refined 2x (minutes; "
+                        "its figures: tests/inverse/test_mesh_error_check.py)",
     "bench scar": "diagnoses virtual two-pad scar sessions, about twenty minutes each (its scoring "
                   "and journal: tests/gap/test_scar_benchmark.py)",
     "bench forward": "starts a Dask cluster and solves finite-element sessions (minutes)",
