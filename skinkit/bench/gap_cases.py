@@ -478,13 +478,17 @@ def _carried(spec: Mapping[str, Any], obs: Any, free: Sequence[str], workers: in
              max_iterations: int = 50) -> tuple[Any, Any]:
     """The calibration a diagnosis makes on a truth with a mesh of its own, and the observations
     carrying the model's discretisation error estimated there (:func:`skinkit.inverse.
-    approximation.refit`): the diagnosis and the oracle then measure χ² with one noise model."""
+    approximation.refit`): the diagnosis and the oracle then measure χ² with one noise model.
+    A model without a mesh (lumped) has no such error: ``(None, obs)``."""
     from skinkit.forward import load
     from skinkit.inverse.approximation import refit
+    from skinkit.inverse.discretisation import has_mesh
     from skinkit.inverse.fit import fit
 
     model = load(spec, workers=workers)
     try:
+        if not has_mesh(model):
+            return None, obs
         r0 = fit(model, obs, list(free), max_iterations=max_iterations)
         return refit(model, obs, r0, list(free), fit, max_iterations=max_iterations)
     finally:
