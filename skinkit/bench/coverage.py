@@ -218,6 +218,8 @@ def run(case: str = "all", seeds: int = 20, start: str = "perturbed", first_seed
 
 def summary_lines(res: dict[str, Any]) -> list[str]:
     """The figures of :func:`run` as lines of text (a table, one case per row)."""
+    from skinkit.lab.truth_mesh import largest_truth_error
+
     cases = list(res["cases"])
     out = ["case       DOF seeds pairs inside coverage  expected (95 %)  chi2/dof evals  per fit   total"]
     out += [_line(res["cases"][c]) for c in cases]
@@ -230,8 +232,7 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
             tm, me = res["cases"][c].get("truth_mesh") or {}, res["cases"][c].get("model_error") or {}
             if tm:
                 ratio = me.get("largest_over_noise")
-                own = max(((row or {}).get("truth_over_noise") or 0.0
-                           for row in (tm.get("discretisation") or {}).values()), default=None)
+                own = largest_truth_error(tm)
                 out.append(f"  {c}: truth {tm.get('truth_unknowns', 0):,} unknowns ({tm.get('factor')}x), "
                            f"its own error at most {'-' if own is None else f'{own:.3g}'} noise levels; "
                            f"model {tm.get('model_unknowns', 0):,}; model error "

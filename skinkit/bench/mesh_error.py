@@ -8,8 +8,9 @@ virtual lab's truth on a mesh of its own, finer and with its own node placement
 (:mod:`skinkit.lab.truth_mesh`) — is a claim this check measures, at the truth's parameters and
 without noise (so that every figure is the error model's, not a draw's):
 
-* per protocol and channel: the RMS of e = truth − model, of d, and of the miss e − m, in noise
-  levels; the ratio a = ⟨d, e⟩ / ⟨d, d⟩ that would fit e best along d, against the range
+* per protocol and channel: the RMS of e = truth − model, of d (the estimate's, averaged over its
+  draws around the truth's parameters), and of the miss e − m, in noise levels; the ratio
+  a = ⟨d, e⟩ / ⟨d, d⟩ that would fit e best along d, against the range
   [R(2), R(1)] the estimate assumes for an exact solution; and **χ²/n of the miss under the
   carried covariance** (noise plus model error): the excess per sample a noiseless null session
   would show, which a correct error model keeps near 0;
@@ -23,7 +24,6 @@ check can tell apart, and ``truth_factor`` makes it finer.
 
 from __future__ import annotations
 
-import importlib
 import time
 from collections.abc import Callable
 from typing import Any
@@ -68,11 +68,11 @@ def run_case(case: str, truth_factor: int = 2, workers: int | None = 1,
     from skinkit.bench.coverage import SPECS
     from skinkit.forward import load, model_kind
     from skinkit.inverse.approximation import ORDER_HIGH, ORDER_LOW, estimate
+    from skinkit.inverse.coverage import LabSessions
     from skinkit.inverse.discretisation import DEFAULT_FACTOR, richardson_factor
     from skinkit.inverse.objective import Objective
     from skinkit.schemas import Observations, Prediction
 
-    lab_sessions = importlib.import_module("skinkit.inverse.coverage").LabSessions
     if case not in SPECS:
         raise SkinkitError(f"--case: unknown case {case!r}; choose from {', '.join(SPECS)}")
     spec, free = SPECS[case]()
@@ -81,7 +81,7 @@ def run_case(case: str, truth_factor: int = 2, workers: int | None = 1,
     tell = say or (lambda _m: None)
     t0 = time.perf_counter()
     tell(f"{case}: the truth on its own mesh ({truth_factor}x)")
-    lab = lab_sessions(spec, workers=workers, mesh="own", mesh_factor=truth_factor)
+    lab = LabSessions(spec, workers=workers, mesh="own", mesh_factor=truth_factor)
     obs = lab.noiseless().fitted()
     model = load(lab.model_spec, workers=workers)
     try:
@@ -129,14 +129,16 @@ def run(cases: list[str], truth_factor: int = 2, say: Callable[[str], None] | No
 
 def summary_lines(res: dict[str, Any]) -> list[str]:
     """The figures of :func:`run` as lines of text."""
+    from skinkit.lab.truth_mesh import largest_truth_error
+
     out = []
     for name, c in res["cases"].items():
         tm = c.get("truth_mesh") or {}
-        own = max(((row or {}).get("truth_over_noise") or 0.0
-                   for row in (tm.get("discretisation") or {}).values()), default=0.0)
+        own = largest_truth_error(tm)
         lo, hi = c["ratio_range"]
+        bound = "-" if own is None else f"{own:.3g}"
         out.append(f"{name}: truth {tm.get('truth_unknowns', 0):,} unknowns ({c['truth_factor']}x, its own "
-                   f"error at most {own:.3g} noise levels), model {tm.get('model_unknowns', 0):,}; "
+                   f"error at most {bound} noise levels), model {tm.get('model_unknowns', 0):,}; "
                    f"ratio assumed {c['ratio_assumed']:.3f} in [{lo:.3f}, {hi:.3f}]")
         out.append("  protocol              channel     RMS truth-model  RMS refined  ratio  RMS miss  "
                    "chi2/n carried")

@@ -90,6 +90,14 @@ def describe_meshes(truth: Mapping[str, Any], model: Mapping[str, Any], mode: st
             "gradings": {k: v for k, v in dict(truth.get("geometry", {})).items() if k.endswith("grading")}}
 
 
+def largest_truth_error(mesh: Mapping[str, Any]) -> float | None:
+    """The largest ``truth_over_noise`` over the channels of a truth file's ``mesh`` entry (the
+    bound on the truth's own error, in noise levels), or None when it has no such figure."""
+    rows = (mesh.get("discretisation") or {}).values()
+    vals = [float(r["truth_over_noise"]) for r in rows if r and r.get("truth_over_noise") is not None]
+    return max(vals) if vals else None
+
+
 def error_figures(fine: Mapping[str, Mapping[str, np.ndarray]],
                   coarse: Mapping[str, Mapping[str, np.ndarray]], noise: Mapping[str, float],
                   factor: int) -> dict[str, dict[str, float | None]]:
@@ -120,4 +128,4 @@ def error_figures(fine: Mapping[str, Mapping[str, np.ndarray]],
 
 
 __all__ = ["DEFAULT_FACTOR", "GRADINGS", "MESH_MODES", "TruthMeshError", "check_mode",
-           "describe_meshes", "error_figures", "mesh_figures", "own_mesh"]
+           "describe_meshes", "error_figures", "largest_truth_error", "mesh_figures", "own_mesh"]

@@ -56,3 +56,12 @@ def test_the_summary_names_every_figure():
     for needle in ("gel: truth 100 unknowns (2x", "ratio assumed 1.667 in [1.333, 2.000]", "points",
                    "ratio per point and component: 10 % 1.30", "by distance from the probe"):
         assert needle in text, (needle, text)
+
+
+def test_the_truths_own_error_is_its_largest_channel_bound():
+    from skinkit.lab.truth_mesh import largest_truth_error
+
+    mesh = {"discretisation": {"tip_force": {"truth_over_noise": 3.6}, "points": {"truth_over_noise": 6.5},
+                               "drive": {"truth_over_noise": None}}}
+    assert largest_truth_error(mesh) == 6.5
+    assert largest_truth_error({}) is None
