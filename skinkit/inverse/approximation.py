@@ -10,18 +10,21 @@ independent of the noise, with a mean and a covariance estimated where the model
     y = y_h(θ) + ε + n,    ε ~ N(m, Γ),    n ~ N(0, Σ)
     χ²(θ) = (y − y_h(θ) − m)ᵀ (Σ + Γ)⁻¹ (y − y_h(θ) − m)
 
-**Estimate.** At the calibrated θ̂ and ``draws`` further points θ_k around it (each positive
-parameter scaled by exp(s ξ), ξ standard normal, s = :data:`SPREAD`; a seeded draw), the model is
-solved on its own mesh and on one refined ``factor`` times; d_k = y_{h/f}(θ_k) − y_h(θ_k). With a
-convergence order p the exact minus coarse prediction is R(p) d_k (Richardson, R = fᵖ/(fᵖ − 1)).
-The order is not known (quadratic elements converge at 2–3 in smooth regions and near 1.3 at a
-bonded punch's edge), so R is taken uniform between R(:data:`ORDER_HIGH`) and
-R(:data:`ORDER_LOW`), independently for each component of each channel of each protocol, and
-for tracked points in each of :data:`BANDS` radial bands (a force at a bonded edge converges
-near order 1, a displacement field far from the indenter near 2): m = R̄ · mean_k d_k, and
-Γ = B Bᵀ with B's columns the draws' spread (R̄ d_k − m)/√K and, per group, the order's,
-σ_R · mean_k d_k on that group alone (σ_R = (R_hi − R_lo)/√12). Γ has rank ≤ K + the number
-of groups (3 per tip channel, 9 per point channel and protocol).
+**Estimate.** At the calibrated θ̂ the model is solved on its own mesh and on one refined
+``factor`` times, d = y_{h/f}(θ̂) − y_h(θ̂). With a convergence order p the exact minus coarse
+prediction is R(p) d (Richardson, R = fᵖ/(fᵖ − 1)). The order is not known (quadratic elements
+converge at 2–3 in smooth regions and near 1.3 at a bonded punch's edge), so R is taken uniform
+between R(:data:`ORDER_HIGH`) and R(:data:`ORDER_LOW`), independently for each component of each
+channel of each protocol, and for tracked points in each of :data:`BANDS` radial bands (a force
+at a bonded edge converges near order 1, a displacement field far from the indenter near 2):
+m = R̄ d, and Γ = B Bᵀ with B's columns, per group, the order's σ_R · d on that group alone
+(σ_R = (R_hi − R_lo)/√12) and the error's change over the parameters' plausible spread (each
+positive parameter scaled by exp(s ξ), ξ standard normal, s = :data:`SPREAD`): to first order
+R̄ (∂d/∂θ_j) s θ_j per free parameter, from the derivatives both solves return with their
+values (the fit's sensitivities on each mesh). Where a derivative is not analytic, or with
+``draws`` given, the spread is sampled instead: d_k at ``draws`` seeded points θ_k, m = R̄ · mean_k
+d_k and columns (R̄ d_k − m)/√K. Γ has rank ≤ the number of groups (3 per tip channel, 9 per
+point channel and protocol) + the free parameters (or K).
 
 **Whiten.** In the objective's noise-whitened coordinates (z = W(y_h + m − y), V = W B), (I +
 V Vᵀ)^(−1/2) = I − Q diag(1 − 1/√(1 + s²)) Qᵀ with V = Q S Rᵀ (thin SVD): a rank-r
@@ -31,10 +34,12 @@ estimate (:meth:`Observations.with_model_error`). A direction whose variance is 
 noise variances is in effect projected out; the projection of one refined-mesh direction the
 diagnosis made before is its special case.
 
-**Cost.** ``(draws + 1)`` solves on the model's mesh and as many on the refined one (each
-``factor³`` times the unknowns): with the default one draw and factor 2, about 2 + 2 × 10
-coarse-solve equivalents, once per calibration; the estimate is reused by every refit and
-candidate of a diagnosis (the mean and basis are stored with the observations).
+**Cost.** One solve on the model's mesh and one on the refined mesh (``factor³`` times the
+unknowns), both with the free parameters' sensitivities: on the virtual forearm (1,815 and
+11,907 unknowns, four parameters) the derivatives add about a fifth to the refined solve,
+against a second pair of solves for a sampled draw. The estimate is made once per calibration
+and reused by every refit and candidate of a diagnosis (the mean and basis are stored with the
+observations).
 """
 
 from __future__ import annotations
@@ -62,7 +67,7 @@ from skinkit.schemas.observations import CHANNELS
 ORDER_LOW, ORDER_HIGH = 1.0, 2.0
 #: log-spread of each positive parameter in the draws around the calibration (10 %)
 SPREAD = 0.1
-#: draws besides the calibration point
+#: draws besides the calibration point when a derivative is not analytic (the spread sampled)
 DEFAULT_DRAWS = 1
 #: radial bands of tracked points with an error amplitude of their own
 BANDS = 3
@@ -172,39 +177,85 @@ def _channel_figures(mean: Mapping[tuple[str, str], np.ndarray], observations: O
     return out
 
 
+#: per ``(protocol, channel)`` an array of the channel's shape (or with a leading axis)
+Diffs = dict[tuple[str, str], np.ndarray]
+
+
+def _step(params: ParameterSet, name: str) -> float:
+    """The draws' standard deviation of ``name`` to first order [its SI unit] (:func:`_draws`)."""
+    v = float(params.values()[name])
+    return SPREAD * abs(v) if v > 0 and params.param(name).lower >= 0 else SPREAD * max(abs(v), 1e-12)
+
+
+def _tangents(coarse: Prediction, fine: Prediction, observations: Observations, params: ParameterSet,
+              free: Sequence[str]) -> dict[tuple[str, str], np.ndarray]:
+    """Per channel ``(len(free), *shape)``: ∂(fine − coarse)/∂θ_j times θ_j's draw spread."""
+    out: dict[tuple[str, str], np.ndarray] = {}
+    for key in _differences(coarse, fine, observations):
+        cp, fp = coarse.protocols[key[0]][key[1]], fine.protocols[key[0]][key[1]]
+        m = cp.mask(observations[key[0]].channels[key[1]])
+        if fp.predicted is not None:
+            m = m & np.asarray(fp.predicted, bool)
+        cols = [np.nan_to_num(np.where(m, np.asarray(fp.d[n], float) - np.asarray(cp.d[n], float), 0.0))
+                * _step(params, n) if n in fp.d and n in cp.d else np.zeros(np.shape(cp.values))
+                for n in free]
+        out[key] = np.stack(cols) if cols else np.zeros((0, *np.shape(cp.values)))
+    return out
+
+
+def _solve_points(model: Any, fine_model: Any, fitted: Observations, params: ParameterSet,
+                  free: Sequence[str], draws: int | None, seed: int, factor: int, say: Callable[[str], None]
+                  ) -> tuple[list[Diffs], Diffs | None, dict[str, int]]:
+    """``(differences at each point, tangent columns or None, unknowns)`` (:func:`estimate`)."""
+    tangent = draws is None and bool(free)
+    say(f"model error: the calibration on the model's mesh and one refined {factor}x"
+        + (", with the parameters' derivatives" if tangent else ""))
+    coarse = model.predict(params, fitted, sensitivities=list(free) if tangent else False)
+    # derivatives another way than analytic would cost the refined mesh 2 solves per parameter
+    tangent = tangent and all(str(v).startswith("analytic") for v in coarse.methods.values())
+    fine_params = fine_model.parameters().with_values(params.values())
+    fine = fine_model.predict(fine_params, fitted, sensitivities=list(free) if tangent else False)
+    info = {"unknowns": int(coarse.info.get("n_dof", 0)), "unknowns_refined": int(fine.info.get("n_dof", 0))}
+    diffs = [_differences(coarse, fine, fitted)]
+    if tangent:
+        return diffs, _tangents(coarse, fine, fitted, params, free), info
+    points = _draws(params, free, DEFAULT_DRAWS if draws is None else draws, seed)[1:]
+    for i, v in enumerate(points):
+        say(f"model error: draw {i + 1}/{len(points)} on the model's mesh and one refined {factor}x")
+        coarse = model.predict(params.with_values(v), fitted, sensitivities=False)
+        fine = fine_model.predict(fine_params.with_values(v), fitted, sensitivities=False)
+        diffs.append(_differences(coarse, fine, fitted))
+    return diffs, None, info
+
+
 def estimate(model: Any, observations: Observations, params: ParameterSet, free: Sequence[str], *,
-             draws: int = DEFAULT_DRAWS, factor: int = DEFAULT_FACTOR, seed: int = 0,
+             draws: int | None = None, factor: int = DEFAULT_FACTOR, seed: int = 0,
              progress: Callable[[str], None] | None = None) -> ModelError:
     """The model's discretisation error on the fitted protocols of ``observations`` (see the
     module): ``model`` a finite-element forward model, ``params`` the calibration, ``free`` the
-    parameters drawn around it, ``draws`` further points, ``factor`` the refinement.
+    parameters around it, ``factor`` the refinement. ``draws``: None (default) for the error's
+    variation with the parameters from its derivatives at the calibration (one solve on each
+    mesh, with sensitivities; random draws when a derivative is not analytic), or that many
+    random draws around the calibration.
 
-    ``summary``: ``factor``, ``orders``, ``draws``, ``unknowns``, ``unknowns_refined``, ``solves``
-    (on each mesh), ``channels`` (name -> ``rms``, ``max`` of the mean error [unit], ``noise``,
-    ``rms_over_noise``), ``wall_s``.
+    ``summary``: ``factor``, ``orders``, ``draws``, ``variation`` ("tangent" or "draws"),
+    ``unknowns``, ``unknowns_refined``, ``solves`` (on each mesh), ``channels`` (name -> ``rms``,
+    ``max`` of the mean error [unit], ``noise``, ``rms_over_noise``), ``wall_s``.
     """
     if not has_mesh(model):
         raise DiscretisationError(f"model {getattr(model, 'name', '?')!r} has no mesh: the approximation "
                                   "error needs a finite-element model")
-    if isinstance(draws, bool) or not isinstance(draws, int) or draws < 0:
-        raise DiscretisationError(f"draws must be a whole number >= 0, got {draws!r}")
+    if draws is not None and (isinstance(draws, bool) or not isinstance(draws, int) or draws < 0):
+        raise DiscretisationError(f"draws must be a whole number >= 0 or None, got {draws!r}")
     if isinstance(factor, bool) or not isinstance(factor, int) or factor < 2:
         raise DiscretisationError(f"refinement factor must be a whole number >= 2, got {factor!r}")
     t0 = time.perf_counter()
     say = progress or (lambda _m: None)
     fitted = observations.fitted()
-    points = _draws(params, free, draws, seed)
-    diffs: list[dict[tuple[str, str], np.ndarray]] = []
     fine_model = model.refined(factor)
-    info: dict[str, int] = {}
     try:
-        for i, v in enumerate(points):
-            say(f"model error: point {i + 1}/{len(points)} on the model's mesh and one refined {factor}x")
-            coarse = model.predict(params.with_values(v), fitted, sensitivities=False)
-            fine = fine_model.predict(fine_model.parameters().with_values(v), fitted, sensitivities=False)
-            info = {"unknowns": int(coarse.info.get("n_dof", 0)),
-                    "unknowns_refined": int(fine.info.get("n_dof", 0))}
-            diffs.append(_differences(coarse, fine, fitted))
+        diffs, tangents, info = _solve_points(model, fine_model, fitted, params, free, draws, seed, factor,
+                                              say)
     finally:
         fine_model.close()
     r_lo, r_hi = richardson_factor(factor, ORDER_HIGH), richardson_factor(factor, ORDER_LOW)
@@ -213,7 +264,8 @@ def estimate(model: Any, observations: Observations, params: ParameterSet, free:
     keys = list(diffs[0])
     groups = {key: _groups(fitted[key[0]].channels[key[1]]) for key in keys}
     n_amp = sum(len(g) for g in groups.values())
-    rank = n_amp + (K if K > 1 else 0)
+    n_var = len(free) if tangents is not None else (K if K > 1 else 0)
+    rank = n_amp + n_var
     mean, basis = {}, {}
     col = 0
     for key in keys:
@@ -226,7 +278,11 @@ def estimate(model: Any, observations: Observations, params: ParameterSet, free:
         for sel in groups[key]:
             b[col][sel] = r_sd * dbar[sel]
             col += 1
-        if K > 1:
+        if tangents is not None:
+            # the error's change over the parameters' spread, to first order: the covariance
+            # the draws sample, without their sampling noise
+            b[n_amp:] = r_mid * tangents[key]
+        elif K > 1:
             b[n_amp:] = np.stack([r_mid * (d - dbar) / math.sqrt(K) for d in ds])
         basis[key] = b
     figures = _channel_figures(mean, fitted)
@@ -235,14 +291,15 @@ def estimate(model: Any, observations: Observations, params: ParameterSet, free:
                "largest_over_noise": worst,
                # error ∝ hᵖ: the refinement that brings the largest channel's error to the noise
                "refine_to_noise": {"order_1": max(worst, 1.0), "order_2": max(math.sqrt(worst), 1.0)},
-               "factor": factor, "orders": [ORDER_LOW, ORDER_HIGH], "draws": draws, "spread": SPREAD,
+               "factor": factor, "orders": [ORDER_LOW, ORDER_HIGH], "draws": K - 1, "spread": SPREAD,
+               "variation": "tangent" if tangents is not None else "draws",
                **info, "solves": {"model_mesh": K, "refined_mesh": K},
                "channels": figures, "wall_s": time.perf_counter() - t0}
     return ModelError(mean, basis, rank, summary)
 
 
 def refit(model: Any, observations: Observations, result: Any, free: Sequence[str], fit: Callable[..., Any],
-          *, draws: int = DEFAULT_DRAWS, factor: int = DEFAULT_FACTOR, passes: int = DEFAULT_PASSES,
+          *, draws: int | None = None, factor: int = DEFAULT_FACTOR, passes: int = DEFAULT_PASSES,
           seed: int = 0, progress: Callable[[str], None] | None = None, **options: Any
           ) -> tuple[Any, Observations]:
     """Estimate the model's error at ``result`` (a calibration of ``free``) and fit again, from

@@ -113,3 +113,45 @@ def test_a_truth_on_its_own_mesh_biases_the_fit_and_the_carried_error_restores_i
     for c in ("tip_force", "points"):
         assert me["channels"][c]["rms_over_noise"] > 1, me["channels"]
     assert me["accounts_for"] is not None and me["accounts_for"] > 0.5
+
+
+def test_the_error_varies_with_the_parameters_as_its_derivatives_say():
+    """The default estimate carries the error's variation over the parameters' spread from the
+    refined-minus-model derivatives at the calibration (one solve per mesh); each such column
+    must be what the error itself does when that parameter moves by its spread: checked by
+    solving both meshes again at θ_j + s θ_j (the second-order terms of a 10 % move of a modulus
+    are a few per cent of the change; 10 % of its largest entry is allowed)."""
+    from skinkit.forward import load
+    from skinkit.inverse.approximation import ORDER_HIGH, ORDER_LOW, SPREAD, _differences, estimate
+    from skinkit.inverse.coverage import LabSessions
+    from skinkit.inverse.discretisation import richardson_factor
+    from tests.inverse.test_discretisation_bias import _spec
+
+    lab = LabSessions(_spec(), workers=1)
+    obs = lab(0).fitted()
+    free = ["skin.E", "subdermal.E"]
+    model = load(copy.deepcopy(lab.model_spec), workers=1)
+    fine = model.refined(2)
+    try:
+        p = model.parameters()
+        err = estimate(model, obs, p, free)
+        s = err.summary
+        assert s["variation"] == "tangent" and s["solves"] == {"model_mesh": 1, "refined_mesh": 1}
+        assert err.rank == 3 + 9 + len(free)          # tip amplitudes, point bands, one per parameter
+        r_mid = 0.5 * (richardson_factor(2, ORDER_LOW) + richardson_factor(2, ORDER_HIGH))
+        base = _differences(model.predict(p, obs), fine.predict(fine.parameters(), obs), obs)
+        for j, name in enumerate(free):
+            h = SPREAD * p[name]
+            up = p.with_values({name: p[name] + h})
+            fine_up = fine.parameters().with_values(up.values())
+            moved = _differences(model.predict(up, obs), fine.predict(fine_up, obs), obs)
+            for key, b in err.basis.items():
+                want = r_mid * (moved[key] - base[key])
+                got = b[err.rank - len(free) + j]
+                scale = float(np.max(np.abs(want)))
+                assert scale > 0
+                np.testing.assert_allclose(got, want, atol=0.1 * scale), (name, key)
+    finally:
+        fine.close()
+        model.close()
+
