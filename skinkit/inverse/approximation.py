@@ -35,11 +35,10 @@ noise variances is in effect projected out; the projection of one refined-mesh d
 diagnosis made before is its special case.
 
 **Cost.** One solve on the model's mesh and one on the refined mesh (``factor³`` times the
-unknowns), both with the free parameters' sensitivities: on the virtual forearm (1,815 and
-11,907 unknowns, four parameters) the derivatives add about a fifth to the refined solve,
-against a second pair of solves for a sampled draw. The estimate is made once per calibration
-and reused by every refit and candidate of a diagnosis (the mean and basis are stored with the
-observations).
+unknowns), both with the free parameters' sensitivities — a few back-substitutions per step on
+tangents already factorised, where a sampled draw costs a second pair of solves. The estimate
+is made once per calibration and reused by every refit and candidate of a diagnosis (the mean
+and basis are stored with the observations).
 """
 
 from __future__ import annotations
