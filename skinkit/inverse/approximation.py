@@ -35,8 +35,9 @@ noise variances is in effect projected out; the projection of one refined-mesh d
 diagnosis made before is its special case.
 
 **Cost.** One solve on the model's mesh and one on the refined mesh (``factor³`` times the
-unknowns), both with the free parameters' sensitivities — a few back-substitutions per step on
-tangents already factorised, where a sampled draw costs a second pair of solves. The estimate
+unknowns), both with the free parameters' sensitivities — per step a few conjugate-gradient
+iterations preconditioned by the Newton loop's factorisation, no tangent factorised again —
+where a sampled draw costs a second pair of solves. The estimate
 is made once per calibration and reused by every refit and candidate of a diagnosis (the mean
 and basis are stored with the observations).
 """
