@@ -219,7 +219,8 @@ def _solve_points(model: Any, fine_model: Any, fitted: Observations, params: Par
     diffs = [_differences(coarse, fine, fitted)]
     if tangent:
         return diffs, _tangents(coarse, fine, fitted, params, free), info
-    points = _draws(params, free, DEFAULT_DRAWS if draws is None else draws, seed)[1:]
+    # nothing free: the error does not vary, the calibration alone says it
+    points = _draws(params, free, (DEFAULT_DRAWS if draws is None else draws) if free else 0, seed)[1:]
     for i, v in enumerate(points):
         say(f"model error: draw {i + 1}/{len(points)} on the model's mesh and one refined {factor}x")
         coarse = model.predict(params.with_values(v), fitted, sensitivities=False)

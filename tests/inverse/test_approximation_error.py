@@ -137,6 +137,10 @@ def test_the_error_varies_with_the_parameters_as_its_derivatives_say():
         err = estimate(model, obs, p, free)
         s = err.summary
         assert s["variation"] == "tangent" and s["solves"] == {"model_mesh": 1, "refined_mesh": 1}
+        sampled = estimate(model, obs, p, free, draws=1)
+        assert sampled.summary["variation"] == "draws" and sampled.summary["solves"]["refined_mesh"] == 2
+        assert sampled.rank == 3 + 9 + 2
+        np.testing.assert_array_equal(sorted(sampled.mean), sorted(err.mean))
         assert err.rank == 3 + 9 + len(free)          # tip amplitudes, point bands, one per parameter
         r_mid = 0.5 * (richardson_factor(2, ORDER_LOW) + richardson_factor(2, ORDER_HIGH))
         base = _differences(model.predict(p, obs), fine.predict(fine.parameters(), obs), obs)
