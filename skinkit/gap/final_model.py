@@ -13,8 +13,8 @@ diagnosis has ended, with the error estimated again at the final model
 but does not settle the parameters: on the virtual forearm the second pass moves c, g1 and the
 pre-stress angle by 5–11 of their standard errors.
 
-Cost: per pass, one solve on the model's mesh and one on one refined 2x (with sensitivities),
-and a refit of the final model from where it is.
+Cost: per pass, two solves on the model's mesh and two on one refined 2x, and a refit of the
+final model from where it is.
 """
 
 from __future__ import annotations
