@@ -115,6 +115,12 @@ def _draws(params: ParameterSet, free: Sequence[str], n: int, seed: int) -> list
     return out
 
 
+def _kept(cp: Any, fp: Any, channel: Any) -> np.ndarray:
+    """Entries observed, predicted on both meshes and not a measured reference frame."""
+    m = cp.mask(channel)
+    return m & np.asarray(fp.predicted, bool) if fp.predicted is not None else m
+
+
 def _differences(coarse: Prediction, fine: Prediction, observations: Observations
                  ) -> dict[tuple[str, str], np.ndarray]:
     """fine − coarse per observed, predicted entry (0 where either is missing)."""
@@ -123,12 +129,9 @@ def _differences(coarse: Prediction, fine: Prediction, observations: Observation
         if proto not in observations.names or cname not in observations[proto].channels:
             continue
         fp = fine.protocols.get(proto, {}).get(cname)
-        ch = observations[proto].channels[cname]
-        m = cp.mask(ch)
         if fp is None or np.shape(fp.values) != np.shape(cp.values):
             continue
-        if fp.predicted is not None:
-            m = m & np.asarray(fp.predicted, bool)
+        m = _kept(cp, fp, observations[proto].channels[cname])
         d = np.where(m, np.asarray(fp.values, float) - np.asarray(cp.values, float), 0.0)
         out[(proto, cname)] = np.nan_to_num(d)
     return out
@@ -192,14 +195,13 @@ def _step(params: ParameterSet, name: str) -> float:
 
 
 def _tangents(coarse: Prediction, fine: Prediction, observations: Observations, params: ParameterSet,
-              free: Sequence[str]) -> dict[tuple[str, str], np.ndarray]:
-    """Per channel ``(len(free), *shape)``: ∂(fine − coarse)/∂θ_j times θ_j's draw spread."""
+              free: Sequence[str], keys: Sequence[tuple[str, str]]) -> dict[tuple[str, str], np.ndarray]:
+    """Per channel of ``keys`` (those :func:`_differences` kept) ``(len(free), *shape)``:
+    ∂(fine − coarse)/∂θ_j times θ_j's draw spread."""
     out: dict[tuple[str, str], np.ndarray] = {}
-    for key in _differences(coarse, fine, observations):
+    for key in keys:
         cp, fp = coarse.protocols[key[0]][key[1]], fine.protocols[key[0]][key[1]]
-        m = cp.mask(observations[key[0]].channels[key[1]])
-        if fp.predicted is not None:
-            m = m & np.asarray(fp.predicted, bool)
+        m = _kept(cp, fp, observations[key[0]].channels[key[1]])
         cols = [np.nan_to_num(np.where(m, np.asarray(fp.d[n], float) - np.asarray(cp.d[n], float), 0.0))
                 * _step(params, n) if n in fp.d and n in cp.d else np.zeros(np.shape(cp.values))
                 for n in free]
@@ -222,7 +224,7 @@ def _solve_points(model: Any, fine_model: Any, fitted: Observations, params: Par
     info = {"unknowns": int(coarse.info.get("n_dof", 0)), "unknowns_refined": int(fine.info.get("n_dof", 0))}
     diffs = [_differences(coarse, fine, fitted)]
     if tangent:
-        return diffs, _tangents(coarse, fine, fitted, params, free), info
+        return diffs, _tangents(coarse, fine, fitted, params, free, list(diffs[0])), info
     # nothing free: the error does not vary, the calibration alone says it
     points = _draws(params, free, (DEFAULT_DRAWS if draws is None else draws) if free else 0, seed)[1:]
     for i, v in enumerate(points):
