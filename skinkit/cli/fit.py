@@ -166,14 +166,10 @@ def fit(model_file: str, session: str, free: str | None, weighting: str, optimis
         best_result.starts = done
         from skinkit.inverse.discretisation import has_mesh
         if model_error and has_mesh(model):
-            from skinkit.inverse import fit as run_fit
-            from skinkit.inverse.approximation import refit
-            starts_kept = best_result.starts
-            best_result, obs = refit(model, obs, best_result, names, run_fit,
-                                     progress=lambda m: bar.say(f"  {m}"),
-                                     weighting=weighting, optimiser=optimiser, ftol=ftol, xtol=xtol,
-                                     max_iterations=max_iterations, bounds=bounds or None)
-            best_result.starts = starts_kept
+            best_result, obs = _carry_model_error(model, obs, best_result, names, bar.say,
+                                                  weighting=weighting, optimiser=optimiser, ftol=ftol,
+                                                  xtol=xtol, max_iterations=max_iterations,
+                                                  bounds=bounds or None)
         if error_estimate:
             from skinkit.inverse.discretisation import attach, estimate
             attach(best_result, estimate(model, obs, best_result.parameters, names, weighting=weighting,
@@ -206,6 +202,25 @@ def _check_centres(model, params, obs, given: dict[str, float]) -> None:
     from skinkit.gap.scan_step import check_centres
 
     check_centres(getattr(model, "effects", []), params.values(), obs, list(given))
+
+
+def _carry_model_error(model, obs, result, names: list[str], say, **options):
+    """``(result, observations)`` refitted with the model's discretisation error carried
+    (:func:`skinkit.inverse.approximation.refit`); when the estimate fails, the plain fit and
+    observations, with ``extra["model_error_failed"]`` saying why."""
+    from skinkit.inverse import fit as run_fit
+    from skinkit.inverse.approximation import refit
+
+    starts_kept = result.starts
+    try:
+        result, obs = refit(model, obs, result, names, run_fit, progress=lambda m: say(f"  {m}"), **options)
+    except SkinkitError as exc:   # the plain fit stands, and says what it lacks
+        result.extra["model_error_failed"] = (
+            f"the model's discretisation error could not be estimated (its mesh refined 2x, or the fit "
+            f"carrying it, failed: {exc}); the fit does not carry it, so its intervals are the noise's alone")
+        say(f"warning: {result.extra['model_error_failed']}")
+    result.starts = starts_kept
+    return result, obs
 
 
 def _result_json(best_result, results: list, model_name: str, session: str, stored_as: str | None) -> dict:
@@ -382,6 +397,8 @@ def _echo_summary(best: dict, model_name: str, session: str, wall_s: float, name
         click.echo(f"  ! {pr['message']}")
     for p, v in best["held_out"].items():
         click.echo(f"  held out {p}: rms {v:.3g} noise levels")
+    if best.get("model_error_failed"):
+        click.echo(f"  ! {best['model_error_failed']}")
     if best.get("model_error"):
         from skinkit.inverse.approximation import describe as describe_error
         for line in describe_error(best["model_error"]):

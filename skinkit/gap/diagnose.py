@@ -306,8 +306,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
     cal = _calibrate(spec, kind, loader, observations, effects=effects, holdout=holdout, free=free,
                      until=until, protocols=protocols, say=say, noise=noise, max_iterations=max_iterations,
                      model_error=model_error, scan=scan, calibration=calibration)
-    if cal["model_error"] is not None:
-        error_estimate = False     # the mesh's error is in the noise model already
+    if cal["model_error"] is not None or cal["failed"] is not None:
+        error_estimate = False     # in the noise model already, or its refined solve fails
     state0, r0, theta = cal["state0"], cal["result"], cal["theta"]
     run = _Run(spec=spec, base=cal["base"], observations=cal["observations"], held=cal["held"],
                present=cal["present"], loader=loader, say=say, alpha=alpha, candidates=candidates,
@@ -315,6 +315,8 @@ def diagnose(model: str | os.PathLike[str] | Mapping[str, Any],
                theta_r=list(theta), remaining=list(cal["candidates"]), n_forward=r0.n_forward + 1,
                min_share=float(min_share), max_iterations=int(max_iterations),
                regions=region_partitions(spec), scan=scan)
+    if cal["failed"] is not None:
+        run.warnings.append(cal["failed"])
     if effects is None:
         _more_of_the_same(run)     # a repeatable effect the model file already has: one more term
     for rnd in range(max(max_effects, 1)):
@@ -375,23 +377,34 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
         with stage("calibration"):
             given = calibration is not None and sorted(calibration.parameters.free_names) == sorted(theta)
             r0 = calibration if given else fit(base, observations, theta, max_iterations=max_iterations)
-        carried = None
+        carried, failed = None, None
         if given and observations.model_error is not None and calibration.extra.get("model_error"):
             # a calibration made with the mesh's error carried, on observations that carry it
             carried = calibration.extra["model_error"]
         elif model_error and has_mesh(base):
             from skinkit.inverse.approximation import refit
-            with stage("model error"):
-                r0, observations = refit(base, observations, r0, theta, fit, progress=say,
+            try:
+                with stage("model error"):
+                    r1, carrying = refit(base, observations, r0, theta, fit, progress=say,
                                          max_iterations=max_iterations)
-            carried, held = r0.extra["model_error"], observations.held_out()
+                r0, observations = r1, carrying
+                carried, held = r0.extra["model_error"], observations.held_out()
+            except SkinkitError as exc:
+                # the calibration stands: a model whose refined copy cannot be solved (an
+                # instability the finer mesh resolves) is still diagnosed, saying what is missing
+                failed = {"kind": "model-error-failed", "where": "model error", "message":
+                          f"the model's discretisation error could not be estimated (its mesh refined "
+                          f"2x, or the calibration carrying it, failed: {exc}); it is neither carried "
+                          "as noise nor checked, so an effect named may be what a finer mesh would "
+                          "explain"}
+                say(failed["message"])
         with stage("calibration"):
             state0 = _state(base, r0, observations, held)
     finally:
         base.close()
     return {"name": name, "source": source, "observations": observations, "held": held, "present": present,
             "theta": theta, "candidates": cands, "result": r0, "state0": state0, "base": base,
-            "model_error": carried}
+            "model_error": carried, "failed": failed}
 
 
 def _round(run: _Run, rnd: int) -> bool:

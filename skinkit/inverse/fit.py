@@ -354,7 +354,8 @@ def fit_json(result: FitResult) -> dict[str, Any]:
             "residual_by_channel": result.residual_by_channel, "starts": result.starts,
             "n_replayed": result.extra.get("n_replayed", 0),
             "n_failed_solves": result.extra.get("n_failed_solves", 0),
-            **{k: result.extra[k] for k in ("discretisation", "model_error") if k in result.extra}}
+            **{k: result.extra[k] for k in ("discretisation", "model_error", "model_error_failed")
+               if k in result.extra}}
 
 
 def _parameter_json(p: Any, se: float | None, identifiable: dict[str, bool]) -> dict[str, Any]:

@@ -258,3 +258,22 @@ def test_k1_k2_trade_off_is_reported_not_hidden():
     assert pairs[0]["fix"] == "skin.k2" and "fix skin.k2" in pairs[0]["message"]
     assert j["parameters"]["skin.k1"]["identifiable"] is False
     assert j["parameters"]["skin.k2"]["identifiable"] is False
+
+
+def test_a_failed_model_error_keeps_the_plain_fit(disc_session, tmp_path):
+    """The model error's refined copy refused for real by the model's size limit (set between the
+    model's unknowns and its 2x refinement's): the fit is kept, written and calibrated, and says
+    that its intervals are the noise's alone."""
+    text = DISC + "\n[solver]\nmax_unknowns = 4000\n"   # the disc: 1,815 unknowns, refined about 8x
+    (tmp_path / "m.toml").write_text(text)
+    args = [a for a in FIT_ARGS if a != "--no-model-error"]
+    r = CliRunner().invoke(main, ["fit", str(tmp_path / "m.toml"), str(disc_session / "s.h5"), *args,
+                                  "--out", str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    best = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert "could not be estimated" in best["model_error_failed"]
+    assert "max_unknowns" in best["model_error_failed"]
+    assert "model_error" not in best
+    assert "! the model's discretisation error could not be estimated" in r.output
+    assert (tmp_path / "out" / "model.toml").exists()
+    assert best["parameters"]["skin.E"]["se"] > 0
