@@ -161,13 +161,19 @@ def _state(model: Any, result: FitResult, observations: Observations, held: Obse
 def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observations: Observations,
            held: Observations, values: Mapping[str, float], theta: Sequence[str], test: ScoreTest,
            sens: Sensitivities, *, load: Callable[..., Any], say: Callable[[str], None],
-           max_iterations: int = 50) -> dict[str, Any]:
-    """The model with ``test.effect`` added, refitted: its state, the added free parameters."""
+           max_iterations: int = 50, form: tuple[str, Mapping[str, float]] | None = None) -> dict[str, Any]:
+    """The model with ``test.effect`` added, refitted: its state, the added free parameters.
+    ``form``: the form to refit it in and that form's start values (a region effect refitted as
+    an ellipse from its shape scan, :mod:`skinkit.gap.shape_scan`), all of which are freed."""
     from skinkit.inverse import fit
     from skinkit.inverse.objective import Objective
 
     cols = sens.columns[test.effect]
-    model = load(with_effects(spec, effects_in + [effect_table(test.effect)]))
+    table = effect_table(test.effect)
+    if form is not None:
+        table["form"] = form[0]
+        values = {**values, **form[1]}
+    model = load(with_effects(spec, effects_in + [table]))
     try:
         ps = model.parameters()
         ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
@@ -179,7 +185,9 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
             start[n] = float(np.clip(v, lo + 1e-9 * (hi - lo if math.isfinite(hi - lo) else 1), hi))
         ps = ps.with_values(start)
         added = list(test.tested)
-        if cols.held:
+        if form is not None:
+            added += [n for n in form[1] if n not in added]
+        elif cols.held:
             # parameters without a signature at the null: free those the switched-on effect shows
             held_names = list(cols.held)
             res, _ = Objective(model, observations.fitted(), held_names, "noise").evaluate(ps)
@@ -194,7 +202,7 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
     finally:
         model.close()
     state["added"] = added
-    state["table"] = effect_table(test.effect, _values(r))
+    state["table"] = {**effect_table(test.effect, _values(r)), **({"form": form[0]} if form else {})}
     state["warnings"] = fit_warnings(r, f"the refit with {test.effect}", added)
     return state
 
@@ -239,6 +247,7 @@ class _Run:
     scan: ScanOptions | None = None  # region scans (skinkit.gap.scan_step): options, results, best regions
     scans: list[dict[str, Any]] = field(default_factory=list)
     held_regions: dict[str, float] = field(default_factory=dict)
+    held_forms: dict[str, tuple[str, dict[str, float]]] = field(default_factory=dict)
 
     @property
     def final_fit(self) -> FitResult:
@@ -434,7 +443,7 @@ def _round(run: _Run, rnd: int) -> bool:
     if not gate["significant"]:
         top = []             # nothing will be named: no refit
     seps = separability(sens, tests, run.alpha, [t.effect for t in top])
-    states = _refit_top(run, top, values, sens, entry)
+    states = _refit_top(run, top, values, sens, entry, rs.refit_forms())
     records = [candidate_record(t, ok[t.effect], states.get(t.effect), current) for t in tests]
     with stage("separation"):
         _separate(run, seps, records, spec_r, values, sens, tests, rnd)
@@ -485,9 +494,11 @@ def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float], rs
 
 
 def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float], sens: Sensitivities,
-               entry: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """The refitted states of the ``top`` candidates (none when ``max_effects`` is 0); a refit that
-    fails is said and recorded in ``entry["refit_failures"]``."""
+               entry: dict[str, Any], forms: Mapping[str, tuple[str, Mapping[str, float]]] | None = None
+               ) -> dict[str, dict[str, Any]]:
+    """The refitted states of the ``top`` candidates (none when ``max_effects`` is 0), each in its
+    refit form where ``forms`` gives one; a refit that fails is said and recorded in
+    ``entry["refit_failures"]``."""
     states: dict[str, dict[str, Any]] = {}
     if run.max_effects <= 0:
         return states
@@ -501,7 +512,7 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
             with stage(f"refit {t.effect}"):
                 states[t.effect] = _refit(run.spec, run.tables, run.observations, run.held, values,
                                           run.theta_r, t, sens, load=run.loader, say=run.say,
-                                          max_iterations=run.max_iterations)
+                                          max_iterations=run.max_iterations, form=(forms or {}).get(t.effect))
             run.n_forward += states[t.effect]["result"].n_forward + 1
         except SkinkitError as exc:
             run.say(f"refit with {t.effect} failed: {exc}")
@@ -646,7 +657,8 @@ def _alone(run: _Run, cal: Mapping[str, Any], label: str) -> float | None:
     try:
         start = {**_values(cal["result"]), **run.held_regions}
         st = _refit(run.spec, [], run.observations, run.held, start, cal["theta"], tests[label], sens,
-                    load=run.loader, say=run.say, max_iterations=run.max_iterations)
+                    load=run.loader, say=run.say, max_iterations=run.max_iterations,
+                    form=run.held_forms.get(label))
     except SkinkitError as exc:
         run.say(f"refit of the first model with {label} alone failed: {exc}")
         return None

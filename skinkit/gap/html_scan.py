@@ -8,7 +8,9 @@ and y up, on one scale for both panels:
 
 * **residual**: every tracked point coloured by its χ²/dof before the named effects (the
   maps section's scale: logarithmic, white at the noise level 1), the scan's best region as a
-  green circle and, when the candidate was refitted, the refitted region dashed;
+  green circle and, when the candidate was refitted, the refitted region dashed (an ellipse of
+  class ``refit-region`` with its semi-axes and angle as data attributes, when the effect was
+  refitted in its elliptical form);
 * **score map**: every scanned centre as a square of the grid's spacing, coloured by the largest
   score statistic over the sizes scanned there (darker: a larger LM), with the same outlines.
 """
@@ -63,28 +65,43 @@ class _Frame:
         return "".join(out)
 
 
-def _outline(fr: _Frame, x: float, y: float, r: float, kind: str) -> str:
-    """One region's outline (``kind`` "best" or "refit") with its centre marked; mm."""
+def _outline(fr: _Frame, x: float, y: float, r: float, kind: str, b: float | None = None,
+             angle: float = 0.0) -> str:
+    """One region's outline (``kind`` "best" or "refit") with its centre marked; mm: a circle of
+    radius ``r``, or with ``b`` an ellipse of semi-axes ``r``, ``b``, the first at ``angle`` [deg]
+    from x."""
     colour, dash = (BEST, "") if kind == "best" else (REFIT, ' stroke-dasharray="5 3"')
     cls = "scan-region" if kind == "best" else "refit-region"
     cx, cy, rp = fr.x(x), fr.y(y), r * fr.scale
-    return (f'<circle class="{cls}" data-x-mm="{x:.4g}" data-y-mm="{y:.4g}" data-size-mm="{r:.4g}" '
-            f'cx="{cx:.1f}" cy="{cy:.1f}" r="{rp:.1f}" fill="none" stroke="{colour}" '
-            f'stroke-width="2.5"{dash}/><path d="M{cx - 5:.1f},{cy:.1f}h10M{cx:.1f},{cy - 5:.1f}v10" '
-            f'stroke="{colour}" stroke-width="1.5"/>')
+    mark = (f'<path d="M{cx - 5:.1f},{cy:.1f}h10M{cx:.1f},{cy - 5:.1f}v10" stroke="{colour}" '
+            'stroke-width="1.5"/>')
+    style = f'fill="none" stroke="{colour}" stroke-width="2.5"{dash}'
+    if b is None:
+        return (f'<circle class="{cls}" data-x-mm="{x:.4g}" data-y-mm="{y:.4g}" data-size-mm="{r:.4g}" '
+                f'cx="{cx:.1f}" cy="{cy:.1f}" r="{rp:.1f}" {style}/>' + mark)
+    # the page's y axis points down: an angle from x turns the other way on screen
+    return (f'<ellipse class="{cls}" data-x-mm="{x:.4g}" data-y-mm="{y:.4g}" data-a-mm="{r:.4g}" '
+            f'data-b-mm="{b:.4g}" data-angle-deg="{angle:.4g}" cx="{cx:.1f}" cy="{cy:.1f}" rx="{rp:.1f}" '
+            f'ry="{b * fr.scale:.1f}" transform="rotate({-angle:.2f} {cx:.1f} {cy:.1f})" {style}/>' + mark)
 
 
-def _refitted(report: Mapping[str, Any], scan: Mapping[str, Any]) -> tuple[float, float, float] | None:
-    """The candidate's refitted region [mm] (its last refit's values), or None."""
-    names = list(scan.get("parameters") or [])
-    for c in report.get("candidates") or []:
-        pars = c.get("parameters") or {}
-        if c.get("effect") == scan.get("effect") and len(names) == 3 and all(n in pars for n in names):
+def _refitted(report: Mapping[str, Any], scan: Mapping[str, Any]) -> tuple[float, ...] | None:
+    """The candidate's refitted region (its last refit's values): ``(x, y, r)`` [mm] of a disc or,
+    refitted in the shape scan's elliptical form, ``(x, y, a, b, angle)`` [mm, mm, mm, mm, deg];
+    None when it was not refitted."""
+    shape = (scan.get("shape") or {}).get("parameters") or []
+    for names in ([list(shape)] if len(shape) == 5 else []) + [list(scan.get("parameters") or [])]:
+        for c in report.get("candidates") or []:
+            pars = c.get("parameters") or {}
+            if c.get("effect") != scan.get("effect") or len(names) not in (3, 5) \
+                    or not all(n in pars for n in names):
+                continue
             try:
-                v = [float(pars[n]["value"]) * 1e3 for n in names]
+                v = [float(pars[n]["value"]) for n in names]
             except (TypeError, ValueError, KeyError):
                 return None
-            return (v[0], v[1], v[2]) if all(math.isfinite(t) for t in v) else None
+            v = [t * 1e3 for t in v[:4]] + [math.degrees(t) for t in v[4:]]
+            return tuple(v) if all(math.isfinite(t) for t in v) else None
     return None
 
 
@@ -195,12 +212,17 @@ def _one(report: Mapping[str, Any], scan: Mapping[str, Any]) -> str:
             f"{_fmt(cost.get('wall_s'))} s"
             + (f", {_fmt(cost.get('forward_equivalents'))} plain predictions' time" if
                cost.get("forward_equivalents") is not None else "") + ".")
-    if fit is not None:
+    if fit is not None and len(fit) == 5:
+        text += (f" Refitted as an ellipse (dashed), started from the best of the elongated shapes scored "
+                 f"at the best centre: x {fit[0]:.3g} mm, y {fit[1]:.3g} mm, semi-axes {fit[2]:.3g} and "
+                 f"{fit[3]:.3g} mm, the first at {fit[4]:.3g}° from x.")
+    elif fit is not None:
         text += f" Refitted (dashed): x {fit[0]:.3g} mm, y {fit[1]:.3g} mm, {_e(size)} {fit[2]:.3g} mm."
     text += "</p>"
     pts = _points(report)
-    xs = [bx - br, bx + br] + ([fit[0] - fit[2], fit[0] + fit[2]] if fit else [])
-    ys = [by - br, by + br] + ([fit[1] - fit[2], fit[1] + fit[2]] if fit else [])
+    reach = max(fit[2:4]) if fit is not None and len(fit) == 5 else fit[2] if fit else 0.0
+    xs = [bx - br, bx + br] + ([fit[0] - reach, fit[0] + reach] if fit else [])
+    ys = [by - br, by + br] + ([fit[1] - reach, fit[1] + reach] if fit else [])
     regs = scan.get("regions") or {}
     h = float(grid.get("spacing_m") or 0.0) * 1e3 / 2
     xs += [float(v) * 1e3 + s for v in regs.get("x_m") or [] for s in (-h, h)]
@@ -209,7 +231,8 @@ def _one(report: Mapping[str, Any], scan: Mapping[str, Any]) -> str:
         xs += pts[0][:, 0].tolist()
         ys += pts[0][:, 1].tolist()
     fr = _Frame(np.array([min(xs), min(ys)]), np.array([max(xs), max(ys)]))
-    outlines = _outline(fr, bx, by, br, "best") + (_outline(fr, *fit, "refit") if fit else "")
+    refit = "" if fit is None else _outline(fr, *fit[:3], "refit", *fit[3:])
+    outlines = _outline(fr, bx, by, br, "best") + refit
     panels = [] if pts is None else [_residual_panel(fr, pts[0], pts[1], outlines)]
     panels.append(_score_panel(fr, scan, outlines))
     return text + '<div class="scan-panels">' + "".join(panels) + "</div>"

@@ -28,6 +28,7 @@ from skinkit.errors import SkinkitError
 from skinkit.forward.stages import stage
 from skinkit.gap.scan import RegionScan, ScanError, imaged_area, positive, region_of, scan, scan_grid
 from skinkit.gap.score import ScoreTest
+from skinkit.gap.shape_scan import ShapeScan, shape_scan
 from skinkit.schemas import Observations
 
 
@@ -52,6 +53,12 @@ class RoundScan:
     """One round's scans: candidate label -> its :class:`RegionScan` (empty: nothing scanned)."""
 
     scans: dict[str, RegionScan] = field(default_factory=dict)
+    shapes: dict[str, ShapeScan] = field(default_factory=dict)
+
+    def refit_forms(self) -> dict[str, tuple[str, dict[str, float]]]:
+        """Candidate label -> the form it is refitted in and that form's start values (model
+        names -> SI), for every scanned candidate whose shape was scanned."""
+        return {k: (v.form, v.values()) for k, v in self.shapes.items()}
 
     def values(self) -> dict[str, float]:
         """Every scanned candidate's best region as model values ``"<label>.<local>"`` [m]."""
@@ -134,7 +141,9 @@ def scan_round(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float],
     """Scan every remaining candidate of the diagnosis ``run`` that declares a region (module
     docstring) on the current model ``spec_r`` at ``values``; each scan is said, counted in
     ``run.n_forward``, appended to ``run.scans`` and its best region kept in
-    ``run.held_regions`` (the first found). Empty without tracked points or when disabled."""
+    ``run.held_regions`` (the first found); a candidate whose effect has an elliptical form gets
+    its shape scanned at the best region (:mod:`skinkit.gap.shape_scan`), kept in
+    ``run.held_forms``. Empty without tracked points or when disabled."""
     opts = run.scan or ScanOptions()
     labels = [c for c in run.remaining if region_of(c)]
     out = RoundScan()
@@ -156,7 +165,17 @@ def scan_round(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float],
                 continue
         run.n_forward += int(s.cost["n_forward"])
         out.scans[label] = s
-        run.scans.append({"round": rnd + 1, **s.to_dict()})
+        entry = {"round": rnd + 1, **s.to_dict()}
+        with stage("region scan"):
+            shape = shape_scan(spec_r, run.observations, values, run.theta_r, label,
+                               s.grid.regions()[s.best], s.tests[s.best].statistic, load=run.loader,
+                               progress=run.say)
+        if shape is not None:
+            run.n_forward += int(shape.cost["n_forward"])
+            out.shapes[label] = shape
+            entry["shape"] = shape.to_dict()
+            run.held_forms.setdefault(label, (shape.form, shape.values()))
+        run.scans.append(entry)
         for k, v in s.values().items():
             run.held_regions.setdefault(k, v)
     return out

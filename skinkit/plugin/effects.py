@@ -108,6 +108,12 @@ class BaseEffect:
     centre given outside that extent. Such an effect may be applied more than once under
     ``instance`` labels (several candidate regions in one model), so, as a repeatable effect,
     it names everything after ``self.name``.
+
+    ``region_ellipse``, for a region effect that also comes in an elliptical form: that form's
+    name and the local names of its centre, semi-axes and angle, ``(form, (x, y, a, b, angle))``
+    ([m], [m], [rad] of the ``a`` axis from x). The diagnosis then scans elongated shapes at the
+    best region it found and refits the effect in that form, so that it estimates the region's
+    centre, semi-axes and direction with its strength.
     """
 
     name: str = ""
@@ -119,6 +125,7 @@ class BaseEffect:
     form: str = ""
     geometry: ClassVar[frozenset[str]] = frozenset()
     region: ClassVar[tuple[str, str, str] | None] = None
+    region_ellipse: ClassVar[tuple[str, tuple[str, str, str, str, str]] | None] = None
 
     def _declared(self) -> list[Declared]:
         raise NotImplementedError

@@ -78,7 +78,7 @@ class Outlines(HTMLParser):
             self._section = a.get("id")
         elif tag == "svg" and self._section == "scan":
             self._panel = a.get("data-panel")
-        elif tag == "circle" and self._section == "scan" and a.get("class") in OUTLINES:
+        elif tag in ("circle", "ellipse") and self._section == "scan" and a.get("class") in OUTLINES:
             self.found.append((self._panel or "", a["class"], a))
 
     def handle_startendtag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
@@ -158,3 +158,36 @@ def test_the_session_report_nests_the_region_section_only_when_scanned():
     assert 'id="gap-scar-scan"' in nested and nested.count('class="scan-region"') == 2
     bare = {k: v for k, v in report().items() if k != "region_scan"}
     assert "scan-region" not in _gap("bare", bare) and "gap-bare-scan" not in _gap("bare", bare)
+
+
+def ellipse_report() -> dict:
+    """The report refitted in the inclusion's elliptical form from a shape scan at the best centre."""
+    rep = report()
+    names = ["inclusion.x", "inclusion.y", "inclusion.a", "inclusion.b", "inclusion.angle"]
+    rep["region_scan"][0]["shape"] = {"form": "ellipse", "parameters": names}
+    rep["candidates"][0]["parameters"] = {
+        "inclusion.x": {"value": 3.4e-3}, "inclusion.y": {"value": -2.4e-3}, "inclusion.a": {"value": 5e-3},
+        "inclusion.b": {"value": 2e-3}, "inclusion.angle": {"value": np.radians(30.0)},
+        "inclusion.ratio": {"value": 2.9}}
+    return rep
+
+
+def test_a_refitted_ellipse_is_drawn_as_one(tmp_path):
+    text = write_html(ellipse_report(), tmp_path / "gap.html").read_text()
+    found = Outlines(text).found
+    refit = [(p, a) for p, c, a in found if c == "refit-region"]
+    assert sorted(p for p, _ in refit) == ["residual", "score"]
+    for _, a in refit:
+        assert (float(a["data-a-mm"]), float(a["data-b-mm"]), float(a["data-angle-deg"])) == \
+            pytest.approx((5.0, 2.0, 30.0))
+        assert float(a["rx"]) > float(a["ry"]) > 0 and "rotate(-30" in a["transform"]
+    assert "semi-axes 5 and 2 mm" in text
+
+
+def test_the_browser_draws_the_refitted_ellipse(tmp_path):
+    """The page Chromium renders holds the refitted ellipse, turned, on both panels."""
+    exe = _chromium()
+    page = write_html(ellipse_report(), tmp_path / "gap.html")
+    dom = _browse(exe, tmp_path / "profile", "--dump-dom", page.resolve().as_uri())
+    refit = [a for p, c, a in Outlines(dom).found if c == "refit-region"]
+    assert len(refit) == 2 and all(a.get("transform", "").startswith("rotate(") for a in refit)

@@ -114,3 +114,37 @@ def test_bad_region_input_is_one_line_before_anything_runs(healthy, tmp_path):
                          "--start", "inclusion.x=12 mm", "--out", str(tmp_path / "fit")),
               "--start inclusion.x, inclusion.y: centre x 12 mm, y 0 mm lies outside the imaged area")
     assert not (tmp_path / "fit").exists()
+
+
+#: an elongated scar (a healed incision) 7 x 2.5 mm across, its long axis at 60 degrees from the pull
+LONG_SCAR = {"form": "ellipse", "x": 3.5e-3, "y": -2.5e-3, "a": 3.5e-3, "b": 1.25e-3,
+             "angle": math.radians(60.0), "ratio": 4.0}
+
+
+def test_the_shape_scan_finds_which_way_a_long_scar_runs(tmp_path):
+    """At the scan's best centre the elongated shapes are scored: on an elongated scar (truth on
+    its own mesh) the best-scoring shape is elongated and runs within one step of the shapes'
+    angles (45 degrees) of the scar's, and scores above the best disc; the refit's start is that
+    shape, in the effect's elliptical form."""
+    from skinkit.forward import load
+    from skinkit.gap.scan import scan
+    from skinkit.gap.shape_scan import ANGLES_DEG, shape_scan
+
+    truth = twopad_spec()
+    truth["effects"] = [{"name": "inclusion", **LONG_SCAR}]
+    spec, obs, values, _ = _calibrated(make(tmp_path / "long", truth, seed=3))
+    loader = lambda s: load(s, workers=1)   # noqa: E731
+    s = scan(spec, obs, values, FREE, "inclusion", load=loader)
+    best = s.grid.regions()[s.best]
+    sh = shape_scan(spec, obs, values, FREE, "inclusion", best, s.tests[s.best].statistic, load=loader)
+    d = sh.to_dict()
+    assert d["form"] == "ellipse" and d["cost"]["n_forward"] == 1
+    stats = np.array(d["shapes"]["statistic"])
+    i = int(np.argmax(stats))
+    assert stats[i] > d["disc_statistic"]
+    assert d["shapes"]["a_m"][i] > d["shapes"]["b_m"][i]
+    step = np.diff(ANGLES_DEG)[0]
+    off = (d["shapes"]["angle_deg"][i] - 60.0 + 90.0) % 180.0 - 90.0     # an ellipse turned 180° is itself
+    assert abs(off) <= step, d["shapes"]
+    assert sh.values() == {f"inclusion.{k}": pytest.approx(v) for k, v in
+                           zip(("x", "y", "a", "b", "angle"), sh.shapes[i], strict=True)}

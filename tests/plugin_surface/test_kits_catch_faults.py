@@ -140,3 +140,23 @@ class Frozen:
 def test_the_trackers_kit_catches_a_tracker_that_sees_no_motion():
     report = check_tracker(Frozen())
     assert {"shift", "edge", "bad input"} <= {c.name for c in report.failed}, str(report)
+
+
+def test_the_effects_kit_checks_a_declared_elliptical_region():
+    """``inclusion`` declares its elliptical form soundly; the same plugin pointing at a form it does
+    not have, or at names that are not its ellipse's lengths and angle, is named a fault."""
+    import copy
+
+    from skinkit import registry
+    from skinkit.plugin.conformance.effects import _ellipse_problems
+
+    sound = registry.create("skinkit.effects", "inclusion")
+    assert _ellipse_problems(sound) == []
+    no_form = copy.copy(sound)
+    no_form.region_ellipse = ("oval", ("x", "y", "a", "b", "angle"))
+    assert "must be one of the effect's forms" in " ".join(_ellipse_problems(no_form))
+    swapped = copy.copy(sound)
+    swapped.region_ellipse = ("ellipse", ("x", "y", "a", "angle", "b"))
+    got = " ".join(_ellipse_problems(swapped))
+    assert "'angle' is not a declared parameter in m" in got
+    assert "'b' is not a declared parameter in rad" in got

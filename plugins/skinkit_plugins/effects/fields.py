@@ -88,6 +88,8 @@ class Inclusion(BaseEffect):
     forms = ("disc", "ellipse")
     # the diagnosis scans centres and radii over the tracked area (with the disc, the default form)
     region = ("x", "y", "radius")
+    # ... and refits the best region found as an ellipse (a scar is rarely round)
+    region_ellipse = ("ellipse", ("x", "y", "a", "b", "angle"))
 
     def _declared(self) -> list[Declared]:
         out = [declare("ratio", 3.0, 1.0, "1", 0.05, 50.0),

@@ -8,7 +8,9 @@ author (and skinkit's own tests) checks an effect with.
 - ``parameters``: at least one, unique local names without a dot, SI units, ``lower < upper``,
   the null and the typical magnitude (the declared value) inside the bounds, the names of
   ``null()`` those of ``parameters()``, and a typical magnitude that differs from the null; a
-  declared ``region`` names three of them in metres and leaves at least one other;
+  declared ``region`` names three of them in metres and leaves at least one other (and a
+  declared ``region_ellipse`` names a form of the effect with the centre and semi-axes in metres
+  and the angle in rad);
 - per model kind the effect supports, on a small model of that kind (:mod:`.testbeds`):
   ``<kind>: input unchanged`` (``apply`` at the null and at the typical magnitude leaves its
   input alone), ``<kind>: tables`` (only the top-level tables the effect declares in
@@ -140,7 +142,29 @@ def _region_problems(plugin: Any, params: Mapping[str, Any]) -> list[str]:
            if n not in params or params[n].unit != "m"]
     if not set(params) - set(names):
         out.append("region: no parameter besides the region's to test at each region")
-    return out
+    return out + _ellipse_problems(plugin)
+
+
+def _ellipse_problems(plugin: Any) -> list[str]:
+    """What is wrong with a declared ``region_ellipse``: a form the effect has, whose declared
+    parameters hold the five names — centre x, y and semi-axes a, b in metres, the angle in rad."""
+    decl = getattr(plugin, "region_ellipse", None)
+    if decl is None:
+        return []
+    try:
+        form, names = decl
+        names = tuple(names)
+    except (TypeError, ValueError):
+        return [f"region_ellipse must be (form, (x, y, a, b, angle)), got {decl!r}"]
+    if form not in tuple(getattr(plugin, "forms", ()) or ()) or len(names) != 5:
+        return [f"region_ellipse: {form!r} must be one of the effect's forms and name five parameters, "
+                f"got {decl!r}"]
+    shaped = copy.copy(plugin)
+    shaped.form = form
+    params = {p.name: p for p in shaped.parameters()}
+    units = ("m", "m", "m", "m", "rad")
+    return [f"region_ellipse: {n!r} is not a declared parameter in {u} of form {form!r}"
+            for n, u in zip(names, units, strict=True) if n not in params or params[n].unit != u]
 
 
 def _typical(plugin: Any) -> dict[str, float]:
