@@ -97,9 +97,15 @@ class ModelError:
         return ModelError(mean, basis, self.rank, self.summary)
 
 
+def _scaled(params: ParameterSet, name: str) -> bool:
+    """Whether ``name`` spreads on a log scale around the calibration: a positive value with a
+    non-negative lower bound (a modulus); others spread by a share of their magnitude."""
+    return float(params.values()[name]) > 0 and params.param(name).lower >= 0
+
+
 def _draws(params: ParameterSet, free: Sequence[str], n: int, seed: int) -> list[dict[str, float]]:
-    """The calibration's values and ``n`` draws around it (positive parameters scaled by
-    exp(SPREAD ξ), others shifted by SPREAD ξ |θ|; clipped to the bounds)."""
+    """The calibration's values and ``n`` draws around it (log-scaled parameters, :func:`_scaled`,
+    multiplied by exp(SPREAD ξ), others shifted by SPREAD ξ |θ|; clipped to the bounds)."""
     rng = np.random.default_rng(seed)
     base = dict(params.values())
     out = [dict(base)]
@@ -108,7 +114,7 @@ def _draws(params: ParameterSet, free: Sequence[str], n: int, seed: int) -> list
         for name in free:
             p = params.param(name)
             xi = float(rng.standard_normal())
-            x = base[name] * math.exp(SPREAD * xi) if base[name] > 0 and p.lower >= 0 else \
+            x = base[name] * math.exp(SPREAD * xi) if _scaled(params, name) else \
                 base[name] + SPREAD * xi * max(abs(base[name]), 1e-12)
             v[name] = float(min(max(x, p.lower), p.upper))
         out.append(v)
@@ -191,7 +197,7 @@ Diffs = dict[tuple[str, str], np.ndarray]
 def _step(params: ParameterSet, name: str) -> float:
     """The draws' standard deviation of ``name`` to first order [its SI unit] (:func:`_draws`)."""
     v = float(params.values()[name])
-    return SPREAD * abs(v) if v > 0 and params.param(name).lower >= 0 else SPREAD * max(abs(v), 1e-12)
+    return SPREAD * abs(v) if _scaled(params, name) else SPREAD * max(abs(v), 1e-12)
 
 
 def _tangents(coarse: Prediction, fine: Prediction, observations: Observations, params: ParameterSet,
