@@ -209,15 +209,14 @@ def _carry_model_error(model, obs, result, names: list[str], say, **options):
     (:func:`skinkit.inverse.approximation.refit`); when the estimate fails, the plain fit and
     observations, with ``extra["model_error_failed"]`` saying why."""
     from skinkit.inverse import fit as run_fit
-    from skinkit.inverse.approximation import refit
+    from skinkit.inverse.approximation import not_estimated, refit
 
     starts_kept = result.starts
     try:
         result, obs = refit(model, obs, result, names, run_fit, progress=lambda m: say(f"  {m}"), **options)
     except SkinkitError as exc:   # the plain fit stands, and says what it lacks
         result.extra["model_error_failed"] = (
-            f"the model's discretisation error could not be estimated (its mesh refined 2x, or the fit "
-            f"carrying it, failed: {exc}); the fit does not carry it, so its intervals are the noise's alone")
+            f"{not_estimated(exc)}; the fit does not carry it, so its intervals are the noise's alone")
         say(f"warning: {result.extra['model_error_failed']}")
     result.starts = starts_kept
     return result, obs

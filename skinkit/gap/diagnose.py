@@ -391,7 +391,7 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
             # a calibration made with the mesh's error carried, on observations that carry it
             carried = calibration.extra["model_error"]
         elif model_error and has_mesh(base):
-            from skinkit.inverse.approximation import refit
+            from skinkit.inverse.approximation import not_estimated, refit
             try:
                 with stage("model error"):
                     r1, carrying = refit(base, observations, r0, theta, fit, progress=say,
@@ -402,10 +402,8 @@ def _calibrate(spec: Mapping[str, Any], kind: str, loader: Callable[..., Any],
                 # the calibration stands: a model whose refined copy cannot be solved (an
                 # instability the finer mesh resolves) is still diagnosed, saying what is missing
                 failed = {"kind": "model-error-failed", "where": "model error", "message":
-                          f"the model's discretisation error could not be estimated (its mesh refined "
-                          f"2x, or the calibration carrying it, failed: {exc}); it is neither carried "
-                          "as noise nor checked, so an effect named may be what a finer mesh would "
-                          "explain"}
+                          f"{not_estimated(exc)}; it is neither carried as noise nor checked, so an "
+                          "effect named may be what a finer mesh would explain"}
                 say(failed["message"])
         with stage("calibration"):
             state0 = _state(base, r0, observations, held)

@@ -301,9 +301,13 @@ class RegionScan:
         }
 
 
-def _tables(effect: str, label: str, region: tuple[str, ...], regions: np.ndarray) -> list[dict[str, Any]]:
-    return [{"name": effect, "instance": f"{label}-scan{k + 1}", region[0]: float(x), region[1]: float(y),
-             region[2]: float(s)} for k, (x, y, s) in enumerate(regions)]
+def instance_tables(effect: str, label: str, region: Sequence[str], regions: np.ndarray,
+                    form: str | None = None) -> list[dict[str, Any]]:
+    """One ``[[effects]]`` table per row of ``regions`` (its ``region`` parameters' values [SI]):
+    the effect at its null as instance ``<label>-scan<k>``, in ``form`` when given."""
+    extra = {"form": form} if form else {}
+    return [{"name": effect, "instance": f"{label}-scan{k + 1}", **extra,
+             **{n: float(v) for n, v in zip(region, row, strict=True)}} for k, row in enumerate(regions)]
 
 
 def scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[str, float],
@@ -317,7 +321,6 @@ def scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[st
     ``reference_wall_s`` [s]: a plain prediction's wall time, to state the cost in forward
     equivalents. :class:`ScanError` without tracked points, or for a grid :func:`scan_grid`
     refuses."""
-    from skinkit.inverse.objective import Objective
 
     say = progress or (lambda _m: None)
     effect = effect_of(label)
@@ -336,35 +339,20 @@ def scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[st
                      centre_bounds=((xs.lower, xs.upper), (ys.lower, ys.upper)))
     regs = grid.regions()
     tested = [n for n in declared if n not in region]
-    tables = _tables(effect, label, region, regs)
+    tables = instance_tables(effect, label, region, regs)
     names = list(theta) + [f"{t['instance']}.{n}" for t in tables for n in tested]
     say(f"region scan of {label}: {len(regs)} regions ({len(grid.centres)} centres "
         f"{grid.spacing * 1e3:.3g} mm apart x {len(grid.sizes)} sizes) in one prediction with "
         f"{len(names)} sensitivities")
-    t0 = time.perf_counter()
-    model = load(with_effects(spec, tables))
-    try:
-        ps = model.parameters()
-        ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
-        pred = model.predict(ps, fitted, sensitivities=names)
-        keep = set(fitted.names)
-        pred = Prediction({p: c for p, c in pred.protocols.items() if p in keep}, pred.methods, pred.inputs,
-                          pred.info)
-        res = Objective(model, fitted, names, "noise").residual(pred)
-    finally:
-        model.close()
-    wall = time.perf_counter() - t0
-    colour = colour_of(fitted, pred)
-    if colour is not None and colour.blocks[-1][0].stop != res.z.size:
-        colour = None          # not the residual's layout: test as if the coefficients were known
-    tests, A = region_tests(res.z, res.J, len(theta), label, plugin, colour, pred.methods)
+    tests, A, pred_methods, wall = instance_tests(spec, fitted, values, theta, label, plugin, tables, names,
+                                                  load=load)
     min_p = null_min_p(A, [t.dof for t in tests])
     scan_r = RegionScan(label, tuple(f"{label}.{n}" for n in region), [f"{label}.{n}" for n in tested],  # type: ignore[arg-type]
                         grid, area, tests, np.ones(len(tests)), np.zeros(len(tests)), min_p)
     adj = [scan_r.adjusted(t.log_p) for t in tests]
     scan_r.p_adjusted = np.array([a[0] for a in adj])
     scan_r.log_p_adjusted = np.array([a[1] for a in adj])
-    methods = sorted({str(pred.methods.get(n, "analytic")) for n in names[len(theta):]})
+    methods = sorted({str(pred_methods.get(n, "analytic")) for n in names[len(theta):]})
     scan_r.cost = {"n_forward": 1, "columns": len(names), "region_columns": len(names) - len(theta),
                    "wall_s": wall, "methods": methods,
                    "forward_equivalents": wall / reference_wall_s if reference_wall_s else None}
@@ -373,6 +361,37 @@ def scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[st
         f"size {regs[b, 2] * 1e3:.2f} mm (LM {tests[b].statistic:.4g}, adjusted p "
         f"{scan_r.p_adjusted[b]:.3g}); {wall:.1f} s")
     return scan_r
+
+
+def instance_tests(spec: Mapping[str, Any], fitted: Observations, values: Mapping[str, float],
+                   theta: Sequence[str], label: str, plugin: Any, tables: Sequence[Mapping[str, Any]],
+                   names: Sequence[str], *, load: Callable[..., Any]
+                   ) -> tuple[list[ScoreTest], list[np.ndarray], dict[str, str], float]:
+    """The score test of every instance of ``tables`` (the effect at its null, each a candidate
+    region, all in one model ``spec``): one prediction of the ``fitted`` observations at ``values``
+    with the sensitivities ``names`` (``theta``, then each instance's tested parameters), the
+    whitened residual and :func:`region_tests` with the noise colour. Returns ``(tests, projected
+    unit columns, how each column was made, the prediction's wall time [s])``."""
+    from skinkit.inverse.objective import Objective
+
+    t0 = time.perf_counter()
+    model = load(with_effects(spec, tables))
+    try:
+        ps = model.parameters()
+        ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
+        pred = model.predict(ps, fitted, sensitivities=list(names))
+        keep = set(fitted.names)
+        pred = Prediction({p: c for p, c in pred.protocols.items() if p in keep}, pred.methods, pred.inputs,
+                          pred.info)
+        res = Objective(model, fitted, list(names), "noise").residual(pred)
+    finally:
+        model.close()
+    wall = time.perf_counter() - t0
+    colour = colour_of(fitted, pred)
+    if colour is not None and colour.blocks[-1][0].stop != res.z.size:
+        colour = None          # not the residual's layout: test as if the coefficients were known
+    tests, A = region_tests(res.z, res.J, len(theta), label, plugin, colour, pred.methods)
+    return tests, A, dict(pred.methods), wall
 
 
 def region_tests(z: np.ndarray, J: np.ndarray, k: int, label: str, plugin: Any, colour: Colour | None = None,

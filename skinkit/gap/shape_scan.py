@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import copy
 import math
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,9 +30,9 @@ from typing import Any
 import numpy as np
 
 from skinkit import registry
-from skinkit.gap.scan import region_tests
-from skinkit.gap.score import ScoreTest, colour_of, effect_of, with_effects
-from skinkit.schemas import Observations, Prediction
+from skinkit.gap.scan import instance_tables, instance_tests
+from skinkit.gap.score import ScoreTest, effect_of
+from skinkit.schemas import Observations
 
 #: elongations a/b of the ellipses scored (each of the best disc's area: a·b = r²)
 ASPECTS = (2.0, 4.0)
@@ -114,8 +113,6 @@ def shape_scan(spec: Mapping[str, Any], observations: Observations, values: Mapp
     radius) [m] whose disc scored ``disc_statistic``, on the calibrated model ``spec`` at
     ``values`` with fitted parameters ``theta`` (module docstring); None when the effect declares
     no elliptical form."""
-    from skinkit.inverse.objective import Objective
-
     el = elliptical(label)
     if el is None:
         return None
@@ -126,32 +123,15 @@ def shape_scan(spec: Mapping[str, Any], observations: Observations, values: Mapp
     shapes = candidate_shapes(best[:2], float(best[2]), (declared[a_name].lower, declared[a_name].upper))
     tested = [n for n in declared if n not in local]
     effect = effect_of(label)
-    tables = [{"name": effect, "instance": f"{label}-scan{k + 1}", "form": form,
-               **{n: float(v) for n, v in zip(local, row, strict=True)}} for k, row in enumerate(shapes)]
+    tables = instance_tables(effect, label, local, shapes, form)
     names = list(theta) + [f"{t['instance']}.{n}" for t in tables for n in tested]
-    t0 = time.perf_counter()
-    fitted = observations.fitted()
-    model = load(with_effects(spec, tables))
-    try:
-        ps = model.parameters()
-        ps = ps.with_values({k: v for k, v in values.items() if k in ps.names})
-        pred = model.predict(ps, fitted, sensitivities=names)
-        keep = set(fitted.names)
-        pred = Prediction({p: c for p, c in pred.protocols.items() if p in keep}, pred.methods, pred.inputs,
-                          pred.info)
-        res = Objective(model, fitted, names, "noise").residual(pred)
-    finally:
-        model.close()
-    colour = colour_of(fitted, pred)
-    if colour is not None and colour.blocks[-1][0].stop != res.z.size:
-        colour = None
-    tests, _ = region_tests(res.z, res.J, len(theta), label, plugin, colour, pred.methods)
+    tests, _, _, wall = instance_tests(spec, observations.fitted(), values, theta, label, plugin, tables,
+                                       names, load=load)
     i = max(range(len(tests)), key=lambda k: tests[k].statistic)
     start = shapes[i].copy()
     if not tests[i].statistic > disc_statistic:
         r, q, lim = float(best[2]), START_ASPECT, declared[a_name]
         start[2:4] = np.clip([r * math.sqrt(q), r / math.sqrt(q)], lim.lower, lim.upper)
-    wall = time.perf_counter() - t0
     out = ShapeScan(label, form, tuple(f"{label}.{n}" for n in local), shapes, tests, float(disc_statistic),
                     start, {"n_forward": 1, "columns": len(names), "wall_s": wall})
     say(f"shape of {label}: {len(shapes)} ellipses at the best centre; best a/b "

@@ -97,6 +97,13 @@ class ModelError:
         return ModelError(mean, basis, self.rank, self.summary)
 
 
+def not_estimated(exc: BaseException) -> str:
+    """What to say when :func:`refit` failed with ``exc``: the estimate could not be made, and
+    why (the solver's where and why, from ``exc``)."""
+    return (f"the model's discretisation error could not be estimated (its mesh refined 2x, or the fit "
+            f"carrying it, failed: {exc})")
+
+
 def _scaled(params: ParameterSet, name: str) -> bool:
     """Whether ``name`` spreads on a log scale around the calibration: a positive value with a
     non-negative lower bound (a modulus); others spread by a share of their magnitude."""
@@ -365,4 +372,4 @@ def describe(summary: Mapping[str, Any]) -> list[str]:
 
 
 __all__ = ["DEFAULT_DRAWS", "DEFAULT_PASSES", "ModelError", "ORDER_HIGH", "ORDER_LOW", "SPREAD",
-           "apply", "describe", "estimate", "refit", "whitening"]
+           "apply", "describe", "estimate", "not_estimated", "refit", "whitening"]
