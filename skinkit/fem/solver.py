@@ -39,6 +39,12 @@ GUESS_PROGRESS = 0.5
 #: of the reference force has reached the round-off floor: a large body carrying large internal
 #: stresses (pre-stress) against small net reactions cannot balance them to ``rtol`` of those
 STALL_RTOL = 1e-6
+#: Newton gives the increment up when the residual is not below half of what it was this many
+#: iterations before: past a limit point or a bifurcation (an indefinite tangent, a wrinkling
+#: layer) the line search only wanders at one residual level, and the remaining iterations of
+#: ``max_iter`` cost as much as the cut increment that follows them would. A damped crawl that
+#: halves the residual within the window goes on
+STAGNANT_ITERS = 6
 #: below this residual, relative to the increment's reference force, Newton finishes on the
 #: tangent it last factorised (frozen-tangent steps: a back-substitution and a residual each,
 #: no tangent assembled or factorised). There the iterate is so close to the solution that the
@@ -184,6 +190,7 @@ class NewtonSolver:
         norm = float(np.linalg.norm(r))
         tol = max(o.rtol * ref, o.atol)
         last, stalled, ascents = math.inf, 0, 0
+        trail: list[float] = []     # the residual after each iteration, for STAGNANT_ITERS
         # frozen-tangent steps only on a tangent factorised in this increment: an extrapolated
         # start has already corrected with the previous increment's until that stopped paying
         frozen = guess is None
@@ -195,6 +202,11 @@ class NewtonSolver:
                 return u, it, norm
             if it == o.max_iter:
                 break
+            trail.append(norm)
+            if len(trail) > STAGNANT_ITERS and norm > 0.5 * trail[-1 - STAGNANT_ITERS]:
+                raise SolverError(f"no progress at t = {t:g}: the residual did not halve in "
+                                  f"{STAGNANT_ITERS} Newton iterations (|r| = {norm:.3g} N, reference "
+                                  f"{ref:.3g} N, {it} iterations){self._where(r)}{_why(ascents, it)}")
             if guess is not None and norm > GUESS_PROGRESS * last:
                 # an extrapolated start outside Newton's basin (it overshot where the drive
                 # turns): Newton crawls there under its line search for a dozen iterations or
@@ -204,6 +216,7 @@ class NewtonSolver:
                 norm, last = float(np.linalg.norm(r)), math.inf
                 tol = max(o.rtol * ref, o.atol)
                 frozen = True
+                trail = [norm]
                 if norm <= tol:
                     return u, it, norm
             last = norm

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -81,7 +83,6 @@ def test_a_failed_increment_says_where_the_body_is_out_of_balance():
     """The report names the node with the largest unbalance and its layer: for a punch pushed
     to 4x the skin's thickness it is at the punch's bonded edge (radius 2 mm), where the strain
     concentrates, within one element (1 mm) of it."""
-    import re
     prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.02])
     with pytest.raises(SolverError) as info:
         NewtonSolver(prob, bc, SolverOptions(max_cuts=3, max_iter=8)).run([1.0])
@@ -90,6 +91,30 @@ def test_a_failed_increment_says_where_the_body_is_out_of_balance():
     assert m, str(info.value)
     x, y = float(m.group(1)), float(m.group(2))
     assert abs(np.hypot(x, y) - 2.0) <= 1.0
+
+
+def test_a_newton_that_stops_making_progress_gives_up_early(monkeypatch):
+    """Past what the mesh can carry (a punch pushed to 4x the skin's thickness), an increment whose
+    residual stops halving is given up after STAGNANT_ITERS iterations instead of the whole
+    max_iter: the solve fails at the same load as when every increment spends its 20 iterations,
+    with fewer Newton iterations, and says that the residual stopped falling."""
+    from skinkit.fem import solver as solver_mod
+
+    def attempt():
+        prob, bc = _indent_problem("displacement", [0.0, 0.0, -0.02])
+        s = NewtonSolver(prob, bc, SolverOptions(max_cuts=3))
+        with pytest.raises(SolverError) as info:
+            s.run([1.0])
+        return s.timings.iterations, str(info.value)
+
+    its_rule, msg_rule = attempt()
+    window = solver_mod.STAGNANT_ITERS
+    monkeypatch.setattr(solver_mod, "STAGNANT_ITERS", 10**6)   # the rule off: max_iter alone
+    its_all, msg_all = attempt()
+    where = r"gave up at load t = (\S+) "
+    assert re.search(where, msg_rule).group(1) == re.search(where, msg_all).group(1)
+    assert its_rule < its_all
+    assert f"did not halve in {window} Newton iterations" in msg_rule
 
 
 def test_an_indefinite_tangent_is_named_as_the_reason():
