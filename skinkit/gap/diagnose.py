@@ -63,7 +63,7 @@ from skinkit.gap.candidates import (
 from skinkit.gap.checks import GapError, check_channels, check_effects
 from skinkit.gap.mesh_check import discretisation, mesh_only
 from skinkit.gap.report_files import write_report
-from skinkit.gap.scan_step import RoundScan, ScanOptions, check_regions, scan_round
+from skinkit.gap.scan_step import RoundScan, ScanOptions, check_regions, rival_refit, scan_round
 from skinkit.gap.score import (
     ScoreTest,
     Sensitivities,
@@ -441,7 +441,7 @@ def _round(run: _Run, rnd: int) -> bool:
     if not gate["significant"]:
         top = []             # nothing will be named: no refit
     seps = separability(sens, tests, run.alpha, [t.effect for t in top])
-    states = _refit_top(run, top, values, sens, entry, rs.refit_forms())
+    states = _refit_top(run, top, values, sens, entry, rs)
     records = [candidate_record(t, ok[t.effect], states.get(t.effect), current) for t in tests]
     with stage("separation"):
         _separate(run, seps, records, spec_r, values, sens, tests, rnd)
@@ -492,14 +492,19 @@ def _score(run: _Run, spec_r: Mapping[str, Any], values: Mapping[str, float], rs
 
 
 def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float], sens: Sensitivities,
-               entry: dict[str, Any], forms: Mapping[str, tuple[str, Mapping[str, float]]] | None = None
-               ) -> dict[str, dict[str, Any]]:
+               entry: dict[str, Any], rs: RoundScan) -> dict[str, dict[str, Any]]:
     """The refitted states of the ``top`` candidates (none when ``max_effects`` is 0), each in its
-    refit form where ``forms`` gives one; a refit that fails is said and recorded in
-    ``entry["refit_failures"]``."""
+    refit form where the round's scans ``rs`` found one, and also from its scan's second place
+    where there is one (the better kept, :func:`~skinkit.gap.scan_step.rival_refit`); a refit that
+    fails is said and recorded in ``entry["refit_failures"]``."""
     states: dict[str, dict[str, Any]] = {}
     if run.max_effects <= 0:
         return states
+    forms = rs.refit_forms()
+
+    def refit(start: Mapping[str, float], form: Any, test: ScoreTest) -> dict[str, Any]:
+        return _refit(run.spec, run.tables, run.observations, run.held, {**values, **start}, run.theta_r,
+                      test, sens, load=run.loader, say=run.say, max_iterations=run.max_iterations, form=form)
     for t in top:
         why = screened(t, best_qualifying(states, top, run.current), run.current["result"])
         if why is not None:
@@ -508,15 +513,17 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
             continue
         try:
             with stage(f"refit {t.effect}"):
-                states[t.effect] = _refit(run.spec, run.tables, run.observations, run.held, values,
-                                          run.theta_r, t, sens, load=run.loader, say=run.say,
-                                          max_iterations=run.max_iterations, form=(forms or {}).get(t.effect))
+                states[t.effect] = refit({}, forms.get(t.effect), t)
             run.n_forward += states[t.effect]["result"].n_forward + 1
         except SkinkitError as exc:
             run.say(f"refit with {t.effect} failed: {exc}")
             entry.setdefault("refit_failures", {})[t.effect] = str(exc)
             run.warnings.append({"kind": "refit-failed", "where": t.effect, "message":
                                  f"the refit with {t.effect} failed in round {entry['round']}: {exc}"})
+        if t.effect in rs.rivals:
+            kept = rival_refit(run, t, states.get(t.effect), rs.rivals[t.effect], entry, refit)
+            if kept is not None:
+                states[t.effect] = kept
     return states
 
 

@@ -65,6 +65,11 @@ DEFAULT_SIZES = (1.0, 2.0)
 #: draws of the null score vector for the max-statistic adjustment (and the generator's seed)
 N_DRAWS = 20000
 SEED = 20260101
+#: a second place rivals the best region when its statistic is at least this share of the best's:
+#: the score statistic is the likelihood gain of a small effect, and a strong one (a scar many times
+#: stiffer) gains differently — a stiffer region's signature saturates where a softer one's keeps
+#: growing — so the order of two places within a factor of two is left to their refits
+RIVAL_SHARE = 0.5
 
 
 class ScanError(SkinkitError):
@@ -241,10 +246,33 @@ class RegionScan:
         """Index of the best region: the smallest p (then the largest statistic)."""
         return min(range(len(self.tests)), key=lambda i: (self.tests[i].log_p, -self.tests[i].statistic))
 
+    def rival(self, share: float = RIVAL_SHARE) -> int | None:
+        """Index of the best region's rival, or None: the highest-scoring region at a place of its
+        own — its centre a local maximum of the map (no neighbouring centre, within 1.5 grid
+        spacings, scores higher at any size) and outside the best region, the best's centre
+        outside it — scoring at least ``share`` of the best's statistic."""
+        regs, b = self.grid.regions(), self.best
+        st = np.array([t.statistic for t in self.tests], float)
+        st = np.where(np.isfinite(st), st, -np.inf)
+        xy = regs[:, :2]
+        d_best = np.hypot(*(xy - xy[b]).T)
+        ok = (d_best > np.maximum(regs[:, 2], regs[b, 2])) & (st >= share * st[b]) & (st > 0)
+        for i in np.flatnonzero(ok):
+            near = np.hypot(*(xy - xy[i]).T) <= 1.5 * self.grid.spacing
+            ok[i] = st[i] >= st[near].max()
+        if not ok.any():
+            return None
+        idx = np.flatnonzero(ok)
+        return int(idx[np.argmax(st[idx])])
+
+    def region_values(self, i: int) -> dict[str, float]:
+        """Region ``i`` as model values: ``"<label>.<x>"``, ``".<y>"``, ``".<size>"`` [m]."""
+        r = self.grid.regions()[i]
+        return {n: float(v) for n, v in zip(self.region, r, strict=True)}
+
     def values(self) -> dict[str, float]:
         """The best region as model values: ``"<label>.<x>"``, ``".<y>"``, ``".<size>"`` [m]."""
-        r = self.grid.regions()[self.best]
-        return {n: float(v) for n, v in zip(self.region, r, strict=True)}
+        return self.region_values(self.best)
 
     def adjusted(self, log_p: float) -> tuple[float, float]:
         """``(p, log p)`` of a raw log p adjusted for the scan: the share of null draws whose
@@ -294,11 +322,21 @@ class RegionScan:
                      "statistic": t.statistic, "dof": t.dof, "p_value": t.p_value, "log10_p": self._log10(b),
                      "p_adjusted": float(self.p_adjusted[b]), "log10_p_adjusted": self._log10(b, True),
                      "step": t.step},
+            "rival": self._rival_dict(),
             "adjustment": {"method": "max-statistic over the scanned regions (joint Gaussian null of their "
                                      "score vector), bounded by Bonferroni", "draws": int(self.min_p.size),
                            "critical_p_05": self.critical_p(0.05)},
             "cost": dict(self.cost),
         }
+
+
+    def _rival_dict(self) -> dict[str, Any] | None:
+        i = self.rival()
+        if i is None:
+            return None
+        r, t = self.grid.regions()[i], self.tests[i]
+        return {"x_m": float(r[0]), "y_m": float(r[1]), "size_m": float(r[2]), "statistic": t.statistic,
+                "share_of_best": t.statistic / self.tests[self.best].statistic, "step": t.step}
 
 
 def instance_tables(effect: str, label: str, region: Sequence[str], regions: np.ndarray,
@@ -468,5 +506,6 @@ def null_min_p(A: Sequence[np.ndarray], dofs: Sequence[int], draws: int = N_DRAW
     return np.sort(np.concatenate(out))
 
 
-__all__ = ["DEFAULT_CELLS", "DEFAULT_SIZES", "N_DRAWS", "ImagedArea", "RegionScan", "ScanError", "ScanGrid",
-           "imaged_area", "null_min_p", "positive", "region_of", "region_tests", "scan", "scan_grid"]
+__all__ = ["DEFAULT_CELLS", "DEFAULT_SIZES", "N_DRAWS", "RIVAL_SHARE", "ImagedArea", "RegionScan",
+           "ScanError", "ScanGrid", "imaged_area", "null_min_p", "positive", "region_of", "region_tests",
+           "scan", "scan_grid"]

@@ -19,15 +19,17 @@ points resolve.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from skinkit import registry
 from skinkit.errors import SkinkitError
 from skinkit.forward.stages import stage
+from skinkit.gap.candidates import AIC_MARGIN
 from skinkit.gap.scan import RegionScan, ScanError, imaged_area, positive, region_of, scan, scan_grid
-from skinkit.gap.score import ScoreTest
+from skinkit.gap.score import ScoreTest, effect_of
 from skinkit.gap.shape_scan import ShapeScan, shape_scan
 from skinkit.schemas import Observations
 
@@ -48,12 +50,30 @@ class ScanOptions:
         return self.spacing is not None or self.sizes is not None
 
 
+@dataclass(frozen=True)
+class Rival:
+    """A second place of a region scan (:meth:`skinkit.gap.scan.RegionScan.rival`) to refit from:
+    ``values`` its region (model names -> SI), ``form`` and ``form_values`` the elliptical form and
+    start its shape scan chose (None, {} without one), ``step`` its score test's step (which way
+    the region differs: stiffer or softer), ``statistic`` its LM and ``entry`` the scan's entry of
+    the report it belongs to."""
+
+    values: dict[str, float]
+    form: str | None
+    form_values: dict[str, float]
+    step: dict[str, float]
+    statistic: float
+    entry: dict[str, Any]
+
+
 @dataclass
 class RoundScan:
-    """One round's scans: candidate label -> its :class:`RegionScan` (empty: nothing scanned)."""
+    """One round's scans: candidate label -> its :class:`RegionScan` (empty: nothing scanned),
+    its :class:`ShapeScan` and its :class:`Rival`."""
 
     scans: dict[str, RegionScan] = field(default_factory=dict)
     shapes: dict[str, ShapeScan] = field(default_factory=dict)
+    rivals: dict[str, Rival] = field(default_factory=dict)
 
     def refit_forms(self) -> dict[str, tuple[str, dict[str, float]]]:
         """Candidate label -> the form it is refitted in and that form's start values (model
@@ -175,10 +195,98 @@ def scan_round(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float],
             out.shapes[label] = shape
             entry["shape"] = shape.to_dict()
             run.held_forms.setdefault(label, (shape.form, shape.values()))
+        rival = _rival(run, spec_r, values, s, label, entry)
+        if rival is not None:
+            out.rivals[label] = rival
         run.scans.append(entry)
         for k, v in s.values().items():
             run.held_regions.setdefault(k, v)
     return out
+
+
+def _rival(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float], s: RegionScan, label: str,
+           entry: dict[str, Any]) -> Rival | None:
+    """The scan's rival region (None without one), its shape scanned as the best's was."""
+    i = s.rival()
+    if i is None:
+        return None
+    row, t = s.grid.regions()[i], s.tests[i]
+    run.say(f"region scan of {label}: a second place at x {row[0] * 1e3:.3g} mm, y {row[1] * 1e3:.3g} mm "
+            f"scores {t.statistic / s.tests[s.best].statistic:.0%} of the best: both are refitted")
+    with stage("region scan"):
+        shape = shape_scan(spec_r, run.observations, values, run.theta_r, label, row, t.statistic,
+                           load=run.loader, progress=run.say)
+    form, form_values = None, {}
+    if shape is not None:
+        run.n_forward += int(shape.cost["n_forward"])
+        entry["rival"]["shape"] = shape.to_dict()
+        form, form_values = shape.form, shape.values()
+    return Rival(s.region_values(i), form, form_values, dict(t.step), t.statistic, entry)
+
+
+def rival_refit(run: Any, test: ScoreTest, state: dict[str, Any] | None, rival: Rival, entry: dict[str, Any],
+                refit: Callable[[Mapping[str, float], tuple[str, Mapping[str, float]] | None, ScoreTest],
+                                dict[str, Any]]) -> dict[str, Any] | None:
+    """Refit candidate ``test.effect`` from its scan's ``rival`` region too and keep the better of
+    that and ``state`` (the refit from the best region; None when it failed): the lower χ², both
+    having the same parameters. ``refit(values, form, test)`` refits from those start values. Both
+    are recorded in ``entry["rivals"]`` and on the scan's entry; when their χ² differ by no more
+    than :data:`~skinkit.gap.candidates.AIC_MARGIN` the data cannot tell the two places apart,
+    which a ``region-not-separable`` warning says. A rival refit that fails keeps ``state``."""
+    label = test.effect
+    run.say(f"refit with {label} from the second place ({_at(rival.values)})")
+    try:
+        with stage(f"refit {label}"):
+            other = refit(rival.values, (rival.form, rival.form_values) if rival.form else None,
+                          dataclasses.replace(test, step=rival.step))
+        run.n_forward += other["result"].n_forward + 1
+    except SkinkitError as exc:
+        run.say(f"refit with {label} from the second place failed: {exc}")
+        entry.setdefault("refit_failures", {})[f"{label} (second place)"] = str(exc)
+        return state
+    d = None if state is None else float(other["chi2"] - state["chi2"])
+    kept = other if d is None or d < 0 else state
+    rec = {"best": None if state is None else _summary(state), "rival": _summary(other), "delta_chi2": d,
+           "kept": "rival" if kept is other else "best",
+           "separable": None if d is None else abs(d) > AIC_MARGIN}
+    entry.setdefault("rivals", {})[label] = rec
+    rival.entry["rival"]["refits"] = rec
+    if kept is other:       # a later refit of this effect alone starts where it fitted better
+        run.held_regions.update(rival.values)
+        if rival.form:
+            run.held_forms[label] = (rival.form, rival.form_values)
+    run.say(f"{label}: kept the refit from the {rec['kept']} place"
+            + ("" if d is None else f" (the second place's χ² {d:+.4g} against the best's)"))
+    if rec["separable"] is False and state is not None:
+        run.warnings.append({"kind": "region-not-separable", "where": label, "message": (
+            f"{label}: two places fit the data alike — {_words(label, state)} and {_words(label, other)} "
+            f"(χ² differ by {abs(d):.3g}, within the AIC margin of {AIC_MARGIN:g}): the data cannot tell "
+            f"them apart; the report carries the {rec['kept']} one")})
+    return kept
+
+
+def _at(values: Mapping[str, float]) -> str:
+    """The first two of a region's ``values`` (its centre) in words, in mm."""
+    return ", ".join(f"{n.partition('.')[2]} {v * 1e3:.3g} mm" for n, v in list(values.items())[:2])
+
+
+def _summary(state: Mapping[str, Any]) -> dict[str, Any]:
+    values = {k: v for k, v in state["table"].items() if isinstance(v, float)}
+    return {"values": values, "chi2": state["chi2"]}
+
+
+def _words(label: str, state: Mapping[str, Any]) -> str:
+    """A refitted region effect's values in words: the region's lengths in mm, an ellipse's angle
+    in degrees (the names its plugin declares as region and elliptical form), the rest as numbers."""
+    plugin = registry.create("skinkit.effects", effect_of(label))
+    el = getattr(plugin, "region_ellipse", None)
+    lengths = set(getattr(plugin, "region", None) or ()) | set(el[1][:4] if el else ())
+    angle = el[1][4] if el else None
+
+    def one(k: str, v: float) -> str:
+        return f"{k} {v * 1e3:.3g} mm" if k in lengths else f"{k} {math.degrees(v):.3g} deg" if k == angle \
+            else f"{k} {v:.3g}"
+    return ", ".join(one(k, v) for k, v in state["table"].items() if isinstance(v, float))
 
 
 def scan_options(spacing_mm: float | None, sizes_mm: Sequence[float] | None, enabled: bool = True
@@ -192,4 +300,5 @@ def scan_options(spacing_mm: float | None, sizes_mm: Sequence[float] | None, ena
     return ScanOptions(None if spacing_mm is None else mm(spacing_mm, "--scan-grid"), sizes, enabled)
 
 
-__all__ = ["RoundScan", "ScanOptions", "check_centres", "check_regions", "scan_options", "scan_round"]
+__all__ = ["Rival", "RoundScan", "ScanOptions", "check_centres", "check_regions", "rival_refit",
+           "scan_options", "scan_round"]

@@ -17,6 +17,7 @@ import pytest
 
 from skinkit.gap.scan import (
     DEFAULT_CELLS,
+    ImagedArea,
     RegionScan,
     ScanError,
     ScanGrid,
@@ -201,6 +202,41 @@ def test_a_signal_is_found_at_its_region():
     p_adj, log_p_adj = s.adjusted(s.tests[s.best].log_p)
     assert p_adj < 1e-6
     assert log_p_adj >= s.tests[s.best].log_p        # adjusting never makes a p smaller
+
+
+def on_a_line(z: np.ndarray, J: np.ndarray) -> RegionScan:
+    """The scan of ``z`` with the regions laid out as their bumps are: centres 2 mm apart on x,
+    each of radius 1.5 mm."""
+    s = scanned(z, J)
+    centres = np.column_stack([(2.0 + 2.0 * np.arange(N_REGIONS)) * 1e-3, np.zeros(N_REGIONS)])
+    s.grid = ScanGrid(centres, np.array([1.5e-3]), 2e-3)
+    s.area = ImagedArea(centres, centres.min(axis=0), centres.max(axis=0), 2e-3)
+    return s
+
+
+def test_a_second_place_of_its_own_is_the_rival_and_a_shoulder_of_the_best_is_not():
+    """Two regions carrying signals of similar strength far apart: the weaker is the best's rival
+    (a place the refit must also try). One signal mid-line: its neighbours score highly (they
+    overlap it) but are no rival, and a second signal a tenth as strong (in LM) is none either.
+    A signal near the line's end: with the fitted uniform and linear columns projected out, the
+    far end's region carries its opposite-signed lobe and scores more than half as much — the
+    shape of a stiff place here read as a soft one there, which the refits must settle."""
+    J, bumps = residual_space()
+    noise = np.random.default_rng(7).standard_normal(J.shape[0])
+    u = [bumps[:, k] / np.linalg.norm(bumps[:, k]) for k in range(N_REGIONS)]
+    two = on_a_line(noise + 15.0 * u[4] + 14.0 * u[14], J)
+    assert {two.best, two.rival()} == {4, 14}
+    d = two.to_dict()["rival"]
+    assert d["x_m"] == pytest.approx(two.grid.centres[two.rival(), 0])
+    assert 0.5 <= d["share_of_best"] <= 1.0
+    one = on_a_line(noise + 15.0 * u[9], J)
+    assert one.best == 9 and one.rival() is None and one.to_dict()["rival"] is None
+    assert max(one.tests[k].statistic for k in (8, 10)) > 0.5 * one.tests[9].statistic  # a shoulder
+    assert on_a_line(noise + 15.0 * u[9] + 4.5 * u[17], J).rival() is None
+    edge = on_a_line(noise + 15.0 * u[4], J)
+    r = edge.rival()
+    assert edge.best == 4 and r == 0
+    assert np.sign(edge.tests[r].step["spot.ratio"]) == -np.sign(edge.tests[4].step["spot.ratio"])
 
 
 @pytest.mark.needs_plugins
