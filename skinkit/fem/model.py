@@ -174,6 +174,34 @@ def _params(law: Any, given: Mapping[str, Any], entry: str) -> dict[str, float]:
     return lawkit.check_parameters(law, out, f"{entry}.parameters")
 
 
+def _fit_bounds(law: Any, given: Any, params: Mapping[str, float], entry: str
+                ) -> dict[str, tuple[float, float]]:
+    """A layer's ``bounds`` table: parameter name -> ``[lower, upper]`` (quantities in the law's
+    unit), the range a fit may give it, inside the law's admissible range and around the file's
+    value. Returns name -> (lower, upper) [SI]."""
+    if given is None:
+        return {}
+    declared = {q.name: q for q in law.parameters()}
+    out = {}
+    for n, pair in table(given, entry).items():
+        where = f"{entry}.{n}"
+        if n not in declared:
+            raise ModelError(where, f"unknown parameter for law {law.name!r}; it has {sorted(declared)}")
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise ModelError(where, f"expected [lower, upper], got {pair!r}")
+        lo, hi = (quantity(v, declared[n].unit, where) for v in pair)
+        q = declared[n]
+        if not lo < hi:
+            raise ModelError(where, f"lower {lo:g} is not below upper {hi:g}")
+        if lo < q.lower or hi > q.upper:
+            raise ModelError(where, f"[{lo:g}, {hi:g}] leaves the law's admissible range "
+                             f"[{q.lower:g}, {q.upper:g}] {q.unit}")
+        if not lo <= params[n] <= hi:
+            raise ModelError(where, f"the layer's value {params[n]:g} {q.unit} lies outside [{lo:g}, {hi:g}]")
+        out[n] = (float(lo), float(hi))
+    return out
+
+
 def _prestress(d: Mapping[str, Any] | None, entry: str):
     """``(F0, None)`` for a general initial deformation gradient, ``(None, (l1, l2, angle))``
     for an in-plane pre-stretch (whose stretches are then differentiable), or ``(None, None)``."""
@@ -476,7 +504,8 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
     layers, mats = [], []
     for i, L in enumerate(layers_spec):
         entry = f"layers[{i}]"
-        _check_keys(L, {"name", "thickness", "elements", "law", "options", "parameters", "prestress"}, entry)
+        _check_keys(L, {"name", "thickness", "elements", "law", "options", "parameters", "prestress",
+                        "bounds"}, entry)
         lname = text(_get(L, "name", entry), f"{entry}.name")
         th = bounded(_get(L, "thickness", entry), "m", f"{entry}.thickness", *LENGTH_RANGE)
         layers.append((lname, th, integer(L.get("elements", 2), f"{entry}.elements", 1,
@@ -484,7 +513,9 @@ def build_model(spec: Mapping[str, Any], require_load: bool = True, mesh: FEMesh
         law = _law(L, entry)
         F0, pre = _prestress(L.get("prestress"), f"{entry}.prestress")
         params = table(L.get("parameters", {}), f"{entry}.parameters")
-        mats.append(Material(lname, law, _params(law, params, entry), F0=F0, prestress=pre))
+        values = _params(law, params, entry)
+        mats.append(Material(lname, law, values, F0=F0, prestress=pre,
+                             bounds=_fit_bounds(law, L.get("bounds"), values, f"{entry}.bounds")))
     if len({n for n, _, _ in layers}) != len(layers):
         raise ModelError("layers", "layer names must be unique")
     sol = table(spec.get("solver", {}), "solver")

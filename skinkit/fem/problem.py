@@ -40,6 +40,8 @@ class Material:
             ``(n_el_region, n_q, 3, 3)``; the law sees ``C_e = F0ᵀ C F0``.
         prestress: optional in-plane pre-stretch ``(l1, l2, angle [rad])`` (see
             :func:`prestretch`); sets ``F0`` and makes the stretches differentiable.
+        bounds: parameter name -> (lower, upper) [SI], the range a fit may give it (narrower
+            than the law's admissible range; the model file's ``bounds``).
     """
 
     region: str
@@ -48,6 +50,7 @@ class Material:
     F0: np.ndarray | None = None
     elements: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     prestress: tuple[float, float, float] | None = None
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     def prony(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The law's Prony series ``(g (N,), tau (N,) [s])`` at its parameters, or None for an elastic law."""

@@ -284,7 +284,8 @@ class FEForwardModel(ForwardModel):
             for q in m.law.parameters():
                 nm = f"{m.region}.{q.name}"
                 if nm not in hidden:
-                    out.append(Parameter(nm, float(m.params[q.name]), q.unit, q.lower, q.upper))
+                    lo, hi = m.bounds.get(q.name, (q.lower, q.upper))
+                    out.append(Parameter(nm, float(m.params[q.name]), q.unit, lo, hi))
             if m.prestress is not None:
                 for i, (pn, unit, lo, hi) in enumerate(zip(PRESTRESS_NAMES, ("1", "1", "rad"),
                                                            (0.5, 0.5, -math.pi / 2), (2.0, 2.0, math.pi / 2),

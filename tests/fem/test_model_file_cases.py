@@ -136,6 +136,14 @@ CASES = [
     (static_force, lambda s: s["layers"][0].update(law="qlv", options={"terms": [1]}),
      "layers[0].options", ["terms"]),
     (static_force, lambda s: s["model"].update(kind="fem"), "model.kind", ["'fe' or 'lumped'"]),
+    # a layer's fit bounds: known parameters, [lower, upper] in the law's unit, inside the law's
+    # admissible range and around the file's value
+    (cube, _layer(0, bounds={"mus": ["1 kPa", "9 kPa"]}), "layers[0].bounds.mus", ["unknown parameter"]),
+    (cube, _layer(0, bounds={"mu": ["9 kPa", "1 kPa"]}), "layers[0].bounds.mu", ["not below"]),
+    (cube, _layer(0, bounds={"mu": ["1 kPa"]}), "layers[0].bounds.mu", ["[lower, upper]"]),
+    (cube, _layer(0, bounds={"mu": ["1 kPa", "2 kPa"]}), "layers[0].bounds.mu", ["outside [1000, 2000]"]),
+    (cube, _layer(0, bounds={"mu": ["-1 kPa", "9 kPa"]}), "layers[0].bounds.mu", ["admissible range"]),
+    (cube, _layer(0, bounds={"mu": ["1 mm", "9 mm"]}), "layers[0].bounds.mu", ["unit"]),
     # parameters far beyond any tissue: refused before the arithmetic overflows
     (cube, lambda s: s["layers"][0]["parameters"].update(mu="1e300 kPa"), "layers[0].parameters.mu",
      ["plausible range"]),
@@ -149,6 +157,20 @@ def test_issue_case_is_one_line_naming_the_file_entry(tmp_path, base, mutate, en
     mutate(spec)
     one_error(solve(spec, tmp_path), entry, *words)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_layers_bounds_narrow_what_a_fit_may_give_it():
+    """``bounds`` in a layer narrow its parameter's range in the model's parameters (what every
+    fit, calibration and refit searches within); the others keep the law's admissible range."""
+    from skinkit.forward import load
+
+    spec = cube()
+    spec["layers"][0]["bounds"] = {"mu": ["1 kPa", "20 kPa"]}
+    with load(spec) as m, load(cube()) as plain:
+        mu, mu0 = m.parameters().param("gel.mu"), plain.parameters().param("gel.mu")
+        K, K0 = m.parameters().param("gel.K"), plain.parameters().param("gel.K")
+    assert (mu.lower, mu.upper) == pytest.approx((1e3, 2e4)) and mu.value == mu0.value
+    assert (K.lower, K.upper) == (K0.lower, K0.upper)
 
 
 def test_dimensionless_quantities_may_be_quoted_numbers(tmp_path):
