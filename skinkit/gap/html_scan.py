@@ -10,7 +10,8 @@ and y up, on one scale for both panels:
   maps section's scale: logarithmic, white at the noise level 1), the scan's best region as a
   green circle and, when the candidate was refitted, the refitted region dashed (an ellipse of
   class ``refit-region`` with its semi-axes and angle as data attributes, when the effect was
-  refitted in its elliptical form);
+  refitted in its elliptical form), and the scan's second place, when it had one that was also
+  refitted from, as an orange circle of class ``rival-region``;
 * **score map**: every scanned centre as a square of the grid's spacing, coloured by the largest
   score statistic over the sizes scanned there (darker: a larger LM), with the same outlines.
 """
@@ -26,8 +27,8 @@ import numpy as np
 
 #: the panel's side [px] and its margin [px]
 SIDE, PAD = 360, 34
-#: colours of the scan's best region and of the refitted region
-BEST, REFIT = "#00c853", "#7d3c98"
+#: colours of the scan's best region, of the refitted region and of the scan's second place
+BEST, REFIT, RIVAL = "#00c853", "#7d3c98", "#e67e22"
 
 
 def _e(x: Any) -> str:
@@ -67,11 +68,11 @@ class _Frame:
 
 def _outline(fr: _Frame, x: float, y: float, r: float, kind: str, b: float | None = None,
              angle: float = 0.0) -> str:
-    """One region's outline (``kind`` "best" or "refit") with its centre marked; mm: a circle of
-    radius ``r``, or with ``b`` an ellipse of semi-axes ``r``, ``b``, the first at ``angle`` [deg]
-    from x."""
-    colour, dash = (BEST, "") if kind == "best" else (REFIT, ' stroke-dasharray="5 3"')
-    cls = "scan-region" if kind == "best" else "refit-region"
+    """One region's outline (``kind`` "best", "refit" or "rival") with its centre marked; mm: a
+    circle of radius ``r``, or with ``b`` an ellipse of semi-axes ``r``, ``b``, the first at
+    ``angle`` [deg] from x."""
+    colour, dash, cls = {"best": (BEST, "", "scan-region"), "rival": (RIVAL, "", "rival-region")}.get(
+        kind, (REFIT, ' stroke-dasharray="5 3"', "refit-region"))
     cx, cy, rp = fr.x(x), fr.y(y), r * fr.scale
     mark = (f'<path d="M{cx - 5:.1f},{cy:.1f}h10M{cx:.1f},{cy - 5:.1f}v10" stroke="{colour}" '
             'stroke-width="1.5"/>')
@@ -218,11 +219,16 @@ def _one(report: Mapping[str, Any], scan: Mapping[str, Any]) -> str:
                  f"{fit[3]:.3g} mm, the first at {fit[4]:.3g}° from x.")
     elif fit is not None:
         text += f" Refitted (dashed): x {fit[0]:.3g} mm, y {fit[1]:.3g} mm, {_e(size)} {fit[2]:.3g} mm."
+    rival = _rival(scan)
+    text += "" if rival is None else rival[1]
     text += "</p>"
     pts = _points(report)
     reach = max(fit[2:4]) if fit is not None and len(fit) == 5 else fit[2] if fit else 0.0
     xs = [bx - br, bx + br] + ([fit[0] - reach, fit[0] + reach] if fit else [])
     ys = [by - br, by + br] + ([fit[1] - reach, fit[1] + reach] if fit else [])
+    if rival is not None:
+        (rx, ry, rr) = rival[0]
+        xs, ys = xs + [rx - rr, rx + rr], ys + [ry - rr, ry + rr]
     regs = scan.get("regions") or {}
     h = float(grid.get("spacing_m") or 0.0) * 1e3 / 2
     xs += [float(v) * 1e3 + s for v in regs.get("x_m") or [] for s in (-h, h)]
@@ -232,10 +238,32 @@ def _one(report: Mapping[str, Any], scan: Mapping[str, Any]) -> str:
         ys += pts[0][:, 1].tolist()
     fr = _Frame(np.array([min(xs), min(ys)]), np.array([max(xs), max(ys)]))
     refit = "" if fit is None else _outline(fr, *fit[:3], "refit", *fit[3:])
-    outlines = _outline(fr, bx, by, br, "best") + refit
+    second = "" if rival is None else _outline(fr, *rival[0], "rival")
+    outlines = _outline(fr, bx, by, br, "best") + refit + second
     panels = [] if pts is None else [_residual_panel(fr, pts[0], pts[1], outlines)]
     panels.append(_score_panel(fr, scan, outlines))
     return text + '<div class="scan-panels">' + "".join(panels) + "</div>"
+
+
+def _rival(scan: Mapping[str, Any]) -> tuple[tuple[float, float, float], str] | None:
+    """The scan's second place refitted from — ``((x, y, size) [mm], a sentence)`` — or None."""
+    r = scan.get("rival")
+    if not isinstance(r, Mapping) or not isinstance(r.get("refits"), Mapping):
+        return None
+    try:
+        x, y, size = (float(r[k]) * 1e3 for k in ("x_m", "y_m", "size_m"))
+    except (KeyError, TypeError, ValueError):
+        return None
+    f = r["refits"]
+    d = f.get("delta_chi2")
+    kept = _e(f.get("kept"))
+    verdict = ("its refit alone succeeded, and is the one carried" if d is None else
+               f"the two refits' χ² differ by {_fmt(abs(float(d)), 4)}: the {kept} place is carried"
+               + ("" if f.get("separable") else ", but the data cannot tell the two apart (within the "
+                  "AIC margin)"))
+    share = _fmt(100 * float(r.get("share_of_best") or 0), 3)
+    return (x, y, size), (f" A second place of its own scored {share} % of the best (orange, x {x:.3g} mm, "
+                          f"y {y:.3g} mm): the candidate was refitted from there too; {verdict}.")
 
 
 def section_scan(report: Mapping[str, Any]) -> str:

@@ -59,7 +59,7 @@ def report() -> dict:
             "named": ["inclusion"], "region_scan": [scan]}
 
 
-OUTLINES = ("scan-region", "refit-region")
+OUTLINES = ("scan-region", "refit-region", "rival-region")
 
 
 class Outlines(HTMLParser):
@@ -191,3 +191,28 @@ def test_the_browser_draws_the_refitted_ellipse(tmp_path):
     dom = _browse(exe, tmp_path / "profile", "--dump-dom", page.resolve().as_uri())
     refit = [a for p, c, a in Outlines(dom).found if c == "refit-region"]
     assert len(refit) == 2 and all(a.get("transform", "").startswith("rotate(") for a in refit)
+
+
+def test_a_second_place_refitted_from_is_drawn_and_said(tmp_path):
+    """A scan whose second place was refitted from too: an orange circle at it on both panels,
+    and the sentence says the two refits fit alike when they do."""
+    from skinkit.gap.html_scan import RIVAL
+
+    rep = report()
+    refits = {"best": {"values": {"x": 3.4e-3}, "chi2": 100.0},
+              "rival": {"values": {"x": -5e-3}, "chi2": 104.0}, "delta_chi2": 4.0, "kept": "best",
+              "separable": False}
+    rep["region_scan"][0]["rival"] = {"x_m": -5e-3, "y_m": 1e-3, "size_m": 2e-3, "statistic": 30.0,
+                                      "share_of_best": 0.75, "step": {"inclusion.ratio": -0.5},
+                                      "refits": refits}
+    text = write_html(rep, tmp_path / "gap.html").read_text()
+    rival = [(p, a) for p, c, a in Outlines(text).found if c == "rival-region"]
+    assert sorted(p for p, _ in rival) == ["residual", "score"]
+    for _, a in rival:
+        assert (float(a["data-x-mm"]), float(a["data-y-mm"]), float(a["data-size-mm"])) == (-5.0, 1.0, 2.0)
+        assert a["stroke"] == RIVAL
+    assert "75 % of the best" in text and "cannot tell the two apart" in text
+    report_without = report()
+    report_without["region_scan"][0]["rival"] = None
+    text = write_html(report_without, tmp_path / "plain.html").read_text()
+    assert not [c for _, c, _ in Outlines(text).found if c == "rival-region"]
