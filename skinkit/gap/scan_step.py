@@ -215,7 +215,7 @@ def _rival(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float], s: 
             f"scores {t.statistic / s.tests[s.best].statistic:.0%} of the best: both are refitted")
     with stage("region scan"):
         shape = shape_scan(spec_r, run.observations, values, run.theta_r, label, row, t.statistic,
-                           load=run.loader, progress=run.say)
+                           load=run.loader, progress=run.say, where="the second place")
     form, form_values = None, {}
     if shape is not None:
         run.n_forward += int(shape.cost["n_forward"])

@@ -108,11 +108,12 @@ def candidate_shapes(centre: Sequence[float], radius: float, bounds: tuple[float
 
 def shape_scan(spec: Mapping[str, Any], observations: Observations, values: Mapping[str, float],
                theta: Sequence[str], label: str, best: Sequence[float], disc_statistic: float, *,
-               load: Callable[..., Any], progress: Callable[[str], None] | None = None) -> ShapeScan | None:
+               load: Callable[..., Any], progress: Callable[[str], None] | None = None,
+               where: str = "the best centre") -> ShapeScan | None:
     """Score elongated shapes of candidate ``label`` at the scan's best region ``best`` (x, y,
     radius) [m] whose disc scored ``disc_statistic``, on the calibrated model ``spec`` at
     ``values`` with fitted parameters ``theta`` (module docstring); None when the effect declares
-    no elliptical form."""
+    no elliptical form. ``where``: the centre's name in the progress line."""
     el = elliptical(label)
     if el is None:
         return None
@@ -134,7 +135,7 @@ def shape_scan(spec: Mapping[str, Any], observations: Observations, values: Mapp
         start[2:4] = np.clip([r * math.sqrt(q), r / math.sqrt(q)], lim.lower, lim.upper)
     out = ShapeScan(label, form, tuple(f"{label}.{n}" for n in local), shapes, tests, float(disc_statistic),
                     start, {"n_forward": 1, "columns": len(names), "wall_s": wall})
-    say(f"shape of {label}: {len(shapes)} ellipses at the best centre; best a/b "
+    say(f"shape of {label}: {len(shapes)} ellipses at {where}; best a/b "
         f"{shapes[i, 2] / shapes[i, 3]:.3g} at {math.degrees(shapes[i, 4]):.3g} deg "
         f"(LM {tests[i].statistic:.4g}, the disc's {disc_statistic:.4g}); refit starts at "
         f"a {start[2] * 1e3:.3g} mm, b {start[3] * 1e3:.3g} mm, {math.degrees(start[4]):.3g} deg; "
