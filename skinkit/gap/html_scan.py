@@ -213,9 +213,11 @@ def _one(report: Mapping[str, Any], scan: Mapping[str, Any]) -> str:
             f"{_fmt(cost.get('wall_s'))} s"
             + (f", {_fmt(cost.get('forward_equivalents'))} plain predictions' time" if
                cost.get("forward_equivalents") is not None else "") + ".")
+    kept = ((scan.get("rival") or {}).get("refits") or {}).get("kept") == "rival"
+    at = "the second place (orange)" if kept else "the best centre"
     if fit is not None and len(fit) == 5:
         text += (f" Refitted as an ellipse (dashed), started from the best of the elongated shapes scored "
-                 f"at the best centre: x {fit[0]:.3g} mm, y {fit[1]:.3g} mm, semi-axes {fit[2]:.3g} and "
+                 f"at {at}: x {fit[0]:.3g} mm, y {fit[1]:.3g} mm, semi-axes {fit[2]:.3g} and "
                  f"{fit[3]:.3g} mm, the first at {fit[4]:.3g}° from x.")
     elif fit is not None:
         text += f" Refitted (dashed): x {fit[0]:.3g} mm, y {fit[1]:.3g} mm, {_e(size)} {fit[2]:.3g} mm."
