@@ -255,8 +255,9 @@ def rival_refit(run: Any, test: ScoreTest, state: dict[str, Any] | None, rival: 
         run.held_regions.update(rival.values)
         if rival.form:
             run.held_forms[label] = (rival.form, rival.form_values)
-    run.say(f"{label}: kept the refit from the {rec['kept']} place"
-            + ("" if d is None else f" (the second place's χ² {d:+.4g} against the best's)"))
+    place = "second" if kept is other else "best"
+    run.say(f"{label}: the refit from the {place} place is carried"
+            + ("" if d is None else f" (its χ² {abs(d):.4g} lower than the other's)"))
     if rec["separable"] is False and state is not None:
         run.warnings.append({"kind": "region-not-separable", "where": label, "message": (
             f"{label}: two places fit the data alike — {_words(label, state)} and {_words(label, other)} "
