@@ -203,7 +203,8 @@ def _refit(spec: Mapping[str, Any], effects_in: list[dict[str, Any]], observatio
         model.close()
     state["added"] = added
     state["table"] = {**effect_table(test.effect, _values(r)), **({"form": form[0]} if form else {})}
-    state["warnings"] = fit_warnings(r, f"the refit with {test.effect}", added)
+    # every free parameter: an earlier effect's, refitted with this one, may reach a bound now
+    state["warnings"] = fit_warnings(r, f"the refit with {test.effect}", free)
     return state
 
 
@@ -620,9 +621,12 @@ def _name(run: _Run, winner: EffectScore, st: dict[str, Any], rnd: int) -> bool:
     run.named.append(winner.effect)
     run.rounds[-1]["named"] = winner.effect
     run.additions.append({"effect": winner.effect, "before": run.current, "after": st, "round": rnd + 1})
+    said = {(w["kind"], w["parameter"]) for w in run.warnings if w.get("parameter")}
     for w in st.get("warnings", []):
+        if (w["kind"], w.get("parameter")) in said:
+            continue          # a parameter refitted again in a later round, said once
         run.warnings.append(w)
-        if w["kind"] in ("not-converged", "on-bound"):
+        if w["kind"] == "not-converged" or (w["kind"] == "on-bound" and w.get("parameter") in st["added"]):
             run.undermined.setdefault(winner.effect, w["message"])
     run.winners.append(winner)
     run.tables.append(st["table"])
