@@ -392,6 +392,11 @@ def _echo_summary(best: dict, model_name: str, session: str, wall_s: float, name
         else:
             click.echo(f"  {n:28s} {p['value']:.6g} ± {1.96 * p['se']:.2g}{u} (95 %)"
                        if p["se"] is not None else f"  {n:28s} {p['value']:.6g}{u}: undetermined")
+    for n in names:
+        side = best["parameters"][n].get("on_bound")
+        if side:
+            click.echo(f"  ! {n} sits on its {side} bound: the fit was stopped by the bound, not by the data "
+                       "(its interval means little)")
     for pr in best["identifiability"]["problems"]:
         click.echo(f"  ! {pr['message']}")
     for p, v in best["held_out"].items():

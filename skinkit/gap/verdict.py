@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from skinkit.inverse.fit import ON_BOUND, on_bound
 from skinkit.schemas import Observations, Prediction
 
 #: the share of the excess an effect must remove to be named as a cause
@@ -40,8 +41,6 @@ MIN_SHARE = 0.5
 SMALL_REMAINDER = 0.05
 #: samples the high band needs before its χ²/ν calibrates the noise level
 FACTOR_MIN_DOF = 1000
-#: a parameter within this fraction of its admissible range from a bound sits on it
-ON_BOUND = 1e-4
 #: a rest segment's mean residual beyond this many noise levels misses the readings
 REST_MISS = 3.0
 
@@ -290,18 +289,17 @@ def fit_warnings(result: Any, what: str, names: Sequence[str]) -> list[dict[str,
         )
     for n in names:
         p = result.parameters.param(n)
-        span = p.upper - p.lower if np.isfinite(p.upper - p.lower) else max(abs(p.value), 1.0)
-        for side, b in (("lower", p.lower), ("upper", p.upper)):
-            if np.isfinite(b) and abs(p.value - b) <= ON_BOUND * span:
-                out.append(
-                    _warn(
-                        "on-bound",
-                        f"{what}: {n} = {p.value:.4g} sits on its {side} bound; its "
-                        "interval means little and the data may want a value outside the range",
-                        where=what,
-                        parameter=n,
-                    )
+        side = on_bound(p)
+        if side is not None:
+            out.append(
+                _warn(
+                    "on-bound",
+                    f"{what}: {n} = {p.value:.4g} sits on its {side} bound; its "
+                    "interval means little and the data may want a value outside the range",
+                    where=what,
+                    parameter=n,
                 )
+            )
         if "stretch" in n and p.value < 1:
             out.append(
                 _warn(

@@ -358,6 +358,21 @@ def fit_json(result: FitResult) -> dict[str, Any]:
                if k in result.extra}}
 
 
+#: a parameter within this fraction of its admissible range from a bound sits on it
+ON_BOUND = 1e-4
+
+
+def on_bound(p: Any) -> str | None:
+    """``"lower"`` or ``"upper"`` when parameter ``p`` (value, lower, upper) sits on that bound —
+    within :data:`ON_BOUND` of its range (of its magnitude, or 1, when the range is infinite) —
+    else None. A fit that ends there was stopped by the bound, not by the data."""
+    span = p.upper - p.lower if np.isfinite(p.upper - p.lower) else max(abs(p.value), 1.0)
+    for side, b in (("lower", p.lower), ("upper", p.upper)):
+        if np.isfinite(b) and abs(p.value - b) <= ON_BOUND * span:
+            return side
+    return None
+
+
 def _parameter_json(p: Any, se: float | None, identifiable: dict[str, bool]) -> dict[str, Any]:
     out: dict[str, Any] = {"value": p.value, "unit": p.unit}
     if se is not None and not np.isfinite(se):   # an undetermined one: no number, and why
@@ -367,6 +382,7 @@ def _parameter_json(p: Any, se: float | None, identifiable: dict[str, bool]) -> 
     bounds = bound_entries(p.lower, p.upper)
     out.update(lower=p.lower, upper=p.upper, **{k: v for k, v in bounds.items() if k.endswith("_reason")})
     out.update(free=p.free, identifiable=identifiable.get(p.name, True) if p.free else None)
+    out["on_bound"] = on_bound(p) if p.free else None
     return out
 
 
@@ -380,5 +396,5 @@ def _identifiability_json(ident: dict[str, Any]) -> dict[str, Any]:
     return {**ident, "metrics": {**metrics, "cond_H_reason": why}}
 
 
-__all__ = ["FitError", "aic", "fit", "fit_json", "free_set", "with_bounds"]
+__all__ = ["ON_BOUND", "FitError", "aic", "fit", "fit_json", "free_set", "on_bound", "with_bounds"]
 

@@ -277,3 +277,20 @@ def test_a_failed_model_error_keeps_the_plain_fit(disc_session, tmp_path):
     assert "! the model's discretisation error could not be estimated" in r.output
     assert (tmp_path / "out" / "model.toml").exists()
     assert best["parameters"]["skin.E"]["se"] > 0
+
+
+def test_a_fit_stopped_by_a_layers_bound_says_so(disc_session, tmp_path):
+    """The model file bounds the skin's modulus below the session's truth (40 kPa): the fit ends on
+    the upper bound, and fit.json and the summary say that the bound, not the data, stopped it;
+    the subdermal modulus, free within the law's range, is not on a bound."""
+    bounded = 'E = "20 kPa"\nnu = 0.45\n[layers.bounds]\nE = ["10 kPa", "30 kPa"]\n'
+    text = DISC.replace('E = "40 kPa"\nnu = 0.45\n', bounded)
+    (tmp_path / "m.toml").write_text(text)
+    r = CliRunner().invoke(main, ["fit", str(tmp_path / "m.toml"), str(disc_session / "s.h5"), *FIT_ARGS,
+                                  "--out", str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    p = json.loads((tmp_path / "out" / "fit.json").read_text())["parameters"]
+    assert (p["skin.E"]["upper"], p["skin.E"]["on_bound"]) == (30e3, "upper")
+    assert p["skin.E"]["value"] == pytest.approx(30e3, rel=1e-3)
+    assert p["subdermal.E"]["on_bound"] is None
+    assert "! skin.E sits on its upper bound" in r.output
