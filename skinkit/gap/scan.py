@@ -240,6 +240,7 @@ class RegionScan:
     log_p_adjusted: np.ndarray
     min_p: np.ndarray
     cost: dict[str, Any] = field(default_factory=dict)
+    _rivals: dict[float, int | None] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def best(self) -> int:
@@ -250,7 +251,13 @@ class RegionScan:
         """Index of the best region's rival, or None: the highest-scoring region at a place of its
         own — its centre a local maximum of the map (no neighbouring centre, within 1.5 grid
         spacings, scores higher at any size) and outside the best region, the best's centre
-        outside it — scoring at least ``share`` of the best's statistic."""
+        outside it — scoring at least ``share`` of the best's statistic. Computed once per share
+        (the report and the diagnosis both ask)."""
+        if share not in self._rivals:
+            self._rivals[share] = self._find_rival(share)
+        return self._rivals[share]
+
+    def _find_rival(self, share: float) -> int | None:
         regs, b = self.grid.regions(), self.best
         st = np.array([t.statistic for t in self.tests], float)
         st = np.where(np.isfinite(st), st, -np.inf)
@@ -328,7 +335,6 @@ class RegionScan:
                            "critical_p_05": self.critical_p(0.05)},
             "cost": dict(self.cost),
         }
-
 
     def _rival_dict(self) -> dict[str, Any] | None:
         i = self.rival()

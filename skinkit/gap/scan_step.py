@@ -55,14 +55,13 @@ class Rival:
     """A second place of a region scan (:meth:`skinkit.gap.scan.RegionScan.rival`) to refit from:
     ``values`` its region (model names -> SI), ``form`` and ``form_values`` the elliptical form and
     start its shape scan chose (None, {} without one), ``step`` its score test's step (which way
-    the region differs: stiffer or softer), ``statistic`` its LM and ``entry`` the scan's entry of
-    the report it belongs to."""
+    the region differs: stiffer or softer) and ``entry`` the scan's entry of the report it belongs
+    to."""
 
     values: dict[str, float]
     form: str | None
     form_values: dict[str, float]
     step: dict[str, float]
-    statistic: float
     entry: dict[str, Any]
 
 
@@ -102,9 +101,8 @@ class RoundScan:
 
 
 def _where(s: RegionScan) -> str:
-    v = s.values()
-    x, y, r = (v[n] * 1e3 for n in s.region)
-    return f"x {x:.3g} mm, y {y:.3g} mm, {s.region[2].partition('.')[2]} {r:.3g} mm"
+    """The scan's best region in words: its centre and size in mm."""
+    return _at(s.values(), 3)
 
 
 def check_regions(spec: Mapping[str, Any], observations: Observations, options: ScanOptions | None) -> None:
@@ -221,7 +219,7 @@ def _rival(run: Any, spec_r: Mapping[str, Any], values: Mapping[str, float], s: 
         run.n_forward += int(shape.cost["n_forward"])
         entry["rival"]["shape"] = shape.to_dict()
         form, form_values = shape.form, shape.values()
-    return Rival(s.region_values(i), form, form_values, dict(t.step), t.statistic, entry)
+    return Rival(s.region_values(i), form, form_values, dict(t.step), entry)
 
 
 def rival_refit(run: Any, test: ScoreTest, state: dict[str, Any] | None, rival: Rival, entry: dict[str, Any],
@@ -266,9 +264,9 @@ def rival_refit(run: Any, test: ScoreTest, state: dict[str, Any] | None, rival: 
     return kept
 
 
-def _at(values: Mapping[str, float]) -> str:
-    """The first two of a region's ``values`` (its centre) in words, in mm."""
-    return ", ".join(f"{n.partition('.')[2]} {v * 1e3:.3g} mm" for n, v in list(values.items())[:2])
+def _at(values: Mapping[str, float], n: int = 2) -> str:
+    """The first ``n`` of a region's ``values`` (its centre; with its size at 3) in words, in mm."""
+    return ", ".join(f"{k.partition('.')[2]} {v * 1e3:.3g} mm" for k, v in list(values.items())[:n])
 
 
 def _summary(state: Mapping[str, Any]) -> dict[str, Any]:

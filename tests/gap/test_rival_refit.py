@@ -38,7 +38,7 @@ TEST = ScoreTest("inclusion", 100.0, 1, 1e-20, math.log(1e-20), {"inclusion.rati
 def rival(entry: dict) -> Rival:
     entry["rival"] = {"x_m": 6e-3}
     return Rival({"inclusion.x": 6e-3, "inclusion.y": 0.0, "inclusion.radius": 6e-3}, "ellipse",
-                 {"inclusion.x": 6e-3, "inclusion.a": 8e-3}, {"inclusion.ratio": 0.9}, 95.0, entry)
+                 {"inclusion.x": 6e-3, "inclusion.a": 8e-3}, {"inclusion.ratio": 0.9}, entry)
 
 
 def test_the_lower_chi2_is_kept_and_the_second_place_starts_on_its_own_side():
