@@ -46,6 +46,7 @@ unless the data still tell them apart: the conditional score test of each given 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -72,6 +73,10 @@ RANK_TOL = 1e-6
 KEPT_GATE = 1000 ** -0.5
 #: a secant's step, as a fraction of the way from the null to the typical magnitude
 SECANT_STEP = 0.25
+#: a candidate's parameter keeping less than this share of its column's norm once the fitted
+#: parameters are projected out (a variance inflation factor above 100) is reported with the
+#: fitted parameter it resembles most (:func:`resemblance`)
+RESEMBLE_KEPT = 0.1
 #: |cos| between two effects' explained signatures above which they "look the same"
 COS_NOT_SEPARABLE = 0.9
 
@@ -513,6 +518,7 @@ class ScoreTest:
         one_sided: some tested parameter has its null on a bound.
         kept: the smallest share of a tested column's norm left once the fitted parameters are
             projected out (1/kept² is its variance inflation factor).
+        resembles: the parameters the fitted ones all but absorb (:func:`resemblance`).
     """
 
     effect: str
@@ -528,12 +534,13 @@ class ScoreTest:
     methods: dict[str, str]
     one_sided: bool
     kept: float = 1.0
+    resembles: list[dict[str, Any]] = field(default_factory=list)
 
     def record(self) -> dict[str, Any]:
         """JSON-ready facts for the candidate record (no arrays)."""
         return {"log10_p": self.log_p / math.log(10), "tested": self.tested, "held": self.held,
                 "absorbed": self.absorbed, "sensitivity": self.methods, "one_sided": self.one_sided,
-                "step": self.step, "kept": self.kept}
+                "step": self.step, "kept": self.kept, "resembles": self.resembles}
 
 
 def _qp(G: np.ndarray, g: np.ndarray, sides: np.ndarray) -> np.ndarray:
@@ -613,8 +620,36 @@ def score_all(sens: Sensitivities, nuisance: np.ndarray | None = None) -> list[S
     along it, a finer mesh would explain too)."""
     J = sens.J_theta if nuisance is None else np.column_stack([sens.J_theta, nuisance])
     U = fitted_basis(J)
-    out = [score_test(sens.z, U, c, sens.colour) for c in sens.columns.values()]
+    out = [dataclasses.replace(score_test(sens.z, U, c, sens.colour),
+                               resembles=resemblance(c, sens.J_theta, sens.theta, U))
+           for c in sens.columns.values()]
     return sorted(out, key=lambda t: (t.log_p, -t.statistic))
+
+
+def resemblance(cols: EffectColumns, J_theta: np.ndarray, theta: Sequence[str], U: np.ndarray,
+                threshold: float = RESEMBLE_KEPT) -> list[dict[str, Any]]:
+    """The parameters of ``cols`` whose column keeps less than ``threshold`` of its norm once the
+    fitted directions (orthonormal ``U``, ``(m, r)``) are projected out: the data cannot tell a
+    step in them from a change of the fitted parameters (``J_theta`` ``(m, p)``, named ``theta``),
+    and their score test says little. One dict each: ``parameter``, ``kept`` (that share),
+    ``fitted`` (the fitted parameter whose column is closest to it) and ``cosine`` (|cos| of the
+    two columns; near 1: a step in one is a step in the other)."""
+    out: list[dict[str, Any]] = []
+    if not len(theta) or not U.shape[1]:
+        return out
+    tn = np.linalg.norm(J_theta, axis=0)
+    for i, name in enumerate(cols.names):
+        col = cols.J[:, i]
+        raw = float(np.linalg.norm(col))
+        if raw == 0:
+            continue
+        kept = float(np.linalg.norm(_project(U, col[:, None]))) / raw
+        if kept >= threshold:
+            continue
+        cos = np.abs(J_theta.T @ col) / (np.where(tn > 0, tn, np.inf) * raw)
+        j = int(np.argmax(cos))
+        out.append({"parameter": name, "kept": kept, "fitted": theta[j], "cosine": float(cos[j])})
+    return out
 
 
 def _n_tested(tests: Sequence[ScoreTest]) -> int:
@@ -751,8 +786,7 @@ def separating_protocol(spec: Mapping[str, Any], observations: Observations, val
     return {"protocol": rows[0]["protocol"], "cosine": rows[0]["cosine"], "ranking": rows}
 
 
-__all__ = ["COS_NOT_SEPARABLE", "Colour", "EffectColumns", "ScoreTest", "Sensitivities", "collect",
-           "colour_of", "colour_variance", "conditional_test", "corrected", "cosine", "directed_p",
-           "effect_of", "effect_table", "fitted_basis",
-           "repeat_candidates", "score_all", "score_test", "separability", "separating_protocol",
-           "with_effects"]
+__all__ = ["COS_NOT_SEPARABLE", "RESEMBLE_KEPT", "Colour", "EffectColumns", "ScoreTest", "Sensitivities",
+           "collect", "colour_of", "colour_variance", "conditional_test", "corrected", "cosine", "directed_p",
+           "effect_of", "effect_table", "fitted_basis", "repeat_candidates", "resemblance", "score_all",
+           "score_test", "separability", "separating_protocol", "with_effects"]

@@ -249,9 +249,25 @@ def messages(
             )
         else:
             out.append(f"{a} and {b} are not separable on these protocols (|cos| {sp['cosine']:.3f}).")
+    # an added effect was judged by its refit, not its score test
+    out += [resemble_sentence(c["effect"], r) for c in report["candidates"] if c["effect"] not in added
+            for r in c.get("resembles") or []]
     out += [f"Warning: {w['message']}." for w in report.get("warnings", [])]
     return out
 
 
+def resemble_sentence(effect: str, r: Mapping[str, Any]) -> str:
+    """What a candidate's parameter the fitted ones all but absorb means (``r``: one entry of
+    its ``resembles``, :func:`skinkit.gap.score.resemblance`)."""
+    kept, cos = float(r["kept"]), float(r["cosine"])
+    like = (f"its signature is that of {r['fitted']} (|cos| {cos:.3f})" if cos >= 0.9 else
+            f"its signature is a combination of the fitted parameters' "
+            f"(closest: {r['fitted']}, |cos| {cos:.2f})")
+    name = r["parameter"] if str(r["parameter"]).startswith(f"{effect}.") else f"{effect}'s {r['parameter']}"
+    return (f"{name} cannot be told from the fitted parameters on these protocols: {like}, "
+            f"and {100 * kept:.2g} % of it is left once they are fitted, so its score test says little; "
+            f"fix {r['fitted']} (or add a protocol that moves them apart) to test it.")
+
+
 __all__ = ["PRESTRESS_KEYS", "added_messages", "disc_messages", "display_parameters", "messages", "num",
-           "parameter_text", "prestress_display"]
+           "parameter_text", "prestress_display", "resemble_sentence"]

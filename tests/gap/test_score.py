@@ -113,6 +113,27 @@ def test_absorbed_direction_is_dropped(design):
     assert t.absorbed == ["offset.p0"] and t.tested == ["offset.p1"] and t.dof == 1
 
 
+def test_a_parameter_the_fit_all_but_absorbs_names_what_it_resembles(design):
+    """A candidate column that is the fitted slope plus 1 % of something else keeps about 1 % of
+    its norm once the fit is projected out: it is reported as resembling the slope (|cos| ≈ 1),
+    with that share, and the verdict says its test says little; a column well apart is not."""
+    from skinkit.gap.sentences import resemble_sentence
+
+    J_theta, J_e = design
+    other = J_e[:, 0] - fitted_basis(J_theta) @ (fitted_basis(J_theta).T @ J_e[:, 0])
+    like = J_theta[:, 1] + 0.01 * np.linalg.norm(J_theta[:, 1]) * other / np.linalg.norm(other)
+    cols = _cols("slip", np.stack([like, J_e[:, 0]], axis=1))
+    z = _linear(5, J_theta, J_e)
+    (t,) = score_all(_sens(z, J_theta, [cols]))
+    (r,) = t.resembles
+    # the leftover is the 1 % added, over a norm of about the slope's
+    assert r["parameter"] == "slip.p0" and r["fitted"] == "t1"
+    assert r["kept"] == pytest.approx(0.01, rel=0.01) and r["cosine"] > 0.999
+    assert t.record()["resembles"] == [r]
+    text = resemble_sentence("slip", r)
+    assert text.startswith("slip.p0 cannot be told") and "that of t1" in text and "1 %" in text
+
+
 def _sens(z, J_theta, cols) -> Sensitivities:
     return Sensitivities(z, J_theta, ["t0", "t1"], {c.effect: c for c in cols}, {}, None)
 
