@@ -154,3 +154,21 @@ def test_coverage_bench_refuses_an_unknown_mesh_mode():
 
     with pytest.raises(SkinkitError, match="--mesh: expected one of shared, own"):
         run_case("lumped", 1, mesh="fine")
+
+
+def test_the_summary_says_when_the_truth_is_not_converged(monkeypatch):
+    """A truth whose own error bound reaches a noise level is flagged (the intervals are then
+    judged against the truth's mesh); one below it is not."""
+    import skinkit.bench.coverage as cov
+
+    def res(bound):
+        case = {"note": "n", "truth_mesh": {"truth_unknowns": 10, "model_unknowns": 1, "factor": 2,
+                                            "discretisation": {"points": {"truth_over_noise": bound}}},
+                "model_error": {"largest_over_noise": 3.0}}
+        return {"mesh": "own", "cases": {"twopad": case}}
+
+    monkeypatch.setattr(cov, "_line", lambda r: "row")     # the table row is another test's
+    flagged = cov.summary_lines(res(2.15))
+    clean = cov.summary_lines(res(0.5 * cov.UNCONVERGED_TRUTH))
+    assert any("not converged" in x and "2.15" in x for x in flagged)
+    assert not any("not converged" in x for x in clean)
