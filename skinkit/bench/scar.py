@@ -23,6 +23,7 @@ stopped part-way goes on where it stopped.
 from __future__ import annotations
 
 import math
+import statistics
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -164,7 +165,7 @@ def run(scars: int, healthy: int, first_seed: int = 0, parallel: int = 1, schedu
         pool.close()
     records = [new.get(case_id(t)) or known[case_id(t)] for t in tasks]
     return {"scar_seeds": scars, "healthy_seeds": healthy, "first_seed": first_seed,
-            "effect": EFFECT, **summarise(records), "cases": records,
+            "effect": EFFECT, **summarise(records), "cases": records, "from_journal": len(tasks) - len(todo),
             "wall_s": time.perf_counter() - t0}
 
 
@@ -176,8 +177,13 @@ def summary_lines(res: Mapping[str, Any]) -> list[str]:
         lo, hi = r["interval_95"]
         return f"{r['count']}/{r['n']} ({100 * r['rate']:.0f} %; 95 % CI {100 * lo:.0f}-{100 * hi:.0f} %)"
 
+    cases = [float(c["wall_s"]) / 60 for c in res.get("cases", []) if c.get("wall_s") is not None]
+    took = (f"; a case {statistics.median(cases):.1f} min (median), {max(cases):.1f} min at most, on one core"
+            if cases else "")
+    resumed = res.get("from_journal") or 0
     return [f"scar sessions: {res['scar_cases']} with a scar, {res['healthy_cases']} healthy "
-            f"(seeds from {res['first_seed']}); {res['wall_s'] / 60:.1f} min",
+            f"(seeds from {res['first_seed']}); this run {res['wall_s'] / 60:.1f} min"
+            + (f" ({resumed} cases read from the journal)" if resumed else "") + took,
             f"  {EFFECT} named on scar sessions: {pct(res['named'])}   (target >= 90 %)",
             f"  found centre inside the true outline: {pct(res['centre_inside'])}   (target >= 90 %)",
             f"  true ratio inside the 95 % interval: {pct(res['ratio_covered'])}   (target 90-99 %)",

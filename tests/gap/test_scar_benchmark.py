@@ -82,6 +82,9 @@ def test_the_journal_keeps_finished_cases(tmp_path):
 
     again = S.run(4, 2, journal=journal, case=never)
     assert [c["id"] for c in again["cases"]] == [c["id"] for c in res["cases"]]
+    # the page of a run read back says so, and how long the cases took when they ran
+    assert again["from_journal"] == 6 and "6 cases read from the journal" in S.summary_lines(again)[0]
+    assert "0.0 min (median)" in S.summary_lines(again)[0]
     more = S.run(5, 2, journal=journal, case=_fake)      # one seed more: only it runs
     assert more["scar_cases"] == 5 and more["named"]["count"] == 5
 
