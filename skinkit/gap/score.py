@@ -46,7 +46,6 @@ unless the data still tell them apart: the conditional score test of each given 
 from __future__ import annotations
 
 import copy
-import dataclasses
 import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -574,8 +573,12 @@ def _tail(lm: float, q: int, level: tuple[float, float]) -> tuple[float, float]:
     return float(stats.chi2.sf(lm / m, q)), float(stats.chi2.logsf(lm / m, q))
 
 
-def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns, colour: Colour | None = None) -> ScoreTest:
+def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns, colour: Colour | None = None,
+               fitted: tuple[np.ndarray, Sequence[str]] | None = None) -> ScoreTest:
     """The score test of ``cols`` against the residual ``z`` with span ``U`` projected out.
+
+    ``fitted``: ``(J_theta, theta)``, the fitted parameters' columns and names, to name what a
+    nearly absorbed column resembles (:func:`resemblance`; None: not named).
 
     ``colour``: where the noise is prewhitened by AR models fitted to rest segments; the
     statistic is then referred to an F distribution that allows for the error of their
@@ -587,9 +590,11 @@ def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns, colour: Colour
     keep = [i for i in range(len(cols.names)) if raw[i] > 0 and nrm[i] > ABSORBED * raw[i]]
     absorbed = [cols.names[i] for i in range(len(cols.names)) if i not in keep]
     tested = [cols.names[i] for i in keep]
+    share = np.divide(nrm, raw, out=np.ones_like(raw), where=raw > 0)
+    like = [] if fitted is None else resemblance(cols, share, *fitted)
     if not keep:
         return ScoreTest(cols.effect, 0.0, 0, 1.0, 0.0, {}, np.zeros(z.size), [], dict(cols.held), absorbed,
-                         dict(cols.methods), False)
+                         dict(cols.methods), False, resembles=like)
     A = Jp[:, keep] / nrm[keep]
     sides = cols.sides[keep]
     G = A.T @ A
@@ -609,7 +614,7 @@ def score_test(z: np.ndarray, U: np.ndarray, cols: EffectColumns, colour: Colour
     step = {n: float(d[j] / nrm[keep[j]]) for j, n in enumerate(tested)}
     return ScoreTest(cols.effect, lm, q, min(max(p, 0.0), 1.0), min(logp, 0.0), step, A @ d, tested,
                      dict(cols.held), absorbed, {n: cols.methods[n] for n in tested}, one_sided,
-                     float(np.min(nrm[keep] / raw[keep])))
+                     float(np.min(share[keep])), like)
 
 
 def score_all(sens: Sensitivities, nuisance: np.ndarray | None = None) -> list[ScoreTest]:
@@ -620,35 +625,30 @@ def score_all(sens: Sensitivities, nuisance: np.ndarray | None = None) -> list[S
     along it, a finer mesh would explain too)."""
     J = sens.J_theta if nuisance is None else np.column_stack([sens.J_theta, nuisance])
     U = fitted_basis(J)
-    out = [dataclasses.replace(score_test(sens.z, U, c, sens.colour),
-                               resembles=resemblance(c, sens.J_theta, sens.theta, U))
-           for c in sens.columns.values()]
+    fitted = (sens.J_theta, sens.theta)
+    out = [score_test(sens.z, U, c, sens.colour, fitted=fitted) for c in sens.columns.values()]
     return sorted(out, key=lambda t: (t.log_p, -t.statistic))
 
 
-def resemblance(cols: EffectColumns, J_theta: np.ndarray, theta: Sequence[str], U: np.ndarray,
+def resemblance(cols: EffectColumns, share: np.ndarray, J_theta: np.ndarray, theta: Sequence[str],
                 threshold: float = RESEMBLE_KEPT) -> list[dict[str, Any]]:
     """The parameters of ``cols`` whose column keeps less than ``threshold`` of its norm once the
-    fitted directions (orthonormal ``U``, ``(m, r)``) are projected out: the data cannot tell a
-    step in them from a change of the fitted parameters (``J_theta`` ``(m, p)``, named ``theta``),
-    and their score test says little. One dict each: ``parameter``, ``kept`` (that share),
-    ``fitted`` (the fitted parameter whose column is closest to it) and ``cosine`` (|cos| of the
-    two columns; near 1: a step in one is a step in the other)."""
-    out: list[dict[str, Any]] = []
-    if not len(theta) or not U.shape[1]:
-        return out
+    fitted directions are projected out (``share`` ``(q,)``: what each keeps, as
+    :func:`score_test` measures it; 1 for a zero column): the data cannot tell a step in them
+    from a change of the fitted parameters (``J_theta`` ``(m, p)``, named ``theta``), and their
+    score test says little. One dict each: ``parameter``, ``kept`` (that share), ``fitted`` (the
+    fitted parameter whose column is closest to it) and ``cosine`` (|cos| of the two columns; near
+    1: a step in one is a step in the other)."""
+    if not len(theta):
+        return []
     tn = np.linalg.norm(J_theta, axis=0)
-    for i, name in enumerate(cols.names):
+    out: list[dict[str, Any]] = []
+    for i in np.flatnonzero(share < threshold):
         col = cols.J[:, i]
-        raw = float(np.linalg.norm(col))
-        if raw == 0:
-            continue
-        kept = float(np.linalg.norm(_project(U, col[:, None]))) / raw
-        if kept >= threshold:
-            continue
-        cos = np.abs(J_theta.T @ col) / (np.where(tn > 0, tn, np.inf) * raw)
+        cos = np.abs(J_theta.T @ col) / (np.where(tn > 0, tn, np.inf) * np.linalg.norm(col))
         j = int(np.argmax(cos))
-        out.append({"parameter": name, "kept": kept, "fitted": theta[j], "cosine": float(cos[j])})
+        out.append({"parameter": cols.names[i], "kept": float(share[i]), "fitted": theta[j],
+                    "cosine": float(cos[j])})
     return out
 
 
