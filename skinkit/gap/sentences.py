@@ -11,6 +11,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from skinkit.gap.score import ABSORBED
 from skinkit.gap.verdict import noise_sentence, remaining_sentence
 from skinkit.units import unit_suffix
 
@@ -260,10 +261,16 @@ def resemble_sentence(effect: str, r: Mapping[str, Any]) -> str:
     """What a candidate's parameter the fitted ones all but absorb means (``r``: one entry of
     its ``resembles``, :func:`skinkit.gap.score.resemblance`)."""
     kept, cos = float(r["kept"]), float(r["cosine"])
+    name = r["parameter"] if str(r["parameter"]).startswith(f"{effect}.") else f"{effect}'s {r['parameter']}"
+    if kept < ABSORBED:
+        # a column in the fitted span to rounding is a parameter the model already has
+        what = (f"{r['fitted']} itself" if cos >= 0.999 else
+                f"a combination of the fitted parameters (closest: {r['fitted']}, |cos| {cos:.3f})")
+        return (f"{name} is {what} on these protocols: the model already fits it, so it was not "
+                f"tested.")
     like = (f"its signature is that of {r['fitted']} (|cos| {cos:.3f})" if cos >= 0.9 else
             f"its signature is a combination of the fitted parameters' "
             f"(closest: {r['fitted']}, |cos| {cos:.2f})")
-    name = r["parameter"] if str(r["parameter"]).startswith(f"{effect}.") else f"{effect}'s {r['parameter']}"
     return (f"{name} cannot be told from the fitted parameters on these protocols: {like}, "
             f"and {100 * kept:.2g} % of it is left once they are fitted, so its score test says little; "
             f"fix {r['fitted']} (or add a protocol that moves them apart) to test it.")

@@ -16,6 +16,7 @@ import pytest
 from scipy import stats
 
 from skinkit.gap.score import (
+    ABSORBED,
     COS_NOT_SEPARABLE,
     EffectColumns,
     Sensitivities,
@@ -132,6 +133,12 @@ def test_a_parameter_the_fit_all_but_absorbs_names_what_it_resembles(design):
     assert t.record()["resembles"] == [r]
     text = resemble_sentence("slip", r)
     assert text.startswith("slip.p0 cannot be told") and "that of t1" in text and "1 %" in text
+    # a column in the fitted span to rounding is the fitted parameter offered again: said so
+    same = _cols("again", np.stack([J_theta[:, 1], J_e[:, 0]], axis=1))
+    (t,) = score_all(_sens(z, J_theta, [same]))
+    (r,) = t.resembles
+    assert r["kept"] < ABSORBED and t.absorbed == ["again.p0"]
+    assert resemble_sentence("again", r).startswith("again.p0 is t1 itself on these protocols")
 
 
 def _sens(z, J_theta, cols) -> Sensitivities:
