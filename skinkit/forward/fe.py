@@ -31,7 +31,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +40,7 @@ from skinkit.errors import ForwardError, SchemaError
 from skinkit.forward import drive as drive_mod
 from skinkit.forward import solve_cache, stages
 from skinkit.forward.effects import AppliedEffect, apply_all
+from skinkit.forward.fe_differences import central_differences
 from skinkit.forward.solve_progress import SolveProgress, gather, init_worker, step_reporter
 from skinkit.interfaces import ForwardModel
 from skinkit.schemas import ChannelPrediction, Observations, Parameter, ParameterSet, Prediction
@@ -382,6 +383,36 @@ class FEForwardModel(ForwardModel):
         ``fields_dir``: also write each protocol's fields there as a PVD series
         (``<protocol>.pvd``, ``<protocol>_NNNN.vtu``: :mod:`skinkit.fem.vtu`), by the process
         that solves it; ``pred.info["protocols"][name]["vtu"]`` is its path."""
+        return self.predict_many([(params, observations, sensitivities)], fields_dir=fields_dir)[0]
+
+    def predict_many(self, calls: Sequence[tuple[ParameterSet, Observations, bool | Sequence[str]]], *,
+                     fields_dir: str | os.PathLike[str] | None = None) -> list[Prediction]:
+        """:meth:`predict` for each ``(params, observations, sensitivities)`` of ``calls``, their
+        protocol solves handed to the workers as one batch: three protocols on two workers take
+        two rounds alone, six take three together."""
+        preps = [self._prepare(*c) for c in calls]
+        fd = max((len(p["fd"]) for p in preps), default=0)
+        share = 1.0 / (1 + 2 * fd)   # of the whole solves reported as progress
+        t0 = time.perf_counter()
+        with stages.portion(0.0, share):
+            built = [self._solve_all(p["spec"], p["observations"], p["fe_names"], p["inst_names"], fields_dir,
+                                     p["shapes"], solve=False) for p in preps]
+            tag = (lambda k, name: name) if len(preps) == 1 else (lambda k, name: f"{k}:{name}")
+            jobs = [replace(j, name=tag(k, j.name)) for k, (js, _) in enumerate(built) for j in js]
+            solved = solve_cache.solve_jobs(jobs, self._run)
+        out = []
+        for k, (p, (js, meta)) in enumerate(zip(preps, built, strict=True)):
+            results = {j.name: solved[tag(k, j.name)] for j in js}
+            pred = self._assemble(p["spec"], p["observations"], results, meta, p["cls"], p["inst_names"])
+            if p["fd"]:
+                with stages.portion(share, 1.0):
+                    central_differences(self, p["params"], p["observations"], pred, p["fd"])
+            out.append(self._finish(pred, p["cls"], results, t0))
+        return out
+
+    def _prepare(self, params: ParameterSet, observations: Observations,
+                 sensitivities: bool | Sequence[str]) -> dict[str, Any]:
+        """One prediction's description, parameter routes and geometry designs (no solve)."""
         if not isinstance(observations, Observations):
             raise SchemaError("observations", f"expected Observations, got {type(observations).__name__}")
         names = self._pset.names if sensitivities is True else \
@@ -391,23 +422,20 @@ class FEForwardModel(ForwardModel):
             raise SchemaError("sensitivities", f"unknown parameter(s) {unknown} for model {self.name!r}")
         spec = self.description(params)
         cls = self._classify(spec, names)
-        fe_names = sorted({v[1] for v in cls.values() if v[0] == "fe"})
         inst_names = sorted({v[1] for v in cls.values() if v[0] == "instrument"})
-        t0 = time.perf_counter()
         shapes = self._designs(params, observations, [nm for nm, (m, _) in cls.items() if m == "shape"],
                                inst_names)
-        fd = [nm for nm, (m, _) in cls.items() if m == "fd"]
-        share = 1.0 / (1 + 2 * len(fd))   # of the whole solves reported as progress
-        with stages.portion(0.0, share):
-            results, jobs_meta = self._solve_all(spec, observations, fe_names, inst_names, fields_dir, shapes)
-        pred = self._assemble(spec, observations, results, jobs_meta, cls, inst_names)
-        if fd:
-            with stages.portion(share, 1.0):
-                self._central_differences(params, observations, pred, fd)
+        return {"params": params, "observations": observations, "spec": spec, "cls": cls,
+                "fe_names": sorted({v[1] for v in cls.values() if v[0] == "fe"}), "inst_names": inst_names,
+                "shapes": shapes, "fd": [nm for nm, (m, _) in cls.items() if m == "fd"]}
+
+    def _finish(self, pred: Prediction, cls: Mapping[str, tuple[str, str]], results: Mapping[str, Any],
+                t0: float) -> Prediction:
+        """``pred`` with its derivatives' methods, the solve's counts and its ``info``."""
         for nm, (m, _) in cls.items():
             pred.methods[nm] = {"fe": "analytic", "instrument": "analytic", "shape": "analytic (shape)",
                                 "fd": "central-difference"}[m]
-        stages.count(len(results), len(names), pred.methods)
+        stages.count(len(results), len(cls), pred.methods)
         infos = [r["info"] for r in results.values()]
         steps = sum(i["increments"] for i in infos)
         pred.info = {"wall_s": time.perf_counter() - t0,
@@ -532,7 +560,9 @@ class FEForwardModel(ForwardModel):
         return mode, ("tip_force" if mode == "force" else "tip_position")
 
     def _solve_all(self, spec, observations: Observations, fe_names: list[str], inst_names: list[str],
-                   fields_dir: str | os.PathLike[str] | None = None, shapes: Mapping[str, Any] | None = None):
+                   fields_dir: str | os.PathLike[str] | None = None, shapes: Mapping[str, Any] | None = None,
+                   solve: bool = True):
+        """``(results, meta)``: each protocol solved (``solve=False``: its job, unsolved)."""
         from skinkit.fem.model import quantity
         inst_mod = _instrument()
         mode, drive_name = self._drive_channel(spec)
@@ -589,8 +619,9 @@ class FEForwardModel(ForwardModel):
                                     options={"vtu": str(fields_dir)} if fields_dir is not None else {},
                                     shapes={n: (g.nodes, g.depth) for n, g in geo.items()},
                                     shape_points={n: g.points[po.name] for n, g in geo.items()}))
-        results = solve_cache.solve_jobs(jobs, self._run)
-        return results, meta
+        if not solve:
+            return jobs, meta
+        return solve_cache.solve_jobs(jobs, self._run), meta
 
     def _run(self, jobs: list[ProtocolJob]) -> dict[str, dict[str, Any]]:
         if self.scheduler is not None:
@@ -758,41 +789,6 @@ class FEForwardModel(ForwardModel):
                 chans[cname] = ChannelPrediction(mvals, dd, mask)
             out[po.name] = chans
         return Prediction(out, {}, inputs, {})
-
-    def _central_differences(self, params: ParameterSet, observations: Observations, pred: Prediction,
-                             names: list[str]) -> None:
-        """Derivatives of the parameters no analytic route covers, by differences of whole
-        solves: central with a step of 1e-5 of the parameter's scale, or, at a bound, the
-        second-order one-sided formula (−3 f₀ + 4 f₁ − f₂)/(2h) into the admissible range."""
-        def part(i: int, j: int) -> Any:   # the j-th of parameter i's two solves, as progress
-            return stages.portion((2 * i + j) / (2 * len(names)), (2 * i + j + 1) / (2 * len(names)))
-
-        for i, nm in enumerate(names):
-            p = params.param(nm)
-            scale = abs(p.value) if p.value != 0 else (
-                0.01 * (p.upper - p.lower) if math.isfinite(p.upper - p.lower) else 1.0)
-            h = 1e-5 * max(scale, 1e-12)
-            if p.value - h >= p.lower and p.value + h <= p.upper:
-                with part(i, 0):
-                    up = self.predict(params.with_values({nm: p.value + h}), observations)
-                with part(i, 1):
-                    dn = self.predict(params.with_values({nm: p.value - h}), observations)
-                for proto, chans in pred.protocols.items():
-                    for cname, cp in chans.items():
-                        diff = up.protocols[proto][cname].values - dn.protocols[proto][cname].values
-                        cp.d[nm] = diff / (2 * h)
-                continue
-            sgn = 1.0 if p.value - h < p.lower else -1.0
-            if not (p.lower <= p.value + 2 * sgn * h <= p.upper):
-                raise ForwardError(nm, "cannot be differentiated: its bounds leave no room for a step")
-            with part(i, 0):
-                f1 = self.predict(params.with_values({nm: p.value + sgn * h}), observations)
-            with part(i, 1):
-                f2 = self.predict(params.with_values({nm: p.value + 2 * sgn * h}), observations)
-            for proto, chans in pred.protocols.items():
-                for cname, cp in chans.items():
-                    a, b = f1.protocols[proto][cname].values, f2.protocols[proto][cname].values
-                    cp.d[nm] = sgn * (-3 * cp.values + 4 * a - b) / (2 * h)
 
 
 __all__ = ["DEFAULT_MAX_STEP", "FEForwardModel", "ProtocolJob", "solve_protocol"]

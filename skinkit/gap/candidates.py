@@ -104,5 +104,20 @@ def screened(test: ScoreTest, best: tuple[str, float] | None, fit: FitResult) ->
             "not be named instead")
 
 
+def refit_order(top: Sequence[ScoreTest], fit: FitResult) -> list[ScoreTest]:
+    """``top`` in the order to refit them: the largest AIC drop a refit could bring first
+    (:func:`best_case_aic`), so that the screen (:func:`screened`) can spare the others' refits;
+    the given order where the fit's χ² is not known. The order of refits does not change the
+    round's verdict: a screened candidate could not have been named."""
+    chi2, n = fit.extra.get("chi2"), fit.extra.get("n_observations")
+    if chi2 is None or n is None:
+        return list(top)
+
+    def could(t: ScoreTest) -> float:
+        v = best_case_aic(t, float(chi2), int(n))
+        return -math.inf if v is None else v
+    return sorted(top, key=could)
+
+
 __all__ = ["AIC_MARGIN", "HELD_OUT_ALLOWANCE", "SCREEN_FACTOR", "best_case_aic", "best_qualifying",
-           "candidate_record", "fraction", "qualifies", "screened"]
+           "candidate_record", "fraction", "qualifies", "refit_order", "screened"]

@@ -58,6 +58,7 @@ from skinkit.gap.candidates import (
     candidate_record,
     fraction,
     qualifies,
+    refit_order,
     screened,
 )
 from skinkit.gap.checks import GapError, check_channels, check_effects
@@ -506,7 +507,7 @@ def _refit_top(run: _Run, top: Sequence[ScoreTest], values: Mapping[str, float],
     def refit(start: Mapping[str, float], form: Any, test: ScoreTest) -> dict[str, Any]:
         return _refit(run.spec, run.tables, run.observations, run.held, {**values, **start}, run.theta_r,
                       test, sens, load=run.loader, say=run.say, max_iterations=run.max_iterations, form=form)
-    for t in top:
+    for t in refit_order(top, run.current["result"]):
         why = screened(t, best_qualifying(states, top, run.current), run.current["result"])
         if why is not None:
             run.say(f"{t.effect} {why}")

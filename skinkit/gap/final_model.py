@@ -13,8 +13,10 @@ diagnosis has ended, with the error estimated again at the final model
 but does not settle the parameters: on the virtual forearm the second pass moves c, g1 and the
 pre-stress angle by 5–11 of their standard errors.
 
-Cost: per pass, two solves on the model's mesh and two on one refined 2x, and a refit of the
-final model from where it is.
+Cost: per pass, two solves on the model's mesh and two on one refined 2x (one batch), and a
+refit of the final model from where it is; a second pass whose parameters stayed near the first
+estimate moves it to first order instead of solving again
+(:meth:`skinkit.inverse.approximation.ModelError.moved`).
 """
 
 from __future__ import annotations

@@ -286,3 +286,26 @@ def test_a_nearly_absorbed_signature_does_not_open_the_gate_alone():
     sound = dataclasses.replace(weak, kept=2 * KEPT_GATE)
     g = _gate(GapLocation(100.0, 100.0, 1.0, 0.5, False, [], family_p=0.9), [sound, tests[1]], 0.05)
     assert g["significant"] and g["score_p"] == pytest.approx(2e-4)
+
+
+def test_the_candidate_that_could_bring_the_largest_drop_is_refitted_first():
+    """Refits run in the order of the AIC drop each could bring at best (SCREEN_FACTOR times its
+    score, less 2 per parameter), so the screen can spare the rest; the score order stands where
+    the fit's χ² is not known."""
+    from skinkit.gap.candidates import best_case_aic, refit_order
+    from skinkit.gap.score import ScoreTest
+    from skinkit.schemas import FitResult, ParameterSet
+
+    def test(effect: str, lm: float, k: int) -> ScoreTest:
+        names = [f"{effect}.{i}" for i in range(k)]
+        return ScoreTest(effect, lm, k, 1e-9, math.log(1e-9), {}, np.zeros(1), names, {}, [], {}, False)
+
+    # listed by p: a 3-parameter effect with the smaller drop first
+    top = [test("offset", 40.0, 3), test("prestress", 400.0, 3), test("lag", 60.0, 1)]
+    fit = FitResult("m", ParameterSet([]), 1.0, extra={"chi2": 2000.0, "n_observations": 1000})
+    order = [t.effect for t in refit_order(top, fit)]
+    assert order == ["prestress", "lag", "offset"]
+    could = [best_case_aic(t, 2000.0, 1000) for t in refit_order(top, fit)]
+    assert could == sorted(could)
+    unknown = FitResult("m", ParameterSet([]), 1.0)
+    assert [t.effect for t in refit_order(top, unknown)] == ["offset", "prestress", "lag"]
