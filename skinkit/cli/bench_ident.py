@@ -78,22 +78,31 @@ def bench_fit_invivo(n_protocols: int, periods: int, workers: int, as_json: bool
 @click.option("--first-seed", type=click.IntRange(0), default=0, show_default=True,
               help="seeds are first-seed, first-seed + 1, ...")
 @click.option("--workers", type=click.IntRange(1), default=None, help="worker processes per FE prediction")
-@click.option("--mesh", type=click.Choice(["shared", "own"]), default="shared", show_default=True,
-              help="finite-element truths on the model's mesh, or on meshes of their own (every fit then "
-                   "carries the model's discretisation error)")
-@click.option("--truth-factor", type=click.IntRange(2), default=2, show_default=True,
+@click.option("--mesh", type=click.Choice(["shared", "own", "extrapolated"]), default="shared",
+              show_default=True,
+              help="finite-element truths on the model's mesh, on meshes of their own, or extrapolated to a "
+                   "vanishing element size from three of their own (with own meshes every fit carries the "
+                   "model's discretisation error)")
+@click.option("--truth-factor", type=click.IntRange(2), default=None,
               help="with --mesh own: the truth's refinement over the model's mesh (element counts along "
-                   "each in-plane axis times this, element layers times this + 1)")
+                   "each in-plane axis times this, element layers times this + 1; default 2); with --mesh "
+                   "extrapolated: the finest of the three meshes (every count times 1, 2, ..., this; "
+                   "at least 3, the default)")
 @click.option("--json", "as_json", is_flag=True, help="print JSON")
 @page_option
 def bench_coverage(case: str, seeds: int, start: str, first_seed: int, workers: int | None, mesh: str,
-                   truth_factor: int, as_json: bool, page: Path | None) -> None:
+                   truth_factor: int | None, as_json: bool, page: Path | None) -> None:
     """Coverage of the reported 95 % intervals over virtual sessions of known truth."""
     from skinkit.bench import coverage
 
-    if truth_factor != 2 and mesh != "own":
-        raise click.BadParameter("applies to truths on meshes of their own: add --mesh own",
+    if truth_factor is not None and mesh == "shared":
+        raise click.BadParameter("applies to truths on meshes of their own: add --mesh own or extrapolated",
                                  param_hint="--truth-factor")
+    if mesh == "extrapolated" and truth_factor is not None and truth_factor < 3:
+        raise click.BadParameter(f"with --mesh extrapolated the finest mesh is at least 3 times the model's "
+                                 f"counts (three meshes 1, 2, 3 times), got {truth_factor}",
+                                 param_hint="--truth-factor")
+    truth_factor = truth_factor or (3 if mesh == "extrapolated" else 2)
     # progress goes to stderr, also with --json
     with progress(stage="bench coverage") as bar:
         res = coverage.run(case, seeds, start, first_seed, workers, say=bar.say, mesh=mesh,

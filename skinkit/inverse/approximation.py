@@ -109,7 +109,8 @@ class ModelError:
     source: _Source | None = None
 
     def cut(self, keep: Mapping[tuple[str, str], tuple[slice, ...]]) -> ModelError:
-        """The same error on sliced channels (``keep``: key -> the slice of its values)."""
+        """The same error on sliced channels (``keep``: key -> the slice of its values); not
+        movable (:meth:`moved` works on whole channels): a later pass solves again."""
         mean = {k: v[keep[k]] for k, v in self.mean.items() if k in keep}
         basis = {k: v[(slice(None), *keep[k])] for k, v in self.basis.items() if k in keep}
         return ModelError(mean, basis, self.rank, self.summary)
@@ -117,12 +118,14 @@ class ModelError:
     def reaches(self, params: ParameterSet) -> bool:
         """Whether :meth:`moved` may stand for a new estimate at ``params``: the difference's
         derivatives are known and every free parameter lies within :data:`MOVE_SPREADS` of the
-        draws' spread of where the estimate was made."""
+        draws' spread of where the estimate was solved (not of where a move took it: moves do not
+        chain beyond the reach)."""
         src = self.source
         if src is None:
             return False
         values = params.values()
-        return all(abs(float(values[n]) - src.at[n]) <= MOVE_SPREADS * src.steps[n] for n in src.free)
+        origin = src.origin or src.at
+        return all(abs(float(values[n]) - origin[n]) <= MOVE_SPREADS * src.steps[n] for n in src.free)
 
     def moved(self, params: ParameterSet, observations: Observations) -> ModelError:
         """The estimate moved to ``params`` to first order: every difference (the calibration's
@@ -141,16 +144,18 @@ class ModelError:
         summary = dict(self.summary, **_figures(mean, observations.fitted()),
                        moved_from={n: src.at[n] for n in src.free})
         at = {n: float(values[n]) for n in src.free}
-        return ModelError(mean, basis, rank, summary, replace(src, diffs=diffs, at=at))
+        moved = replace(src, diffs=diffs, at=at, origin=src.origin or src.at)
+        return ModelError(mean, basis, rank, summary, moved)
 
 
 @dataclass
 class _Source:
     """A :class:`ModelError`'s making: the refined-minus-model differences (the calibration's
     first, then the draws'), the spread's tangent columns (or None), the amplitude groups, the
-    refinement factor, and
-    per channel ``derivatives`` ``(len(free), *shape)``: ∂(fine − coarse)/∂θ_j at ``at``
-    (free parameter -> value [SI]); ``steps``: each one's draw spread [SI]."""
+    refinement factor, and per channel ``derivatives`` ``(len(free), *shape)``: ∂(fine −
+    coarse)/∂θ_j at ``origin`` (free parameter -> value [SI], where both meshes were solved);
+    ``at``: where the differences stand now (``origin`` until moved); ``steps``: each one's draw
+    spread [SI]."""
 
     diffs: list[dict[tuple[str, str], np.ndarray]]
     tangents: dict[tuple[str, str], np.ndarray] | None
@@ -160,6 +165,7 @@ class _Source:
     at: dict[str, float]
     steps: dict[str, float]
     derivatives: dict[tuple[str, str], np.ndarray]
+    origin: dict[str, float] | None = None
 
 
 def not_estimated(exc: BaseException) -> str:

@@ -106,7 +106,8 @@ class LabSessions:
     ``reference``: ``"measured"`` or ``"exact"`` (module docstring); ``drive_noise``: add the
     drive sensor's noise to the drive (an errors-in-variables session; default False);
     ``noise_scale``: the lab's ``--noise-scale``; ``mesh``: a finite-element truth on a mesh of
-    its own, ``mesh_factor`` times finer (``"own"``), or the model's (``"shared"``:
+    its own, ``mesh_factor`` times finer (``"own"``), the limit of three of its own, the finest
+    ``mesh_factor`` times the model's counts (``"extrapolated"``), or the model's (``"shared"``:
     :func:`skinkit.lab.session.simulate`). Calling the object with a seed returns that
     seed's :class:`~skinkit.schemas.Observations`; :attr:`model_spec` is the description with
     the indenter mode the truth ran in (the model to fit has the truth's structure).

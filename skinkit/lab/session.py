@@ -33,7 +33,7 @@ from skinkit import jsonio
 from skinkit.errors import SkinkitError
 from skinkit.lab.sensors import JACOBIAN_HOME, LOG_RATE_HZ, SensorModel
 from skinkit.lab.truth_mesh import DEFAULT_FACTOR as DEFAULT_MESH_FACTOR
-from skinkit.lab.truth_mesh import check_mode, describe_meshes, error_figures, own_mesh
+from skinkit.lab.truth_mesh import check_mode, describe_meshes, error_figures, mesh_figures, own_mesh
 from skinkit.schemas import Channel, Observations, Protocol, ProtocolObservations, SurfaceProfile
 
 #: Table 12 protocols of a finite-element truth when neither --protocols nor the model's
@@ -508,24 +508,13 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
         names = _default_protocols(spec, kind, truth if is_model else None)
     planned = [plan_protocol(n, _protocol_parameters(spec, kind, n)) for n in names]
     surface = top_surface(spec if not is_model else None, kind)
-    own = kind == "fe" and not is_model and mesh == "own"
-    solved = own_mesh(spec, mesh_factor) if own else spec
-    noiseless, model = run_truth(solved if not is_model else truth, planned, sensors, surface, workers,
-                                 progress, points)
     mesh_doc: dict[str, Any] | None = None
     if kind == "fe" and not is_model:
-        mesh_doc = describe_meshes(solved, spec, mesh, mesh_factor)
-    if own:   # the same truth on the model's mesh: the truth's own error, bounded
-        try:
-            coarse, other = run_truth(spec, planned, sensors, surface, workers, progress, points,
-                                      stage="truth on the model's mesh")
-            other.close()
-        except BaseException:
-            model.close()
-            raise
-        noise = {c: float(np.sqrt(np.mean(np.square(sensors.sigma(c)))))
-                 for c in ("tip_force", "tip_position", "points")}
-        mesh_doc["discretisation"] = error_figures(noiseless, coarse, noise, mesh_factor)
+        noiseless, model, mesh_doc = _truth_on_meshes(spec, mesh, mesh_factor, planned, sensors, surface,
+                                                      workers, progress, points)
+    else:
+        noiseless, model = run_truth(truth if is_model else spec, planned, sensors, surface, workers,
+                                     progress, points)
     try:
         description = _description(model, spec, kind)
         parameters = model.parameters().to_list()
@@ -552,6 +541,66 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
                        if "points" in noiseless[p.protocol.name] else 0} for p in planned],
     }
     return VirtualSession(planned, noiseless, recorded, profile_true, profile, sensors, truth_doc)
+
+
+def _noise_levels(sensors: SensorModel) -> dict[str, float]:
+    return {c: float(np.sqrt(np.mean(np.square(sensors.sigma(c)))))
+            for c in ("tip_force", "tip_position", "points")}
+
+
+def _truth_on_meshes(spec: dict[str, Any], mesh: str, factor: int, planned: Sequence[PlannedProtocol],
+                     sensors: SensorModel, surface: TopSurface, workers: int | None,
+                     progress: Progress | None, points: np.ndarray | None
+                     ) -> tuple[dict[str, dict[str, np.ndarray]], Any, dict[str, Any]]:
+    """A finite-element description's noiseless truth, the model it was solved with and the truth
+    file's ``mesh`` entry: on the model's mesh, on one of its own, or extrapolated from three of
+    its own (:mod:`skinkit.lab.truth_extrapolation`); the last two with the truth's own error and the
+    model mesh's (the same truth solved on the model's mesh) against the noise."""
+    if mesh == "shared":
+        noiseless, model = run_truth(spec, planned, sensors, surface, workers, progress, points)
+        return noiseless, model, describe_meshes(spec, spec, mesh, factor)
+    opened: list[Any] = []
+    try:
+        if mesh == "extrapolated":
+            from skinkit.lab.truth_extrapolation import extrapolate, family_spec, members
+
+            ks = members(factor)
+            solved, unknowns = {}, []
+            for k in ks:
+                member = family_spec(spec, k)
+                solved[k], m = run_truth(member, planned, sensors, surface, workers, progress, points,
+                                         stage=f"truth, mesh {k}x of {ks[-1]}x")
+                opened.append(m)
+                unknowns.append(mesh_figures(member)["unknowns"])
+            noiseless, rep = extrapolate(solved, ks, _noise_levels(sensors))
+            finest = family_spec(spec, ks[-1])
+        else:
+            finest = own_mesh(spec, factor)
+            noiseless, m = run_truth(finest, planned, sensors, surface, workers, progress, points)
+            opened.append(m)
+        coarse, other = run_truth(spec, planned, sensors, surface, workers, progress, points,
+                                  stage="truth on the model's mesh")
+        other.close()
+    except BaseException:
+        for m in opened:
+            m.close()
+        raise
+    model = opened.pop()
+    for m in opened:
+        m.close()
+    doc = describe_meshes(finest, spec, mesh, factor)
+    figures = error_figures(noiseless, coarse, _noise_levels(sensors), factor)
+    if mesh == "extrapolated":
+        # the model mesh's error is the whole difference from the limit; the truth's is estimated
+        for c, row in figures.items():
+            row["model_rms"] = row["truth_rms"] * (factor - 1)
+            row["model_over_noise"] = row["model_rms"] / row["noise"] if row["noise"] else None
+            est = rep["channels"].get(c, {})
+            row.update(est)
+        doc["extrapolation"] = {"members": rep["members"], "member_unknowns": unknowns,
+                                "orders": rep["orders"]}
+    doc["discretisation"] = figures
+    return noiseless, model, doc
 
 
 def resample(vs: VirtualSession, seed: int) -> VirtualSession:

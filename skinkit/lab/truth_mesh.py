@@ -25,9 +25,10 @@ import numpy as np
 
 from skinkit.errors import SkinkitError
 
-#: how the truth meshes: on its own mesh (default) or on the model's ("shared": the inverse crime,
-#: kept for comparison)
-MESH_MODES = ("own", "shared")
+#: how the truth meshes: on its own mesh (default), on three of its own extrapolated to a vanishing
+#: element size ("extrapolated", :mod:`skinkit.lab.truth_extrapolation`), or on the model's
+#: ("shared": the inverse crime, kept for comparison)
+MESH_MODES = ("own", "extrapolated", "shared")
 #: default refinement of the truth's mesh over the model's
 DEFAULT_FACTOR = 2
 #: geometry key -> the truth's grading as a function of the model's (every grading >= 1)
@@ -44,11 +45,14 @@ class TruthMeshError(SkinkitError):
 
 
 def check_mode(mode: str, factor: int) -> None:
-    """``mode`` one of :data:`MESH_MODES`, ``factor`` a whole number >= 2."""
+    """``mode`` one of :data:`MESH_MODES`, ``factor`` a whole number >= 2 (>= 3 extrapolated)."""
     if mode not in MESH_MODES:
         raise TruthMeshError(f"truth mesh: expected one of {', '.join(MESH_MODES)}, got {mode!r}")
-    if isinstance(factor, bool) or not isinstance(factor, int) or factor < 2:
-        raise TruthMeshError(f"truth mesh factor: expected a whole number >= 2, got {factor!r}")
+    least = 3 if mode == "extrapolated" else 2
+    if isinstance(factor, bool) or not isinstance(factor, int) or factor < least:
+        raise TruthMeshError(f"truth mesh factor: expected a whole number >= {least}"
+                             + (" (three members 1..3 times the model's counts)" if least == 3 else "")
+                             + f", got {factor!r}")
 
 
 def own_mesh(spec: Mapping[str, Any], factor: int = DEFAULT_FACTOR) -> dict[str, Any]:
@@ -84,7 +88,7 @@ def describe_meshes(truth: Mapping[str, Any], model: Mapping[str, Any], mode: st
                     factor: int) -> dict[str, Any]:
     """The truth file's ``mesh`` entry: the mode, the factor and both meshes' figures."""
     t, m = mesh_figures(truth), mesh_figures(model)
-    return {"mode": mode, "factor": factor if mode == "own" else 1,
+    return {"mode": mode, "factor": factor if mode != "shared" else 1,
             "truth_elements": t["elements"], "truth_unknowns": t["unknowns"],
             "model_elements": m["elements"], "model_unknowns": m["unknowns"],
             "gradings": {k: v for k, v in dict(truth.get("geometry", {})).items() if k.endswith("grading")}}

@@ -137,6 +137,8 @@ def test_sysid_physical_options(tmp_path, args, option):
     (["sysid", "--repeat", "0"], "'--repeat'"), (["fit", "--seed", "-1"], "'--seed'"),
     (["coverage", "--mesh", "own", "--truth-factor", "1"], "'--truth-factor'"),
     (["coverage", "--truth-factor", "3"], "--truth-factor"),
+    (["coverage", "--mesh", "extrapolated", "--truth-factor", "2"], "--truth-factor"),
+    (["coverage", "--mesh", "nope"], "'--mesh'"),
 ])
 def test_bench_bad_counts(args, option):
     one_error(_run("bench", *args), option)

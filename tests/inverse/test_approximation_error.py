@@ -190,6 +190,10 @@ def test_a_pass_within_the_spread_moves_the_estimate_as_solving_again_would():
     finally:
         model.close()
     assert moved.reaches(near) and moved.summary["moved_from"] == {n: p[n] for n in free}
+    # moves do not chain beyond the reach of where both meshes were solved: within the reach of
+    # the moved point, beyond the origin's
+    beyond = p.with_values({"skin.E": p["skin.E"] * (1 + (MOVE_SPREADS + 0.3) * SPREAD)})
+    assert not moved.reaches(beyond)
     for key, want in solved.mean.items():
         change = want - err.mean[key]
         scale = float(np.max(np.abs(change)))
