@@ -30,13 +30,21 @@ def lab() -> None:
               help="solve a finite-element truth on its model file's own mesh, the model's (default: on "
                    "a mesh of its own, 2x finer in-plane, 3x through the thickness, its own node "
                    "placement; the truth file states both meshes and the truth's error)")
+@click.option("--extrapolated-truth", is_flag=True,
+              help="solve a finite-element truth on three meshes of its own (every element count 1, 2 and "
+                   "3 times the model's, its own node placement) and record their limit at a vanishing "
+                   "element size (Richardson, with the observed order; its estimated error in the truth "
+                   "file)")
 def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | None, noise_scale: str,
-            images: bool, shared_mesh: bool) -> None:
+            images: bool, shared_mesh: bool, extrapolated_truth: bool) -> None:
     """Run the TRUTH model file (effects included) through the protocols and record it as a session."""
     from skinkit.cli._progress import progress
     from skinkit.forward import read_description
     from skinkit.lab.session import check_noise_scale, check_options, make_session
 
+    if shared_mesh and extrapolated_truth:
+        raise click.BadParameter("cannot be combined with --shared-mesh (one truth mesh)",
+                                 param_hint="--extrapolated-truth")
     scale = check_noise_scale(noise_scale)
     check_options(out, truth_out, protocols, scale, images)
     # the session is written beside --out under a hidden name: a folder that takes no file is
@@ -46,7 +54,8 @@ def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | No
     read_description(truth)  # a missing or malformed model file: one line, before any progress bar
     with progress(transient=True, width=24) as bar:
         doc = make_session(truth, out, truth_out, seed, protocols=protocols, noise_scale=scale,
-                           images=images, progress=bar, mesh="shared" if shared_mesh else "own")
+                           images=images, progress=bar,
+                           mesh="shared" if shared_mesh else "extrapolated" if extrapolated_truth else "own")
     names = ", ".join(f"{p['name']} ({p['samples']} samples, {p['frames']} frames)" for p in doc["protocols"])
     click.echo(f"session {out}: {names}")
     click.echo(f"truth {truth_out}: {doc['kind']} model, {len(doc['parameters'])} parameters, "
@@ -56,9 +65,13 @@ def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | No
         click.echo(f"truth mesh: {mesh['mode']}, {mesh['truth_unknowns']:,} unknowns "
                    f"({mesh['truth_elements']:,} elements); the model file's {mesh['model_unknowns']:,} "
                    f"({mesh['model_elements']:,})")
+        ext = mesh.get("extrapolation")
+        if ext:
+            click.echo(f"  extrapolated from {', '.join(f'{u:,}' for u in ext['member_unknowns'])} unknowns")
         for c, row in (mesh.get("discretisation") or {}).items():
-            click.echo(f"  {c}: truth's own error at most {row['truth_over_noise']:.3g} noise levels RMS; "
-                       f"the model's mesh about {row['model_over_noise']:.3g}")
+            click.echo(f"  {c}: truth's own error {'estimated at' if ext else 'at most'} "
+                       f"{row['truth_over_noise']:.3g} noise levels RMS; the model's mesh about "
+                       f"{row['model_over_noise']:.3g}")
 
 
 @lab.command("scar-session")

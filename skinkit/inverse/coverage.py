@@ -115,7 +115,7 @@ class LabSessions:
 
     def __init__(self, spec: Mapping[str, Any], protocols: Sequence[str] | None = None,
                  reference: str = "measured", drive_noise: bool = False, noise_scale: float = 1.0,
-                 workers: int | None = 1, mesh: str = "own", mesh_factor: int = 2) -> None:
+                 workers: int | None = 1, mesh: str = "own", mesh_factor: int | None = None) -> None:
         from skinkit.forward import model_kind
         from skinkit.lab.session import simulate, top_surface
 

@@ -479,14 +479,19 @@ def simulate(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, seed: int,
              protocols: str | Sequence[str] | None = None, noise_scale: float = 1.0,
              progress: Progress | None = None, workers: int | None = None,
              points: np.ndarray | None = None, mesh: str = "own",
-             mesh_factor: int = DEFAULT_MESH_FACTOR, sensors: SensorModel | None = None) -> VirtualSession:
+             mesh_factor: int | None = None, sensors: SensorModel | None = None) -> VirtualSession:
     """Run ``truth`` through the protocols and record it (see :func:`make_session`); nothing is
     written. ``points`` ``(P, 3)`` [m]: material points of the top surface to follow instead of
     the tracked grid (e.g. a dense grid from which camera views are rendered). ``mesh``: a
     finite-element truth description is solved on a mesh of its own, ``mesh_factor`` times finer
-    with its own node placement (``"own"``, :mod:`skinkit.lab.truth_mesh`), or on the mesh its
-    description gives, the model's (``"shared"``). ``sensors``: the instruments (default: the
-    robot's, :class:`SensorModel` at ``noise_scale``; when given, ``noise_scale`` is its own)."""
+    with its own node placement (``"own"``, :mod:`skinkit.lab.truth_mesh`; default 2), on three
+    of its own extrapolated to a vanishing element size, the finest ``mesh_factor`` times the
+    model's counts (``"extrapolated"``, :mod:`skinkit.lab.truth_extrapolation`; default 3), or
+    on the mesh its description gives, the model's (``"shared"``). ``sensors``: the instruments
+    (default: the robot's, :class:`SensorModel` at ``noise_scale``; when given, ``noise_scale``
+    is its own)."""
+    if mesh_factor is None:
+        mesh_factor = 3 if mesh == "extrapolated" else DEFAULT_MESH_FACTOR
     check_mode(mesh, mesh_factor)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise LabError(f"--seed: expected a non-negative integer, got {seed!r}")
@@ -671,8 +676,8 @@ def make_session(truth: str | os.PathLike[str] | Mapping[str, Any] | Any, out: s
     (``"a,b"`` or a list; default: the model's ``[session] protocols``, else the kind's
     default). ``noise_scale`` (> 0) multiplies every imperfection of the instruments.
     ``progress(stage, fraction)``; ``workers``: the FE truth's worker processes; ``mesh``: a
-    finite-element truth on a mesh of its own (``"own"``) or the model's (``"shared"``; see
-    :func:`simulate`). Options are
+    finite-element truth on a mesh of its own (``"own"``), extrapolated from three of its own
+    (``"extrapolated"``) or on the model's (``"shared"``; see :func:`simulate`). Options are
     checked before any model runs; nothing is left at ``out`` or ``truth_out`` on failure.
     Returns the truth document.
     """

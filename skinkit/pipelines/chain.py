@@ -131,7 +131,8 @@ def _image_sequences(seed: int, grid: np.ndarray, points: np.ndarray, rest: np.n
 def acquire(out: Path, seed: int, quick: bool, workers: int, progress: Progress = _quiet,
             mesh: str = "own") -> dict[str, Any]:
     """Step 1: write ``out/session.h5`` (records, images) and ``out/truth.json``; the truth document.
-    ``mesh``: the truth on a mesh of its own (``"own"``) or the model's (``"shared"``)."""
+    ``mesh``: the truth on a mesh of its own (``"own"``), extrapolated from three of its own
+    (``"extrapolated"``) or on the model's (``"shared"``)."""
     from skinkit.lab import forearm
     from skinkit.lab.imaging import followed_grid
     from skinkit.lab.lumped import LumpedTruth, stochastic_session
@@ -293,8 +294,8 @@ def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: 
               progress: Progress = _quiet, mesh: str = "own") -> dict[str, Any]:
     """Run steps 1–7 into ``out_dir``; the JSON-ready summary (also ``out_dir/summary.json``).
     ``mesh``: the truth on a mesh of its own, the model's discretisation error then carried as
-    noise by the diagnosis (``"own"``), or on the model's mesh without it (``"shared"``: the
-    inverse crime, for comparison)."""
+    noise by the diagnosis (``"own"``; ``"extrapolated"``: the limit of three of its own), or on
+    the model's mesh without it (``"shared"``: the inverse crime, for comparison)."""
     from skinkit.report import write_report
 
     out = Path(out_dir)
@@ -316,7 +317,7 @@ def run_chain(out_dir: str | Path, seed: int = 0, quick: bool = False, workers: 
     summary["identify"] = fe
     summary["diagnose"] = timed("diagnose",
                                 lambda: diagnose_gap(session, out, desc, quick, workers, progress,
-                                                     model_error=mesh == "own", calibration=calibration))
+                                                     model_error=mesh != "shared", calibration=calibration))
     report = timed("report", lambda: write_report(session, out / "report.html", overwrite=True))
     summary["report"] = str(report)
     progress("compare with the truth", 0.0)

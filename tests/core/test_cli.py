@@ -114,6 +114,13 @@ def test_demo_refuses_an_out_that_is_a_file(tmp_path):
     assert f.read_text() == "x"
 
 
+def test_demo_refuses_two_truth_meshes(tmp_path):
+    res = CliRunner().invoke(cli, ["demo", "--out", str(tmp_path / "d"), "--shared-mesh",
+                                   "--extrapolated-truth"])
+    assert res.exit_code == 2 and "--extrapolated-truth" in res.output and "--shared-mesh" in res.output
+    assert not (tmp_path / "d").exists()
+
+
 def test_recover_after_a_crash(tmp_path):
     crashed = tmp_path / "crashed.h5"
     code = ("import os, numpy as np\n"

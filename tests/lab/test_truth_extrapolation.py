@@ -141,3 +141,57 @@ def test_the_lab_solves_three_members_and_records_their_limit():
     force = mesh["discretisation"]["tip_force"]
     assert 0 < force["truth_rms"] < force["correction_rms"] < force["model_rms"]
     assert force["truth_over_noise"] == pytest.approx(force["truth_rms"] / force["noise"])
+
+
+TINY_TOML = """
+[model]
+name = "tiny-extrapolated"
+[session]
+protocols = ["normal_indentation"]
+parameters = { normal_indentation = { periods = 1, camera_rate = 0.5 } }
+[geometry]
+kind = "disc"
+diameter = "20 mm"
+indenter_diameter = "4 mm"
+n_inner = 1
+n_ring = 1
+[[layers]]
+name = "skin"
+thickness = "3 mm"
+elements = 1
+law = "neo-hookean-enu"
+parameters = { E = "30 kPa", nu = 0.45 }
+[boundary]
+fixed = ["outer", "bottom"]
+[indenter]
+mode = "displacement"
+[drive]
+max_step = "2.5 s"
+"""
+
+
+@pytest.mark.needs_plugins
+def test_lab_session_extrapolated_truth_says_so(tmp_path):
+    """``skinkit lab session --extrapolated-truth``: the truth file's mode and members, and the
+    command's lines name the members and the truth's *estimated* error; with ``--shared-mesh``
+    it is refused naming both options, nothing written."""
+    import json
+
+    from click.testing import CliRunner
+
+    from skinkit.cli import cli
+
+    model = tmp_path / "tiny.toml"
+    model.write_text(TINY_TOML)
+    args = ["lab", "session", str(model), "--out", str(tmp_path / "s.h5"), "--truth-out",
+            str(tmp_path / "t.json"), "--seed", "0"]
+    r = CliRunner().invoke(cli, [*args, "--extrapolated-truth", "--shared-mesh"])
+    assert r.exit_code == 2 and "--extrapolated-truth" in r.output and "--shared-mesh" in r.output
+    assert not (tmp_path / "t.json").exists()
+    r = CliRunner().invoke(cli, [*args, "--extrapolated-truth"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "t.json").read_text())
+    assert doc["mesh"]["mode"] == "extrapolated" and doc["mesh"]["extrapolation"]["members"] == [1, 2, 3]
+    assert "truth mesh: extrapolated" in r.output
+    assert "extrapolated from 441, 2,535, 7,581 unknowns" in r.output
+    assert "own error estimated at" in r.output
