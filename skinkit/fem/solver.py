@@ -35,10 +35,14 @@ def sp_triu(A):
 #: the increment starts again from the tangent predictor (quadratic convergence cuts it by
 #: orders of magnitude; a damped crawl by a few tens of per cent)
 GUESS_PROGRESS = 0.5
-#: a residual that stops falling (two Newton iterations without halving it) below this fraction
-#: of the reference force has reached the round-off floor: a large body carrying large internal
-#: stresses (pre-stress) against small net reactions cannot balance them to ``rtol`` of those
-STALL_RTOL = 1e-6
+#: a residual that stops falling (two Newton iterations without halving it, or none halving it
+#: in :data:`STAGNANT_ITERS`) below this fraction of the reference force has reached the
+#: round-off floor: a large body carrying large internal stresses (pre-stress, a nearly
+#: incompressible layer) against small net reactions cannot balance them to ``rtol`` of those.
+#: The floor grows with the mesh: a virtual forearm's truth on 37,479 unknowns (finely graded at
+#: the indenter's edge) wanders between 4e-7 and 5e-6 of its reference force without halving,
+#: which is four orders below the force sensor's noise
+STALL_RTOL = 1e-5
 #: Newton gives the increment up when the residual is not below half of what it was this many
 #: iterations before: past a limit point or a bifurcation (an indefinite tangent, a wrinkling
 #: layer) the line search only wanders at one residual level, and the remaining iterations of
@@ -204,6 +208,8 @@ class NewtonSolver:
                 break
             trail.append(norm)
             if len(trail) > STAGNANT_ITERS and norm > 0.5 * trail[-1 - STAGNANT_ITERS]:
+                if norm <= STALL_RTOL * ref:
+                    return u, it, norm   # wandering at the round-off floor: converged there
                 raise SolverError(f"no progress at t = {t:g}: the residual did not halve in "
                                   f"{STAGNANT_ITERS} Newton iterations (|r| = {norm:.3g} N, reference "
                                   f"{ref:.3g} N, {it} iterations){self._where(r)}{_why(ascents, it)}")
