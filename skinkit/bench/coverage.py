@@ -225,6 +225,10 @@ def run(case: str = "all", seeds: int = 20, start: str = "perturbed", first_seed
             "wall_s": time.perf_counter() - t0}
 
 
+def _order(o: dict[str, Any]) -> str:
+    return format(o["order"], ".2f") + ("" if o.get("extrapolated", True) else " not extrapolated")
+
+
 def summary_lines(res: dict[str, Any]) -> list[str]:
     """The figures of :func:`run` as lines of text (a table, one case per row)."""
     from skinkit.lab.truth_mesh import largest_truth_error
@@ -246,7 +250,7 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
                 own = largest_truth_error(tm)
                 ext = tm.get("extrapolation") or {}
                 sizes = (f"limit of {', '.join(f'{u:,}' for u in ext['member_unknowns'])} unknowns"
-                         f" (orders {', '.join(format(o['order'], '.2f') for o in ext['orders'].values())})"
+                         f" (orders {', '.join(_order(o) for o in ext['orders'].values())})"
                          if ext else f"{tm.get('truth_unknowns', 0):,} unknowns ({tm.get('factor')}x)")
                 out.append(f"  {c}: truth {sizes}, its own error {'estimated at' if ext else 'at most'} "
                            f"{'-' if own is None else f'{own:.3g}'} noise levels; "

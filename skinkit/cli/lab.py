@@ -68,6 +68,9 @@ def session(truth: str, out: str, truth_out: str, seed: int, protocols: str | No
         ext = mesh.get("extrapolation")
         if ext:
             click.echo(f"  extrapolated from {', '.join(f'{u:,}' for u in ext['member_unknowns'])} unknowns")
+            kept = [k for k, o in ext["orders"].items() if not o.get("extrapolated", True)]
+            if kept:
+                click.echo(f"  not in the asymptotic range, the finest mesh kept: {', '.join(kept)}")
         for c, row in (mesh.get("discretisation") or {}).items():
             click.echo(f"  {c}: truth's own error {'estimated at' if ext else 'at most'} "
                        f"{row['truth_over_noise']:.3g} noise levels RMS; the model's mesh about "

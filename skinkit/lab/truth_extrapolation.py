@@ -18,8 +18,11 @@ error model y_k = y∞ − C k^(−p) gives the observed order p from the norms 
 ‖y_b − y_a‖ / ‖y_c − y_b‖ = (a^(−p) − b^(−p)) / (b^(−p) − c^(−p)), and the limit
 y∞ = y_c + (y_c − y_b) c^(−p) / (b^(−p) − c^(−p)) (Richardson, generalised to non-integer ratios;
 Roache, *Verification and Validation in Computational Science and Engineering*, 1998). A ratio
-outside the asymptotic range (p outside [:data:`ORDER_MIN`, :data:`ORDER_MAX`]) takes the nearer
-end and is reported.
+above the asymptotic range (p > :data:`ORDER_MAX`) takes that order; one below it (the changes
+do not shrink as an order of :data:`ORDER_MIN` would: the members are not in the asymptotic range,
+and a limit at that order would amplify the last change several-fold) is not extrapolated: the
+finest member is kept, its error stated as an order 1 would make it, b/(c − b) |y_c − y_b|
+(not a bound there), and the report says so (``clipped``, ``extrapolated`` false).
 
 **Its own error, estimated.** p is fitted to norms; where the error's shape still changes from
 member to member the asymptotic form does not hold point by point. The coarsest member predicted
@@ -106,7 +109,8 @@ def extrapolate(solved: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]], ks
     channel, equal on every member, as solved); ``report``: per channel (over protocols)
     ``truth_rms`` (the extrapolated truth's estimated error), ``correction_rms`` (the finest
     member's own error, extrapolated), each ``..._over_noise`` against ``noise[channel]`` [unit],
-    and ``orders``: per ``protocol/channel`` the observed order and whether it was clipped."""
+    and ``orders``: per ``protocol/channel`` the observed order, whether it was clipped and
+    whether the channel was extrapolated."""
     a, b, c = ks
     values: dict[str, dict[str, np.ndarray]] = {}
     acc: dict[str, dict[str, list[np.ndarray]]] = {}
@@ -120,15 +124,21 @@ def extrapolate(solved: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]], ks
             if p is None:
                 values[proto][name] = yc
                 continue
+            part = acc.setdefault(name, {"truth": [], "correction": []})
+            ok = np.isfinite(ya) & np.isfinite(yb) & np.isfinite(yc)
+            extrapolated = not (clipped and p == ORDER_MIN)
+            orders[f"{proto}/{name}"] = {"order": p, "clipped": clipped, "extrapolated": extrapolated}
+            if not extrapolated:
+                values[proto][name] = yc
+                part["truth"].append(((yc - yb)[ok] * b / (c - b)).ravel())
+                part["correction"].append(np.zeros(int(ok.sum())))
+                continue
             w = c ** -p / (b ** -p - c ** -p)
             inf = yc + (yc - yb) * w
             values[proto][name] = inf
             ya_hat = inf - (inf - yc) * (c / a) ** p
-            ok = np.isfinite(ya_hat) & np.isfinite(ya)
-            part = acc.setdefault(name, {"truth": [], "correction": []})
             part["truth"].append(((ya - ya_hat)[ok] * (b / c) ** p).ravel())
             part["correction"].append(((inf - yc)[ok]).ravel())
-            orders[f"{proto}/{name}"] = {"order": p, "clipped": clipped}
     report: dict[str, Any] = {"members": list(ks), "orders": orders, "channels": {}}
     for name, parts in acc.items():
         sig = noise.get(name)

@@ -70,6 +70,20 @@ def test_an_error_whose_shape_changes_is_estimated_not_hidden(second, seed):
     assert true_err < (0.7 if second == 1.0 else 0.25 if second == 0.3 else 0.1) * finest_err
 
 
+def test_members_outside_the_asymptotic_range_are_not_extrapolated():
+    """Changes that do not shrink (the second as large as the first): a limit at the lowest
+    accepted order would amplify the last change several-fold, so the finest member is kept, its
+    error stated as an order 1 would make it (2 |y3 − y2| for members 1, 2, 3), and said."""
+    y = np.linspace(0.0, 1.0, 30)
+    solved = {k: {"p": {"f": y + 1e-3 * k}} for k in (1, 2, 3)}
+    values, rep = extrapolate(solved, (1, 2, 3), {"f": 1e-3})
+    np.testing.assert_array_equal(values["p"]["f"], solved[3]["p"]["f"])
+    assert rep["orders"]["p/f"] == {"order": ORDER_MIN, "clipped": True, "extrapolated": False}
+    row = rep["channels"]["f"]
+    assert row["correction_rms"] == 0.0
+    assert row["truth_rms"] == pytest.approx(2e-3) and row["truth_over_noise"] == pytest.approx(2.0)
+
+
 def test_a_sequence_outside_the_asymptotic_range_is_clipped_and_said():
     """Changes that grow with refinement (no convergence): the order takes the nearer end and the
     report says it was clipped; equal members (nothing to extrapolate) give no order."""
