@@ -24,6 +24,12 @@ and a limit at that order would amplify the last change several-fold) is not ext
 finest member is kept, its error stated as an order 1 would make it, b/(c − b) |y_c − y_b|
 (not a bound there), and the report says so (``clipped``, ``extrapolated`` false).
 
+**Tracked points by their motion.** A points channel ``(P, F, 3)`` is extrapolated in its motion
+since the first frame, then put back on the finest member's first frame: on a curved top each
+member embeds the material points on its own approximation of the surface, a static offset per
+point (microns) that the fit never sees (a session's track is referred to its first frame) and
+that would otherwise swamp the convergence of the motion.
+
 **Its own error, estimated.** p is fitted to norms; where the error's shape still changes from
 member to member the asymptotic form does not hold point by point. The coarsest member predicted
 from the two finer ones and p, ŷ_a = y∞ − (y∞ − y_c)(c/a)^p, departs from the solved one by what
@@ -120,22 +126,26 @@ def extrapolate(solved: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]], ks
         for name, yc_ in chans.items():
             yc = np.asarray(yc_, float)
             ya, yb = (np.asarray(solved[k][proto][name], float) for k in (a, b))
+            base = None
+            if yc.ndim == 3 and yc.shape[1] > 1:
+                base = yc[:, :1].copy()
+                ya, yb, yc = ya - ya[:, :1], yb - yb[:, :1], yc - base
             p, clipped = observed_order(ya, yb, yc, ks)
             if p is None:
-                values[proto][name] = yc
+                values[proto][name] = yc if base is None else yc + base
                 continue
             part = acc.setdefault(name, {"truth": [], "correction": []})
             ok = np.isfinite(ya) & np.isfinite(yb) & np.isfinite(yc)
             extrapolated = not (clipped and p == ORDER_MIN)
             orders[f"{proto}/{name}"] = {"order": p, "clipped": clipped, "extrapolated": extrapolated}
             if not extrapolated:
-                values[proto][name] = yc
+                values[proto][name] = yc if base is None else yc + base
                 part["truth"].append(((yc - yb)[ok] * b / (c - b)).ravel())
                 part["correction"].append(np.zeros(int(ok.sum())))
                 continue
             w = c ** -p / (b ** -p - c ** -p)
             inf = yc + (yc - yb) * w
-            values[proto][name] = inf
+            values[proto][name] = inf if base is None else inf + base
             ya_hat = inf - (inf - yc) * (c / a) ** p
             part["truth"].append(((ya - ya_hat)[ok] * (b / c) ** p).ravel())
             part["correction"].append(((inf - yc)[ok]).ravel())

@@ -105,17 +105,22 @@ def largest_truth_error(mesh: Mapping[str, Any]) -> float | None:
 def error_figures(fine: Mapping[str, Mapping[str, np.ndarray]],
                   coarse: Mapping[str, Mapping[str, np.ndarray]], noise: Mapping[str, float],
                   factor: int) -> dict[str, dict[str, float | None]]:
-    """Per channel (over protocols): RMS of the truth's estimated discretisation error, ``|fine −
-    coarse| / (factor − 1)`` [unit] (an upper bound at order ≥ 1), the model mesh's (``|fine −
-    coarse|`` · f/(f − 1): the same truth on the model's mesh) and each over the noise level
-    ``noise[channel]`` [unit]."""
+    """Per channel (over protocols; tracked points by their motion since the first frame): RMS of
+    the truth's estimated discretisation error, ``|fine − coarse| / (factor − 1)`` [unit] (an
+    upper bound at order ≥ 1), the model mesh's (``|fine − coarse|`` · f/(f − 1): the same truth
+    on the model's mesh) and each over the noise level ``noise[channel]`` [unit]."""
     acc: dict[str, list[np.ndarray]] = {}
     for proto, chans in fine.items():
         for c, v in chans.items():
             w = coarse.get(proto, {}).get(c)
             if w is None or np.shape(w) != np.shape(v):
                 continue
-            d = np.asarray(v, float) - np.asarray(w, float)
+            v, w = np.asarray(v, float), np.asarray(w, float)
+            if v.ndim == 3 and v.shape[1] > 1:
+                # tracked points by their motion since the first frame, as a session refers them:
+                # each mesh embeds them on its own approximation of a curved top (a static offset)
+                v, w = v - v[:, :1], w - w[:, :1]
+            d = v - w
             acc.setdefault(c, []).append(d[np.isfinite(d)].ravel())
     out = {}
     for c, parts in acc.items():

@@ -44,6 +44,24 @@ def test_the_order_and_limit_of_an_asymptotic_sequence_are_recovered(p):
     assert "tip_position" not in rep["channels"]
 
 
+def test_tracked_points_are_extrapolated_in_their_motion():
+    """Points ``(P, F, 3)``: each member embeds them with a static offset of its own (a curved top
+    approximated per mesh) that does not converge; their motion since the first frame does, at
+    order 2. The order and the limit of the motion are recovered, the first frame is the finest
+    member's, and the offsets are not counted as error."""
+    rng = np.random.default_rng(5)
+    ref = rng.normal(size=(20, 1, 3))
+    motion, C = rng.normal(size=(2, 20, 4, 3))
+    motion[:, 0] = C[:, 0] = 0.0
+    solved = {k: {"p": {"points": ref + 1e-3 * rng.normal(size=(20, 1, 3)) + motion + C * float(k) ** -2}}
+              for k in (1, 2, 3)}
+    values, rep = extrapolate(solved, (1, 2, 3), {"points": 1.0})
+    assert rep["orders"]["p/points"]["order"] == pytest.approx(2.0, abs=1e-5)
+    got = values["p"]["points"]
+    np.testing.assert_array_equal(got[:, 0], solved[3]["p"]["points"][:, 0])
+    np.testing.assert_allclose(got - got[:, :1], motion, atol=1e-8)
+
+
 def test_other_members_than_one_two_three():
     """Non-integer ratios (2, 3, 4): the generalised form still recovers order and limit."""
     y_inf, _, solved = _sequence(1.3, ks=(2, 3, 4))
