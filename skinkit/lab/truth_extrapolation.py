@@ -8,7 +8,7 @@ still leaves the subdermal modulus about 1.8 standard errors off, where the fit 
 model to the extrapolated solution is within them. Refining further soon costs more than a
 machine has; extrapolation costs two coarser solves.
 
-**Family.** The truth's own node placement (:data:`skinkit.lab.truth_mesh.GRADINGS`: no node where
+**Family.** The truth's own node placement (:func:`skinkit.lab.truth_mesh.own_gradings`: no node where
 the model's mesh or its refinement check put one) with every element count — in-plane and through
 each layer — multiplied by k (:func:`family_spec`). Gradings are functions of the position along
 a segment, so the members differ only in size: the setting Richardson extrapolation assumes.
@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import brentq
 
-from skinkit.lab.truth_mesh import GRADINGS, TruthMeshError
+from skinkit.lab.truth_mesh import TruthMeshError, own_gradings
 
 #: the observed orders accepted as asymptotic: a quadratic element converges near 1 at a bonded
 #: edge (a singularity) and at 3 in displacement where the field is smooth
@@ -61,19 +61,7 @@ MIN_FACTOR = 3
 def family_spec(spec: Mapping[str, Any], k: int) -> dict[str, Any]:
     """A deep copy of ``spec`` as the truth family's member ``k``: every element count (in-plane
     and each layer's) times ``k``, every grading moved as the truth's own mesh moves it."""
-    from skinkit.fem.discretisation import MESH_KEYS, refined_spec
-
-    s = refined_spec(spec, k)
-    g = s["geometry"]
-    kind = g.get("kind", "disc")
-    if kind == "block" and g.get("fit_indenter") is True:
-        kind = "block_fitted"
-    defaults = MESH_KEYS.get(kind, {})
-    for key, move in GRADINGS.items():
-        if key in defaults:
-            g[key] = float(move(float(g.get(key, defaults[key]))))
-    return s
-
+    return own_gradings(spec, k)
 
 def members(factor: int) -> tuple[int, int, int]:
     """The three member factors extrapolated from, the finest ``factor`` (>= :data:`MIN_FACTOR`)."""

@@ -55,11 +55,11 @@ def check_mode(mode: str, factor: int) -> None:
                              + f", got {factor!r}")
 
 
-def own_mesh(spec: Mapping[str, Any], factor: int = DEFAULT_FACTOR) -> dict[str, Any]:
-    """A deep copy of the finite-element description ``spec`` on the truth's own mesh (module)."""
-    from skinkit.fem.discretisation import LAYER_ELEMENTS_DEFAULT, MESH_KEYS, refined_spec
+def own_gradings(spec: Mapping[str, Any], factor: int) -> dict[str, Any]:
+    """A deep copy of ``spec`` with every element count (in-plane and each layer's) times
+    ``factor`` and every grading moved as the truth's own mesh moves it (:data:`GRADINGS`)."""
+    from skinkit.fem.discretisation import MESH_KEYS, refined_spec
 
-    check_mode("own", factor)
     s = refined_spec(spec, factor)
     g = s["geometry"]
     kind = g.get("kind", "disc")
@@ -69,6 +69,15 @@ def own_mesh(spec: Mapping[str, Any], factor: int = DEFAULT_FACTOR) -> dict[str,
     for key, move in GRADINGS.items():
         if key in defaults:
             g[key] = float(move(float(g.get(key, defaults[key]))))
+    return s
+
+
+def own_mesh(spec: Mapping[str, Any], factor: int = DEFAULT_FACTOR) -> dict[str, Any]:
+    """A deep copy of the finite-element description ``spec`` on the truth's own mesh (module)."""
+    from skinkit.fem.discretisation import LAYER_ELEMENTS_DEFAULT
+
+    check_mode("own", factor)
+    s = own_gradings(spec, factor)
     # one more element layer per factor through the thickness: the skin's gradients under the
     # indenter run across its thin layers, and the truth then has >= 8x the model's unknowns
     for L, L0 in zip(s["layers"], spec["layers"], strict=True):
@@ -137,4 +146,5 @@ def error_figures(fine: Mapping[str, Mapping[str, np.ndarray]],
 
 
 __all__ = ["DEFAULT_FACTOR", "GRADINGS", "MESH_MODES", "TruthMeshError", "check_mode",
-           "describe_meshes", "error_figures", "largest_truth_error", "mesh_figures", "own_mesh"]
+           "describe_meshes", "error_figures", "largest_truth_error", "mesh_figures", "own_gradings",
+           "own_mesh"]
