@@ -13,10 +13,15 @@ diagnosis has ended, with the error estimated again at the final model
 but does not settle the parameters: on the virtual forearm the second pass moves c, g1 and the
 pre-stress angle by 5–11 of their standard errors.
 
+Where the model's mesh cannot render what a parameter of the final model does — a region
+effect smaller than an element or two, whose size and place the coarse mesh only smears — the
+refits run on the mesh refined 2x instead, carrying that mesh's own, smaller error from the same
+pair (:func:`skinkit.inverse.approximation.resolution`, ``member="auto"``).
+
 Cost: per pass, two solves on the model's mesh and two on one refined 2x (one batch), and a
-refit of the final model from where it is; a second pass whose parameters stayed near the first
-estimate moves it to first order instead of solving again
-(:meth:`skinkit.inverse.approximation.ModelError.moved`).
+refit of the final model from where it is (on the refined mesh: each solve about eight times
+the elements); a second pass whose parameters stayed near the first estimate moves it to first
+order instead of solving again (:meth:`skinkit.inverse.approximation.ModelError.moved`).
 """
 
 from __future__ import annotations
@@ -42,7 +47,7 @@ def refit_final(spec: Mapping[str, Any], observations: Observations, result: Fit
     model = load(spec)
     try:
         out, _ = refit(model, observations, result, list(free), fit, progress=say,
-                       max_iterations=max_iterations)
+                       max_iterations=max_iterations, member="auto")
     except SkinkitError as exc:
         message = f"final model not refitted with its own discretisation error: {exc}"
         say(message)

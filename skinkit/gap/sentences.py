@@ -170,6 +170,19 @@ def model_error_messages(err: Mapping[str, Any] | None) -> list[str]:
     return out
 
 
+def final_mesh_messages(err: Mapping[str, Any] | None) -> list[str]:
+    """When the final model was refitted on the refined mesh (its estimate's ``member``): why (the
+    parameter the model's mesh renders worst, :func:`skinkit.inverse.approximation.resolution`)."""
+    if not err or err.get("member") != "refined":
+        return []
+    res = {k: v for k, v in (err.get("resolution") or {}).items() if v is not None}
+    worst = max(res, key=lambda n: res[n], default=None)
+    why = "" if worst is None else (f": the model's mesh misrepresents what {worst} does by "
+                                    f"{res[worst]:.2g} of its signature")
+    return [f"The final model's parameters come from the mesh refined {err.get('factor', 2)}x "
+            f"({err.get('unknowns_refined', 0):,} unknowns, carrying its own discretisation error){why}."]
+
+
 def periodic_sentence(lines: Sequence[Any], chi2_per_dof: float, elsewhere: bool) -> str:
     """The periodic components of the residual (:class:`skinkit.gap.lines.Line`) in words;
     ``elsewhere``: whether the residual's χ² shows a gap besides them."""
@@ -227,6 +240,7 @@ def messages(
             + (f"; located in {'; '.join(where)}." if where else ".")
         )
     out += added_messages(report["candidates"], added, min_share)
+    out += final_mesh_messages(report.get("final_model_error"))
     if not added:
         if tests_significant and not refit_any:
             out.append(

@@ -47,3 +47,15 @@ def test_plain_values_and_no_prestress():
                                 "skin.prestretch.angle": 0.0})
     assert shown == pytest.approx({"skin.prestretch.λ1": 1.2, "skin.prestretch.λ2": 1.0,
                                    "skin.prestretch.θ": 90.0})
+
+
+def test_a_final_model_fitted_on_the_refined_mesh_says_so_and_why():
+    """The verdict names the refined mesh and the parameter the model's mesh renders worst; a
+    final model on the model's own mesh adds nothing."""
+    from skinkit.gap.sentences import final_mesh_messages
+
+    err = {"member": "refined", "factor": 2, "unknowns_refined": 50787,
+           "resolution": {"skin.E": 0.06, "inclusion.a": 1.15, "inclusion.x": 0.97}}
+    (line,) = final_mesh_messages(err)
+    assert "refined 2x (50,787 unknowns" in line and "inclusion.a does by 1.1" in line
+    assert final_mesh_messages(dict(err, member="model")) == [] and final_mesh_messages(None) == []
