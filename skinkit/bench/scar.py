@@ -105,8 +105,11 @@ def scar_case(task: Mapping[str, Any]) -> dict[str, Any]:
         t_sim = time.perf_counter() - t0
         report = diagnose(model_spec(), str(session), workers=1).to_dict()
     scar = truth.get("scar")
+    final_error = report.get("final_model_error") or {}
     return {"id": case_id(task), "seed": seed, "healthy": healthy, "scar": scar,
             **score_case(report, scar), "chi2_per_dof": report.get("fit", {}).get("chi2_per_dof"),
+            # the mesh the final model was fitted on, and why (the model mesh's resolution)
+            "final_member": final_error.get("member"), "resolution": final_error.get("resolution"),
             "simulate_s": t_sim, "wall_s": time.perf_counter() - t0}
 
 
