@@ -329,8 +329,8 @@ def resolution(coarse: Prediction, derivatives: Mapping[tuple[str, str], np.ndar
     Near 0 the model's mesh renders the parameter's signature as the refined one does; near 1
     the refined mesh's signature differs from the model's by as much as the signature itself,
     and the parameter's value on the model's mesh is not the physical one (a region smaller
-    than an element or two: its size and position). ``inf`` for a parameter the model's mesh
-    does not see."""
+    than an element or two: its size and position). ``inf`` for a parameter the refined mesh
+    sees and the model's does not (null in JSON); 0 for one neither sees."""
     num, den = np.zeros(len(free)), np.zeros(len(free))
     for (proto, cname), dd in derivatives.items():
         cp = coarse.protocols[proto][cname]
@@ -342,7 +342,8 @@ def resolution(coarse: Prediction, derivatives: Mapping[tuple[str, str], np.ndar
             num[j] += float(np.sum((w * dd[j]) ** 2))
             if name in cp.d:
                 den[j] += float(np.sum((w * np.nan_to_num(np.asarray(cp.d[name], float))) ** 2))
-    return {n: math.sqrt(num[j] / den[j]) if den[j] > 0 else math.inf for j, n in enumerate(free)}
+    return {n: math.sqrt(num[j] / den[j]) if den[j] > 0 else (math.inf if num[j] > 0 else 0.0)
+            for j, n in enumerate(free)}
 
 
 def _predict_all(model: Any, calls: list[tuple[ParameterSet, Observations, Any]]) -> list[Prediction]:

@@ -226,7 +226,7 @@ def test_the_refined_member_carries_r_minus_one_of_the_same_pair():
 
 def test_resolution_is_the_whitened_share_of_the_signature_the_mesh_misses():
     """ρ_j = ‖W ∂(fine − coarse)/∂θ_j‖ / ‖W ∂coarse/∂θ_j‖ over the channels, each whitened by its
-    own noise; a parameter the model's mesh does not see at all is infinite."""
+    own noise; a parameter only the refined mesh sees is infinite, one neither sees 0."""
     from skinkit.inverse.approximation import resolution
 
     rng = np.random.default_rng(5)
@@ -237,14 +237,14 @@ def test_resolution_is_the_whitened_share_of_the_signature_the_mesh_misses():
     obs = Observations({"p": ProtocolObservations(Protocol("p", "trajectory"), ch)})
     coarse = Prediction({"p": {"tip_force": ChannelPrediction(np.zeros((20, 3)), d={"a": s1, "b": s1}),
                                "tip_position": ChannelPrediction(np.zeros((20, 3)), d={"a": s2, "b": s2})}})
-    derivs = {("p", "tip_force"): np.stack([0.3 * s1, 0.0 * s1, s1]),
-              ("p", "tip_position"): np.stack([0.3 * s2, 2.0 * s2, s2])}
-    rho = resolution(coarse, derivs, obs, ["a", "b", "c"])
+    derivs = {("p", "tip_force"): np.stack([0.3 * s1, 0.0 * s1, s1, 0.0 * s1]),
+              ("p", "tip_position"): np.stack([0.3 * s2, 2.0 * s2, s2, 0.0 * s2])}
+    rho = resolution(coarse, derivs, obs, ["a", "b", "c", "d"])
     assert rho["a"] == pytest.approx(0.3, rel=1e-12)
     # only the position channel's signature is misrepresented, twice over: weighted by its noise
     w1, w2 = np.sum((s1 / 0.5) ** 2), np.sum((s2 / 2.0) ** 2)
     assert rho["b"] == pytest.approx(np.sqrt(4 * w2 / (w1 + w2)), rel=1e-12)
-    assert rho["c"] == np.inf
+    assert rho["c"] == np.inf and rho["d"] == 0.0      # seen by the refined mesh alone; by neither
 
 
 @pytest.mark.needs_plugins
