@@ -94,8 +94,9 @@ DEFAULT_PASSES = 2
 MOVE_SPREADS = 3.0
 #: whose discretisation error an estimate describes: the model's mesh, or its refined copy
 MEMBERS = ("model", "refined")
-#: a final fit moves to the refined mesh when the model's mesh misrepresents some free
-#: parameter's signature by more than this share (:func:`resolution`). Measured: on the two-pad
+#: the model's mesh cannot render a free parameter whose signature it misrepresents by more than
+#: this share (:func:`resolution`; the gap verdict warns, ``refit(member="auto")`` moves the
+#: fit to the refined mesh). Measured: on the two-pad
 #: scar model (7,395 unknowns) at a scar 5.4 × 6.3 mm across the scar's centre along the pull,
 #: its long semi-axis and its angle 0.97-1.15, the moduli 0.04-0.06; on the virtual forearm
 #: (1,815 unknowns) c, k1, κ, g1 and the pre-stress 0.23-0.42. On that scar's session the fit on
