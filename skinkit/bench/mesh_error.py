@@ -18,6 +18,12 @@ without noise (so that every figure is the error model's, not a draw's):
   percentiles) and per radial band of the points' distance from the probe: a single ratio per
   band is what the estimate's covariance allows.
 
+* **the draws' linearity**: the estimate moves the refined-minus-model difference to its draw
+  around the parameters by the difference's derivatives instead of solving both meshes there
+  (:func:`skinkit.inverse.approximation.estimate`); the check solves the draw as well and reports
+  ‖W(d_solved − d_moved)‖ / ‖W(d_solved − d_0)‖, the share of the draw's change that the first
+  order misses.
+
 A truth finer than the model is not exact: its own error (the truth file's bound) limits what the
 check can tell apart, and ``truth_factor`` makes it finer.
 """
@@ -88,6 +94,8 @@ def run_case(case: str, truth_factor: int = 2, workers: int | None = 1,
         params = model.parameters()
         tell(f"{case}: the model's error estimated at the truth's parameters (its mesh and one refined 2x)")
         err = estimate(model, obs, params, free)
+        tell(f"{case}: its draw solved on both meshes as well, to measure the first order's miss")
+        linearity = draw_linearity(estimate(model, obs, params, free, solve_draws=True), err, obs)
         pred = model.predict(params, obs, sensitivities=False)
     finally:
         model.close()
@@ -117,7 +125,25 @@ def run_case(case: str, truth_factor: int = 2, workers: int | None = 1,
     mesh = lab.truth.truth.get("mesh") or {}
     return {"case": case, "truth_factor": truth_factor, "truth_mesh": mesh,
             "ratio_range": [r_lo, r_hi], "ratio_assumed": r_mid, "channels": rows,
-            "model_error": err.summary, "wall_s": time.perf_counter() - t0}
+            "model_error": err.summary, "draw_linearity": linearity, "wall_s": time.perf_counter() - t0}
+
+
+def draw_linearity(solved: Any, moved: Any, obs: Any) -> float | None:
+    """‖W(d_solved − d_moved)‖ / ‖W(d_solved − d_0)‖ over the draws of two estimates made at one
+    point with one seed, the draws of ``solved`` solved on both meshes and those of ``moved``
+    moved to by the derivatives (W: the noise's whitening); None when either kept no draws."""
+    if solved.source is None or moved.source is None or len(solved.source.diffs) < 2:
+        return None
+    d0 = solved.source.diffs[0]
+    num = den = 0.0
+    for ds, dm in zip(solved.source.diffs[1:], moved.source.diffs[1:], strict=True):
+        for key, d in ds.items():
+            ch = obs[key[0]].channels[key[1]]
+            with np.errstate(divide="ignore"):
+                w = np.nan_to_num(1.0 / np.asarray(ch.sigma(), float), nan=0.0, posinf=0.0)
+            num += float(np.sum((w * (d - dm[key])) ** 2))
+            den += float(np.sum((w * (d - d0[key])) ** 2))
+    return float(np.sqrt(num / den)) if den > 0 else None
 
 
 def run(cases: list[str], truth_factor: int = 2, say: Callable[[str], None] | None = None) -> dict[str, Any]:
@@ -160,4 +186,4 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
     return out
 
 
-__all__ = ["BANDS", "run", "run_case", "summary_lines"]
+__all__ = ["BANDS", "draw_linearity", "run", "run_case", "summary_lines"]

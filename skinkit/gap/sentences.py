@@ -171,31 +171,24 @@ def model_error_messages(err: Mapping[str, Any] | None) -> list[str]:
 
 
 def final_mesh_messages(err: Mapping[str, Any] | None) -> list[str]:
-    """What the final model's mesh cannot render (its estimate's ``resolution``: the free
+    """What the final model's mesh cannot render: its estimate's ``resolution`` names the free
     parameters whose signature the model's mesh misrepresents by more than
-    :data:`skinkit.inverse.approximation.RESOLUTION_LIMIT`), or, when the final model was refitted
-    on the refined mesh (``member``), that it was."""
-    from skinkit.inverse.approximation import RESOLUTION_LIMIT
+    :data:`skinkit.inverse.approximation.RESOLUTION_LIMIT`."""
+    from skinkit.inverse.approximation import RESOLUTION_LIMIT, unresolved
 
-    if not err:
-        return []
-    res = {k: v for k, v in (err.get("resolution") or {}).items() if v is not None}
-    worst = max(res, key=lambda n: res[n], default=None)
-    if err.get("member") == "refined":
-        why = "" if worst is None else (f": the model's mesh misrepresents what {worst} does by "
-                                        f"{res[worst]:.2g} of its signature")
-        return [f"The final model's parameters come from the mesh refined {err.get('factor', 2)}x "
-                f"({err.get('unknowns_refined', 0):,} unknowns, carrying its own discretisation error){why}."]
-    over = sorted((n for n, v in res.items() if v > RESOLUTION_LIMIT), key=lambda n: -res[n])
+    res = (err or {}).get("resolution") or {}
+    over = unresolved(res)
     if not over:
         return []
-    listed = ", ".join(f"{n} ({res[n]:.2g})" for n in over)
+    listed = ", ".join(f"{n} ({res[n]:.2g})" if res[n] is not None else f"{n} (only the refined mesh sees it)"
+                       for n in over)
+    one = len(over) == 1
     return [f"Warning: the model's mesh ({err.get('unknowns', 0):,} unknowns) cannot render what "
-            f"{listed} {'does' if len(over) == 1 else 'do'}: the refined mesh's signature differs from "
-            f"its own by more than {RESOLUTION_LIMIT:g} of it, so {'its' if len(over) == 1 else 'their'} "
-            f"fitted value{'s' if len(over) > 1 else ''} and interval{'s' if len(over) > 1 else ''} are the "
+            f"{listed} {'does' if one else 'do'}: the refined mesh's signature differs from "
+            f"its own by more than {RESOLUTION_LIMIT:g} of it, so {'its' if one else 'their'} "
+            f"fitted value{'' if one else 's'} and interval{'' if one else 's'} are the "
             f"mesh's more than the skin's; a mesh refined {err.get('factor', 2)}x "
-            f"({err.get('unknowns_refined', 0):,} unknowns) renders {'it' if len(over) == 1 else 'them'}."]
+            f"({err.get('unknowns_refined', 0):,} unknowns) renders {'it' if one else 'them'}."]
 
 
 def periodic_sentence(lines: Sequence[Any], chi2_per_dof: float, elsewhere: bool) -> str:

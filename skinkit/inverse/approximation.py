@@ -38,13 +38,19 @@ estimate (:meth:`Observations.with_model_error`). A direction whose variance is 
 noise variances is in effect projected out; the projection of one refined-mesh direction the
 diagnosis made before is its special case.
 
-**Cost.** ``draws + 1`` solves on the model's mesh and as many on the refined one (``factor³``
-times the unknowns), the refined ones handed to the workers as one batch; the calibration's pair
-with the free parameters' sensitivities (per step a few conjugate-gradient iterations
-preconditioned by the Newton loop's factorisation, no tangent factorised again), which the
-tangent form uses for its spread instead of draws. The estimate is made once per calibration
-and reused by every refit and candidate of a diagnosis (the mean and basis are stored with the
-observations).
+**Cost.** One solve on the model's mesh and one on the refined one (``factor³`` times the
+unknowns), both with the free parameters' sensitivities (per step a few conjugate-gradient
+iterations preconditioned by the Newton loop's factorisation, no tangent factorised again). Each
+draw's difference is the calibration's moved to it by those derivatives, d_k ≈ d + (∂d/∂θ)(θ_k −
+θ̂), not solved: within the draws' 10 % spread the error's change is close to linear (on the
+virtual forearm the solved draw differs from the moved one by 2–3 % of its change, at the truth
+and at a calibration far from it; ``skinkit bench mesh-error`` measures it), and a solved draw
+costs a solve on each mesh, a third of the estimate on the forearm (the refined mesh's solve
+there is 14 times the model's). Where a derivative is not analytic the draws are solved
+(``solve_draws`` forces it), ``draws + 1`` solves on each mesh, the refined ones handed to the
+workers as one batch. The tangent form uses the derivatives for its spread instead of draws.
+The estimate is made once per calibration and reused by every refit and candidate of a
+diagnosis (the mean and basis are stored with the observations).
 
 **Passes.** :func:`refit` estimates, refits, and estimates again where the refit went. When no
 free parameter went further than :data:`MOVE_SPREADS` of its draw spread, the next estimate is
@@ -355,12 +361,16 @@ def _predict_all(model: Any, calls: list[tuple[ParameterSet, Observations, Any]]
 
 
 def _solve_points(model: Any, fine_model: Any, fitted: Observations, params: ParameterSet,
-                  free: Sequence[str], draws: int | None, seed: int, factor: int, say: Callable[[str], None]
+                  free: Sequence[str], draws: int | None, seed: int, factor: int, say: Callable[[str], None],
+                  solve_draws: bool = False
                   ) -> tuple[list[Diffs], Diffs | None, Diffs | None, dict[str, Any]]:
     """``(differences at each point, tangent columns or None, the calibration's difference's
-    derivatives or None, unknowns)`` (:func:`estimate`). The derivatives come with the
-    calibration's two solves (a few preconditioned iterations per step and parameter); the
-    refined mesh's solves at the calibration and the draws go to the workers as one batch."""
+    derivatives or None, unknowns and solves)`` (:func:`estimate`). The derivatives come with the
+    calibration's two solves (a few preconditioned iterations per step and parameter). Each
+    draw's difference is the calibration's moved to it to first order by those derivatives
+    (:func:`_linear_draws`) unless ``solve_draws`` or a derivative is not analytic; then the
+    draws are solved on both meshes, the refined mesh's solves handed to the workers as one
+    batch."""
     sens = list(free) if free else False
     coarse = model.predict(params, fitted, sensitivities=sens)
     # derivatives another way than analytic would cost the refined mesh 2 solves per parameter
@@ -369,18 +379,30 @@ def _solve_points(model: Any, fine_model: Any, fitted: Observations, params: Par
     # nothing free: the error does not vary, the calibration alone says it
     points = [] if tangent or not free else _draws(params, free, DEFAULT_DRAWS if draws is None else draws,
                                                    seed)[1:]
+    linear = bool(points) and bool(sens) and analytic and not solve_draws
     say(f"model error: the calibration on the model's mesh and one refined {factor}x"
         + (", with the parameters' derivatives" if sens and analytic else "")
-        + (f", and {len(points)} draw(s) around it" if points else ""))
-    coarse_draws = _predict_all(model, [(params.with_values(v), fitted, False) for v in points])
+        + (f", and {len(points)} draw(s) around it" if points else "")
+        + (" moved to by those derivatives" if linear else ""))
     fine_params = fine_model.parameters().with_values(params.values())
-    fine, *fine_draws = _predict_all(fine_model, [(fine_params, fitted, sens if analytic else False)]
-                                     + [(fine_params.with_values(v), fitted, False) for v in points])
+    calls = [(fine_params, fitted, sens if analytic else False)]
+    fine = _predict_all(fine_model, calls + ([] if linear else [(fine_params.with_values(v), fitted, False)
+                                                                  for v in points]))
+    diffs = [_differences(coarse, fine[0], fitted)]
+    derivs = _derivatives(coarse, fine[0], fitted, free, list(diffs[0])) if sens and analytic else None
+    if linear and derivs is None:     # the refined mesh's derivatives were not analytic after all
+        linear = False
+        fine += _predict_all(fine_model, [(fine_params.with_values(v), fitted, False) for v in points])
+    if linear:
+        diffs += _linear_draws(diffs[0], derivs, params, free, points)
+    else:
+        coarse_draws = _predict_all(model, [(params.with_values(v), fitted, False) for v in points])
+        diffs += [_differences(c, f, fitted) for c, f in zip(coarse_draws, fine[1:], strict=True)]
+    n_solved = 1 + (0 if linear else len(points))
     info: dict[str, Any] = {"unknowns": int(coarse.info.get("n_dof", 0)),
-                            "unknowns_refined": int(fine.info.get("n_dof", 0))}
-    diffs = [_differences(coarse, fine, fitted)]
-    diffs += [_differences(c, f, fitted) for c, f in zip(coarse_draws, fine_draws, strict=True)]
-    derivs = _derivatives(coarse, fine, fitted, free, list(diffs[0])) if sens and analytic else None
+                            "unknowns_refined": int(fine[0].info.get("n_dof", 0)),
+                            "draws_from": "derivatives" if linear else "solves",
+                            "solves": {"model_mesh": n_solved, "refined_mesh": n_solved}}
     if derivs is not None:
         info["resolution"] = resolution(coarse, derivs, fitted, free)
     if not tangent or derivs is None:
@@ -388,6 +410,18 @@ def _solve_points(model: Any, fine_model: Any, fitted: Observations, params: Par
     steps = np.array([_step(params, n) for n in free])
     tangents = {k: d * steps.reshape((-1,) + (1,) * (d.ndim - 1)) for k, d in derivs.items()}
     return diffs, tangents, derivs, info
+
+
+def _linear_draws(d0: Diffs, derivs: Diffs, params: ParameterSet, free: Sequence[str],
+                  points: Sequence[Mapping[str, float]]) -> list[Diffs]:
+    """The refined-minus-model difference at each draw ``points`` to first order: ``d0`` (at
+    ``params``) + Σ_j ∂d/∂θ_j (θ_kj − θ̂_j) (the module's cost says why and how far)."""
+    base = params.values()
+    out = []
+    for v in points:
+        dtheta = np.array([float(v[n]) - float(base[n]) for n in free])
+        out.append({key: d + np.tensordot(dtheta, derivs[key], axes=1) for key, d in d0.items()})
+    return out
 
 
 def _assemble(diffs: Sequence[Diffs], tangents: Diffs | None,
@@ -429,16 +463,19 @@ def _assemble(diffs: Sequence[Diffs], tangents: Diffs | None,
 
 def estimate(model: Any, observations: Observations, params: ParameterSet, free: Sequence[str], *,
              draws: int | None = DEFAULT_DRAWS, factor: int = DEFAULT_FACTOR, seed: int = 0,
-             progress: Callable[[str], None] | None = None) -> ModelError:
+             progress: Callable[[str], None] | None = None, solve_draws: bool = False) -> ModelError:
     """The model's discretisation error on the fitted protocols of ``observations`` (see the
     module): ``model`` a finite-element forward model, ``params`` the calibration, ``free`` the
     parameters around it, ``factor`` the refinement. ``draws``: that many random draws around
     the calibration (default :data:`DEFAULT_DRAWS`), or None for the error's variation with the
     parameters from its derivatives at the calibration (one solve on each mesh, with
-    sensitivities; random draws when a derivative is not analytic).
+    sensitivities; random draws when a derivative is not analytic). Each draw's difference is
+    the calibration's moved to it by its derivatives (no solve) when they are analytic, unless
+    ``solve_draws``.
 
-    ``summary``: ``factor``, ``orders``, ``draws``, ``variation`` ("tangent" or "draws"),
-    ``unknowns``, ``unknowns_refined``, ``solves`` (on each mesh), ``channels`` (name -> ``rms``,
+    ``summary``: ``factor``, ``orders``, ``draws``, ``draws_from`` ("derivatives" or "solves"),
+    ``variation`` ("tangent" or "draws"), ``unknowns``, ``unknowns_refined``, ``solves`` (on
+    each mesh), ``channels`` (name -> ``rms``,
     ``max`` of the mean error [unit], ``noise``, ``rms_over_noise``), ``wall_s``.
     """
     if not has_mesh(model):
@@ -454,7 +491,7 @@ def estimate(model: Any, observations: Observations, params: ParameterSet, free:
     fine_model = model.refined(factor)
     try:
         diffs, tangents, derivs, info = _solve_points(model, fine_model, fitted, params, free, draws, seed,
-                                                      factor, say)
+                                                      factor, say, solve_draws)
     finally:
         fine_model.close()
     K = len(diffs)
@@ -464,7 +501,7 @@ def estimate(model: Any, observations: Observations, params: ParameterSet, free:
                "member": "model", **_figures(mean, fitted),
                "factor": factor, "orders": [ORDER_LOW, ORDER_HIGH], "draws": K - 1, "spread": SPREAD,
                "variation": "tangent" if tangents is not None else "draws",
-               **info, "solves": {"model_mesh": K, "refined_mesh": K}, "wall_s": time.perf_counter() - t0}
+               **info, "wall_s": time.perf_counter() - t0}
     source = None if derivs is None else _Source(
         diffs, tangents, groups, factor, list(free), {n: float(params.values()[n]) for n in free},
         {n: _step(params, n) for n in free}, derivs)
@@ -544,14 +581,22 @@ def refit(model: Any, observations: Observations, result: Any, free: Sequence[st
     return new, carried
 
 
+def unresolved(resolution: Mapping[str, float | None]) -> list[str]:
+    """The free parameters whose signature the model's mesh misrepresents by more than
+    :data:`RESOLUTION_LIMIT` (``resolution``: :func:`resolution`'s, None for one only the refined
+    mesh sees, as JSON writes ``inf``), the worst first."""
+    res = {n: math.inf if v is None else float(v) for n, v in resolution.items()}
+    return sorted((n for n, v in res.items() if v > RESOLUTION_LIMIT), key=lambda n: -res[n])
+
+
 def _choose_member(err: ModelError, say: Callable[[str], None]) -> str:
     """``"refined"`` when ``err`` found a free parameter whose signature the model's mesh
     misrepresents by more than :data:`RESOLUTION_LIMIT` (and can be re-scaled), else ``"model"``."""
     res = err.summary.get("resolution") or {}
-    worst = max(res, key=lambda n: res[n], default=None)
-    if worst is None or err.source is None or not res[worst] > RESOLUTION_LIMIT:
+    over = unresolved(res)
+    if not over or err.source is None:
         return "model"
-    say(f"model error: the model's mesh misrepresents what {worst} does by {res[worst]:.2g} of its "
+    say(f"model error: the model's mesh misrepresents what {over[0]} does by {res[over[0]]:.2g} of its "
         f"signature (more than {RESOLUTION_LIMIT:g}): refitting on the mesh refined "
         f"{err.summary.get('factor', DEFAULT_FACTOR)}x, carrying that mesh's own error")
     return "refined"
@@ -575,9 +620,18 @@ def describe(summary: Mapping[str, Any]) -> list[str]:
     if summary.get("member") == "refined":
         lines.append(f"  fitted on the refined mesh ({summary.get('unknowns_refined', 0):,} unknowns), "
                      "carrying that mesh's own error")
+    res = summary.get("resolution") or {}
+    over = unresolved(res)
+    if over and summary.get("member") != "refined":
+        listed = ", ".join(f"{n} ({'refined mesh only' if res[n] is None else format(res[n], '.2g')})"
+                           for n in over)
+        lines.append(f"  warning: this mesh misrepresents what {listed} "
+                     f"{'does' if len(over) == 1 else 'do'} by more than {RESOLUTION_LIMIT:g} of the "
+                     f"signature: the value is the mesh's more than the skin's (the mesh refined "
+                     f"{summary.get('factor', DEFAULT_FACTOR)}x renders it)")
     return lines
 
 
 __all__ = ["DEFAULT_DRAWS", "DEFAULT_PASSES", "MEMBERS", "MOVE_SPREADS", "ModelError", "ORDER_HIGH",
            "ORDER_LOW", "RESOLUTION_LIMIT", "SPREAD", "apply", "describe", "estimate", "not_estimated",
-           "refit", "resolution", "whitening"]
+           "refit", "resolution", "unresolved", "whitening"]

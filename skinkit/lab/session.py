@@ -567,18 +567,19 @@ def _truth_on_meshes(spec: dict[str, Any], mesh: str, factor: int, planned: Sequ
     opened: list[Any] = []
     try:
         if mesh == "extrapolated":
-            from skinkit.lab.truth_extrapolation import extrapolate, family_spec, members
+            from skinkit.lab.truth_extrapolation import extrapolate, members
+            from skinkit.lab.truth_mesh import own_gradings
 
             ks = members(factor)
             solved, unknowns = {}, []
             for k in ks:
-                member = family_spec(spec, k)
+                member = own_gradings(spec, k)
                 solved[k], m = run_truth(member, planned, sensors, surface, workers, progress, points,
                                          stage=f"truth, mesh {k}x of {ks[-1]}x")
                 opened.append(m)
                 unknowns.append(mesh_figures(member)["unknowns"])
             noiseless, rep = extrapolate(solved, ks, _noise_levels(sensors))
-            finest = family_spec(spec, ks[-1])
+            finest = own_gradings(spec, ks[-1])
         else:
             finest = own_mesh(spec, factor)
             noiseless, m = run_truth(finest, planned, sensors, surface, workers, progress, points)

@@ -10,7 +10,7 @@ machine has; extrapolation costs two coarser solves.
 
 **Family.** The truth's own node placement (:func:`skinkit.lab.truth_mesh.own_gradings`: no node where
 the model's mesh or its refinement check put one) with every element count — in-plane and through
-each layer — multiplied by k (:func:`family_spec`). Gradings are functions of the position along
+each layer — multiplied by k (the same function). Gradings are functions of the position along
 a segment, so the members differ only in size: the setting Richardson extrapolation assumes.
 
 **Order and limit.** For members k = F − 2, F − 1, F (a, b, c) and each protocol and channel, the
@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import brentq
 
-from skinkit.lab.truth_mesh import TruthMeshError, own_gradings
+from skinkit.lab.truth_mesh import TruthMeshError
 
 #: the observed orders accepted as asymptotic: a quadratic element converges near 1 at a bonded
 #: edge (a singularity) and at 3 in displacement where the field is smooth
@@ -57,11 +57,6 @@ ORDER_MIN, ORDER_MAX = 0.5, 4.0
 #: the coarsest finest member: three members 1, 2, 3 times the model's counts
 MIN_FACTOR = 3
 
-
-def family_spec(spec: Mapping[str, Any], k: int) -> dict[str, Any]:
-    """A deep copy of ``spec`` as the truth family's member ``k``: every element count (in-plane
-    and each layer's) times ``k``, every grading moved as the truth's own mesh moves it."""
-    return own_gradings(spec, k)
 
 def members(factor: int) -> tuple[int, int, int]:
     """The three member factors extrapolated from, the finest ``factor`` (>= :data:`MIN_FACTOR`)."""
@@ -149,4 +144,4 @@ def extrapolate(solved: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]], ks
     return values, report
 
 
-__all__ = ["MIN_FACTOR", "ORDER_MAX", "ORDER_MIN", "extrapolate", "family_spec", "members", "observed_order"]
+__all__ = ["MIN_FACTOR", "ORDER_MAX", "ORDER_MIN", "extrapolate", "members", "observed_order"]

@@ -49,17 +49,18 @@ def test_plain_values_and_no_prestress():
                                    "skin.prestretch.θ": 90.0})
 
 
-def test_a_final_model_fitted_on_the_refined_mesh_says_so_and_why():
-    """The verdict names the refined mesh and the parameter the model's mesh renders worst; on
-    the model's own mesh it warns of the parameters over the limit, and of nothing else."""
+def test_the_verdict_warns_of_the_parameters_the_models_mesh_cannot_render():
+    """The verdict warns of the final model's parameters over the resolution limit, the worst
+    first (one only the refined mesh sees, null in JSON, said so), and of nothing else."""
     from skinkit.gap.sentences import final_mesh_messages
 
-    err = {"member": "refined", "factor": 2, "unknowns": 7395, "unknowns_refined": 50787,
-           "resolution": {"skin.E": 0.06, "inclusion.a": 1.15, "inclusion.x": 0.97, "offset.x": None}}
-    (line,) = final_mesh_messages(err)
-    assert "refined 2x (50,787 unknowns" in line and "inclusion.a does by 1.1" in line
-    (warn,) = final_mesh_messages(dict(err, member="model"))
+    err = {"member": "model", "factor": 2, "unknowns": 7395, "unknowns_refined": 50787,
+           "resolution": {"skin.E": 0.06, "inclusion.a": 1.15, "inclusion.x": 0.97, "offset.x": 0.0}}
+    (warn,) = final_mesh_messages(err)
     assert warn.startswith("Warning: the model's mesh (7,395 unknowns) cannot render")
     assert "inclusion.a (1.1), inclusion.x (0.97) do" in warn and "skin.E" not in warn
-    assert final_mesh_messages(dict(err, member="model", resolution={"skin.E": 0.3})) == []
+    assert "refined 2x (50,787 unknowns) renders them" in warn
+    (only,) = final_mesh_messages(dict(err, resolution={"inclusion.y": None, "skin.E": 0.3}))
+    assert "inclusion.y (only the refined mesh sees it) does" in only and "skin.E" not in only
+    assert final_mesh_messages(dict(err, resolution={"skin.E": 0.3})) == []
     assert final_mesh_messages(None) == []

@@ -9,11 +9,10 @@ from skinkit.lab.truth_extrapolation import (
     ORDER_MAX,
     ORDER_MIN,
     extrapolate,
-    family_spec,
     members,
     observed_order,
 )
-from skinkit.lab.truth_mesh import TruthMeshError, check_mode
+from skinkit.lab.truth_mesh import TruthMeshError, check_mode, own_gradings
 
 
 def _sequence(p: float, ks=(1, 2, 3), seed: int = 0):
@@ -116,13 +115,13 @@ def test_a_sequence_outside_the_asymptotic_range_is_clipped_and_said():
 def test_the_family_scales_every_count_and_moves_every_grading():
     spec = {"geometry": {"kind": "disc", "n_inner": 1, "n_ring": 2, "grading": 1.6},
             "layers": [{"name": "a", "elements": 1}, {"name": "b", "elements": 2}]}
-    s = family_spec(spec, 3)
+    s = own_gradings(spec, 3)
     g = s["geometry"]
     assert (g["n_inner"], g["n_ring"]) == (3, 6)
     assert [L["elements"] for L in s["layers"]] == [3, 6]
     assert g["grading"] != 1.6 and g["inner_grading"] != 1.0 and g["layer_grading"] != 1.0
     # the members differ only in size: every grading is the same on each
-    g1 = family_spec(spec, 1)["geometry"]
+    g1 = own_gradings(spec, 1)["geometry"]
     assert all(g1[k] == g[k] for k in g if k.endswith("grading"))
     assert spec["geometry"]["n_inner"] == 1   # the description itself is left alone
 
@@ -166,7 +165,7 @@ def test_the_lab_solves_three_members_and_records_their_limit():
     assert mesh["mode"] == "extrapolated" and mesh["factor"] == 3
     ext = mesh["extrapolation"]
     assert ext["members"] == [1, 2, 3]
-    assert ext["member_unknowns"] == [mesh_figures(family_spec(TINY, k))["unknowns"] for k in (1, 2, 3)]
+    assert ext["member_unknowns"] == [mesh_figures(own_gradings(TINY, k))["unknowns"] for k in (1, 2, 3)]
     assert mesh["truth_unknowns"] == ext["member_unknowns"][-1]
     assert mesh["model_unknowns"] == mesh_figures(TINY)["unknowns"]
     assert set(ext["orders"]) == {"normal_indentation/tip_force", "normal_indentation/points"}
