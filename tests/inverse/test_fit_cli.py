@@ -234,6 +234,20 @@ def test_failed_solve_shrinks_the_step():
     assert r.n_forward == sum(h["solved"] for h in r.extra["history"])
 
 
+def test_a_start_on_a_bound_is_solved_once():
+    """scipy's trust-region reflective moves a start lying on a bound strictly inside (by ~1e-10
+    of the scale) and asks for it again: the same point, not a second solve."""
+    from skinkit.inverse import fit
+    t = np.linspace(0, 1, 101)
+    y = np.sqrt(0.6) * t[:, None] * np.ones((1, 3))
+    obs = Observations({"p": ProtocolObservations(Protocol("p"), {
+        "tip_force": Channel("tip_force", t, y, noise=1e-3)})}, None, "test")
+    r = fit(_SqrtModel(), obs, ["a"], start={"a": 10.0})
+    xs = [h["x"][0] for h in r.extra["history"]]
+    assert xs[0] == 10.0 and all(abs(x - 10.0) > 1e-6 for x in xs[1:]), xs
+    assert r.n_forward == sum(h["solved"] for h in r.extra["history"])
+
+
 def test_k1_k2_trade_off_is_reported_not_hidden():
     """GOH skin indented only 0.3 mm p-p: the fibres stay in their quadratic range, where the
     energy k1/(2 k2) (exp(k2 E²) - 1) ≈ k1 E²/2 (1 + k2 E²/2) leaves k2 almost without effect
