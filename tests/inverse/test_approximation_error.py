@@ -238,6 +238,38 @@ def test_a_draw_moved_to_by_the_derivatives_is_the_draw_solved():
         np.testing.assert_allclose(moved.mean[key], want, atol=0.1 * change + 1e-30, err_msg=str(key))
 
 
+@pytest.mark.needs_plugins
+def test_the_first_pass_starts_where_the_carried_chi2_is_lower():
+    """A calibration the mesh's error has dragged far off (here both moduli a hundredth of the
+    truth's) is a poor start for the first pass; the calibration's own start (the user's prior) is
+    taken instead when the χ² carrying the error is lower there, and not otherwise."""
+    from skinkit.forward import load
+    from skinkit.inverse import fit
+    from skinkit.inverse.approximation import _first_start, estimate
+    from skinkit.inverse.coverage import LabSessions
+    from tests.inverse.test_discretisation_bias import _spec
+
+    lab = LabSessions(_spec(), workers=1)
+    obs = lab(0)
+    free = ["skin.E", "subdermal.E"]
+    model = load(copy.deepcopy(lab.model_spec), workers=1)
+    said: list[str] = []
+    try:
+        truth = {n: model.parameters()[n] for n in free}
+        r = fit(model, obs, free, max_iterations=3)
+        carried = obs.with_model_error(estimate(model, obs, r.parameters, free))
+        r.extra["history"][0]["x"] = [truth[n] for n in r.extra["free"]]
+        r.parameters = r.parameters.with_values({n: 0.01 * v for n, v in truth.items()})
+        assert _first_start(model, carried, r, free, "noise", said.append) == truth
+        assert "starts there" in said[-1]
+        r.parameters = r.parameters.with_values(truth)
+        r.extra["history"][0]["x"] = [0.01 * truth[n] for n in r.extra["free"]]
+        assert _first_start(model, carried, r, free, "noise", said.append) == truth
+        assert len(said) == 1
+    finally:
+        model.close()
+
+
 def test_the_refined_member_carries_r_minus_one_of_the_same_pair():
     """Richardson's exact − coarse = R d gives exact − fine = (R − 1) d: R uniform over
     [R(2), R(1)] makes R − 1 uniform over the same width, so the refined member's mean and its
