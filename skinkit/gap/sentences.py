@@ -180,8 +180,8 @@ def final_mesh_messages(err: Mapping[str, Any] | None) -> list[str]:
     over = unresolved(res)
     if not over:
         return []
-    listed = ", ".join(f"{n} ({res[n]:.2g})" if res[n] is not None else f"{n} (only the refined mesh sees it)"
-                       for n in over)
+    listed = ", ".join(f"{n} ({res[n]:.2g})" if res[n] is not None and math.isfinite(res[n])
+                       else f"{n} (only the refined mesh sees it)" for n in over)
     one = len(over) == 1
     return [f"Warning: the model's mesh ({err.get('unknowns', 0):,} unknowns) cannot render what "
             f"{listed} {'does' if one else 'do'}: the refined mesh's signature differs from "

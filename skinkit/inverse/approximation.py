@@ -662,8 +662,9 @@ def describe(summary: Mapping[str, Any]) -> list[str]:
     res = summary.get("resolution") or {}
     over = unresolved(res)
     if over and summary.get("member") != "refined":
-        listed = ", ".join(f"{n} ({'refined mesh only' if res[n] is None else format(res[n], '.2g')})"
-                           for n in over)
+        def shown(v: float | None) -> str:
+            return format(v, ".2g") if v is not None and math.isfinite(v) else "refined mesh only"
+        listed = ", ".join(f"{n} ({shown(res[n])})" for n in over)
         lines.append(f"  warning: this mesh misrepresents what {listed} "
                      f"{'does' if len(over) == 1 else 'do'} by more than {RESOLUTION_LIMIT:g} of the "
                      f"signature: the value is the mesh's more than the skin's (the mesh refined "

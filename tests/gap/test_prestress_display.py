@@ -62,5 +62,8 @@ def test_the_verdict_warns_of_the_parameters_the_models_mesh_cannot_render():
     assert "refined 2x (50,787 unknowns) renders them" in warn
     (only,) = final_mesh_messages(dict(err, resolution={"inclusion.y": None, "skin.E": 0.3}))
     assert "inclusion.y (only the refined mesh sees it) does" in only and "skin.E" not in only
+    # before JSON the summary holds infinity where JSON writes null
+    (inf,) = final_mesh_messages(dict(err, resolution={"inclusion.y": float("inf")}))
+    assert "inclusion.y (only the refined mesh sees it) does" in inf
     assert final_mesh_messages(dict(err, resolution={"skin.E": 0.3})) == []
     assert final_mesh_messages(None) == []

@@ -327,6 +327,9 @@ def test_the_fit_summary_warns_of_the_parameters_the_mesh_cannot_render():
     assert "inclusion.y (refined mesh only), inclusion.a (1.1), inclusion.x (0.97) do" in warn
     assert "skin.E" not in warn
     assert not any("warning" in ln for ln in describe(dict(summary, member="refined")))
+    lines = describe(dict(summary, resolution={"inclusion.y": float("inf")}))
+    (inf,) = [ln for ln in lines if "warning" in ln]
+    assert "inclusion.y (refined mesh only) does" in inf
 
 
 @pytest.mark.needs_plugins
