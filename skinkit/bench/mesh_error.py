@@ -132,15 +132,15 @@ def draw_linearity(solved: Any, moved: Any, obs: Any) -> float | None:
     """‖W(d_solved − d_moved)‖ / ‖W(d_solved − d_0)‖ over the draws of two estimates made at one
     point with one seed, the draws of ``solved`` solved on both meshes and those of ``moved``
     moved to by the derivatives (W: the noise's whitening); None when either kept no draws."""
+    from skinkit.inverse.approximation import noise_weights
+
     if solved.source is None or moved.source is None or len(solved.source.diffs) < 2:
         return None
     d0 = solved.source.diffs[0]
     num = den = 0.0
     for ds, dm in zip(solved.source.diffs[1:], moved.source.diffs[1:], strict=True):
         for key, d in ds.items():
-            ch = obs[key[0]].channels[key[1]]
-            with np.errstate(divide="ignore"):
-                w = np.nan_to_num(1.0 / np.asarray(ch.sigma(), float), nan=0.0, posinf=0.0)
+            w = noise_weights(obs[key[0]].channels[key[1]])
             num += float(np.sum((w * (d - dm[key])) ** 2))
             den += float(np.sum((w * (d - d0[key])) ** 2))
     return float(np.sqrt(num / den)) if den > 0 else None

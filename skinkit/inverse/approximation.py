@@ -331,6 +331,13 @@ def _derivatives(coarse: Prediction, fine: Prediction, observations: Observation
     return out
 
 
+def noise_weights(ch: Any) -> np.ndarray:
+    """1/σ of channel ``ch`` per entry (its values' shape or broadcastable to it) [1/unit]; 0
+    where the noise level is zero or unknown."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.nan_to_num(1.0 / np.asarray(ch.sigma(), float), nan=0.0, posinf=0.0)
+
+
 def resolution(coarse: Prediction, derivatives: Mapping[tuple[str, str], np.ndarray],
                observations: Observations, free: Sequence[str]) -> dict[str, float]:
     """Per free parameter, how far the model's mesh misrepresents what it does: ‖∂(fine −
@@ -345,9 +352,7 @@ def resolution(coarse: Prediction, derivatives: Mapping[tuple[str, str], np.ndar
     for (proto, cname), dd in derivatives.items():
         cp = coarse.protocols[proto][cname]
         ch = observations[proto].channels[cname]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w = np.nan_to_num(1.0 / np.asarray(ch.sigma(), float), nan=0.0, posinf=0.0)
-        w = np.where(cp.mask(ch), w, 0.0)
+        w = np.where(cp.mask(ch), noise_weights(ch), 0.0)
         for j, name in enumerate(free):
             num[j] += float(np.sum((w * dd[j]) ** 2))
             if name in cp.d:
@@ -388,14 +393,14 @@ def _solve_points(model: Any, fine_model: Any, fitted: Observations, params: Par
         + (f", and {len(points)} draw(s) around it" if points else "")
         + (" moved to by those derivatives" if linear else ""))
     fine_params = fine_model.parameters().with_values(params.values())
-    calls = [(fine_params, fitted, sens if analytic else False)]
-    fine = _predict_all(fine_model, calls + ([] if linear else [(fine_params.with_values(v), fitted, False)
-                                                                  for v in points]))
+    draw_calls = [(fine_params.with_values(v), fitted, False) for v in points]
+    fine = _predict_all(fine_model, [(fine_params, fitted, sens if analytic else False)]
+                        + ([] if linear else draw_calls))
     diffs = [_differences(coarse, fine[0], fitted)]
     derivs = _derivatives(coarse, fine[0], fitted, free, list(diffs[0])) if sens and analytic else None
     if linear and derivs is None:     # the refined mesh's derivatives were not analytic after all
         linear = False
-        fine += _predict_all(fine_model, [(fine_params.with_values(v), fitted, False) for v in points])
+        fine += _predict_all(fine_model, draw_calls)
     if linear:
         diffs += _linear_draws(diffs[0], derivs, params, free, points)
     else:
@@ -673,5 +678,5 @@ def describe(summary: Mapping[str, Any]) -> list[str]:
 
 
 __all__ = ["DEFAULT_DRAWS", "DEFAULT_PASSES", "MEMBERS", "MOVE_SPREADS", "ModelError", "ORDER_HIGH",
-           "ORDER_LOW", "RESOLUTION_LIMIT", "SPREAD", "apply", "describe", "estimate", "not_estimated",
-           "refit", "resolution", "unresolved", "whitening"]
+           "ORDER_LOW", "RESOLUTION_LIMIT", "SPREAD", "apply", "describe", "estimate", "noise_weights",
+           "not_estimated", "refit", "resolution", "unresolved", "whitening"]

@@ -115,22 +115,28 @@ def test_a_truth_on_its_own_mesh_biases_the_fit_and_the_carried_error_restores_i
     assert me["accounts_for"] is not None and me["accounts_for"] > 0.5
 
 
+def _disc_two_moduli():
+    """The small layered disc's session (seed 0, truth on the model's mesh), its two moduli, and
+    its model loaded on one worker (the caller closes it)."""
+    from skinkit.forward import load
+    from skinkit.inverse.coverage import LabSessions
+    from tests.inverse.test_discretisation_bias import _spec
+
+    lab = LabSessions(_spec(), workers=1)
+    return lab(0), ["skin.E", "subdermal.E"], load(copy.deepcopy(lab.model_spec), workers=1)
+
+
 def test_the_error_varies_with_the_parameters_as_its_derivatives_say():
     """The tangent estimate (draws=None) carries the error's variation over the parameters'
     spread from the refined-minus-model derivatives at the calibration (one solve per mesh); each such column
     must be what the error itself does when that parameter moves by its spread: checked by
     solving both meshes again at θ_j + s θ_j (the second-order terms of a 10 % move of a modulus
     are a few per cent of the change; 10 % of its largest entry is allowed)."""
-    from skinkit.forward import load
     from skinkit.inverse.approximation import ORDER_HIGH, ORDER_LOW, SPREAD, _differences, estimate
-    from skinkit.inverse.coverage import LabSessions
     from skinkit.inverse.discretisation import richardson_factor
-    from tests.inverse.test_discretisation_bias import _spec
 
-    lab = LabSessions(_spec(), workers=1)
-    obs = lab(0).fitted()
-    free = ["skin.E", "subdermal.E"]
-    model = load(copy.deepcopy(lab.model_spec), workers=1)
+    session, free, model = _disc_two_moduli()
+    obs = session.fitted()
     fine = model.refined(2)
     try:
         p = model.parameters()
@@ -169,15 +175,10 @@ def test_a_pass_within_the_spread_moves_the_estimate_as_solving_again_would():
     solving both meshes again. Checked against solving both again at the moved point (same
     seed, so the same draw): half a spread on each modulus leaves second-order terms, a few per
     cent of the mean's change, 10 % allowed; beyond the spread it is not used."""
-    from skinkit.forward import load
     from skinkit.inverse.approximation import MOVE_SPREADS, SPREAD, estimate
-    from skinkit.inverse.coverage import LabSessions
-    from tests.inverse.test_discretisation_bias import _spec
 
-    lab = LabSessions(_spec(), workers=1)
-    obs = lab(0).fitted()
-    free = ["skin.E", "subdermal.E"]
-    model = load(copy.deepcopy(lab.model_spec), workers=1)
+    session, free, model = _disc_two_moduli()
+    obs = session.fitted()
     try:
         p = model.parameters()
         err = estimate(model, obs, p, free)
@@ -212,15 +213,10 @@ def test_a_draw_moved_to_by_the_derivatives_is_the_draw_solved():
     change; 10 % of it (whitened) is allowed, and the means (which hold half the draw, times the
     Richardson factor) agree within 10 % of the draw's largest change."""
     from skinkit.bench.mesh_error import draw_linearity
-    from skinkit.forward import load
     from skinkit.inverse.approximation import estimate
-    from skinkit.inverse.coverage import LabSessions
-    from tests.inverse.test_discretisation_bias import _spec
 
-    lab = LabSessions(_spec(), workers=1)
-    obs = lab(0).fitted()
-    free = ["skin.E", "subdermal.E"]
-    model = load(copy.deepcopy(lab.model_spec), workers=1)
+    session, free, model = _disc_two_moduli()
+    obs = session.fitted()
     try:
         p = model.parameters()
         moved = estimate(model, obs, p, free, seed=3)
@@ -243,16 +239,10 @@ def test_the_first_pass_starts_where_the_carried_chi2_is_lower():
     """A calibration the mesh's error has dragged far off (here both moduli a hundredth of the
     truth's) is a poor start for the first pass; the calibration's own start (the user's prior) is
     taken instead when the χ² carrying the error is lower there, and not otherwise."""
-    from skinkit.forward import load
     from skinkit.inverse import fit
     from skinkit.inverse.approximation import _first_start, estimate
-    from skinkit.inverse.coverage import LabSessions
-    from tests.inverse.test_discretisation_bias import _spec
 
-    lab = LabSessions(_spec(), workers=1)
-    obs = lab(0)
-    free = ["skin.E", "subdermal.E"]
-    model = load(copy.deepcopy(lab.model_spec), workers=1)
+    obs, free, model = _disc_two_moduli()
     said: list[str] = []
     try:
         truth = {n: model.parameters()[n] for n in free}
