@@ -17,7 +17,10 @@ differences of whole solves.
 
 Protocols are independent solves: they run in worker processes (``workers``, default one
 per core) or on a Dask cluster (``scheduler``); every solve uses one thread, so the numbers
-do not depend on where or how many solves run at once.
+do not depend on where or how many solves run at once — except where a prediction has fewer
+protocols than workers (a one-protocol record on two cores): the idle cores then go to each
+protocol's sparse direct solver (PARDISO's threads), whose sums in another order agree with one
+thread's to rounding, not bit for bit.
 
 Progress: a prediction reports the fraction of its solver steps done
 (:func:`skinkit.forward.stages.report`), step by step from the worker processes too, so a caller
@@ -68,6 +71,9 @@ class ProtocolJob:
     # geometry parameter -> design velocity of the nodes (N, 3) and their depths (N,) [m per unit]
     shapes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     shape_points: dict[str, np.ndarray] = field(default_factory=dict)   # -> (P, 3) points' dX/dp
+    # the sparse direct solver's threads: more than one only where a prediction has fewer
+    # protocols than workers (set when solving, after the solve cache's key: same numbers to rounding)
+    threads: int = 1
 
 
 def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np.ndarray]:
@@ -84,7 +90,8 @@ def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np
 
 def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None = None) -> dict[str, Any]:
     """Solve one protocol; the outputs at ``[0, *job.times]`` (the first row is the unloaded
-    state) with their derivatives. Runs with one thread (see the module docstring).
+    state) with their derivatives. Runs with one thread, its sparse solver with ``job.threads``
+    (see the module docstring).
     ``on_fraction(f)``: told the fraction of the output steps solved after each one."""
     from threadpoolctl import threadpool_limits
 
@@ -117,6 +124,8 @@ def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None
                 f.level = _interp_table(job.times, job.level if job.level is not None else none)
                 f.strokes = _interp_table(job.times, job.strokes if job.strokes is not None else none)
         solver = NewtonSolver(model.problem, model.bc, model.options)
+        if job.threads > 1:
+            solver.linear.use_threads(job.threads)
         series = _field_series(job, model)
         from skinkit.forward import fe_geometry
         shapes = fe_geometry.velocities(spec, mesh, job.shapes, model) if job.shapes else None
@@ -162,7 +171,7 @@ def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None
                 "newton_per_step": tm.iterations / max(solver.steps_taken, 1),
                 "factorisations": tm.factorisations, "back_substitutions": tm.back_substitutions,
                 "assembly_s": tm.assembly, "linear_solve_s": tm.solve, "n_dof": mesh.n_dof,
-                "linear_solver": solver.linear.name, "process": os.getpid()}
+                "linear_solver": solver.linear.name, "threads": job.threads, "process": os.getpid()}
         if series is not None:
             info["vtu"] = str(series[0].close())
         return {"name": job.name, "times": np.concatenate([[0.0], job.times]), "tip_u": tip_u,
@@ -626,8 +635,12 @@ class FEForwardModel(ForwardModel):
     def _run(self, jobs: list[ProtocolJob]) -> dict[str, dict[str, Any]]:
         if self.scheduler is not None:
             return self._run_dask(jobs)
-        workers = self.workers if self.workers is not None else (os.cpu_count() or 1)
-        workers = max(1, min(workers, len(jobs)))
+        wanted = max(1, self.workers if self.workers is not None else (os.cpu_count() or 1))
+        workers = min(wanted, len(jobs))
+        if jobs and wanted >= 2 * len(jobs):
+            # fewer protocols than workers (a one-protocol record): the idle cores go to each
+            # protocol's sparse solver
+            jobs = [replace(j, threads=wanted // len(jobs)) for j in jobs]
         tracker = SolveProgress(jobs)
         if workers == 1:
             return {j.name: solve_protocol(j, lambda f, n=j.name: tracker(n, f)) for j in jobs}

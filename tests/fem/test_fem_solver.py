@@ -182,6 +182,35 @@ def test_linear_solvers_agree(linear):
     np.testing.assert_allclose(u, u_ref, atol=1e-10)
 
 
+def test_pardiso_on_two_threads_solves_as_on_one():
+    """A protocol solved alone may give PARDISO the idle cores: the same solution to rounding
+    (the factorisation's sums in another order), and the count is fixed once analysed (PARDISO
+    crashes when its phases run with different counts)."""
+    from threadpoolctl import threadpool_limits
+
+    from skinkit.fem import linsolve
+    from skinkit.fem.errors import SolverError
+    if "pardiso" not in linsolve.available():
+        pytest.skip("pypardiso not installed")
+    m = block_mesh((1, 1, 1), (6, 6, 6))
+    prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 20.0})])
+    bc = BoundaryConditions(m.n_dof).fix(m.node_sets["bottom"]).fix(m.node_sets["top"])
+    solver = NewtonSolver(prob, bc, SolverOptions(linear="pardiso"))
+    _, Ke = prob.evaluate(np.zeros(m.n_dof))
+    K = solver.pattern.matrix(Ke)
+    b = np.random.default_rng(0).normal(size=(K.shape[0], 3))
+    x = {}
+    with threadpool_limits(limits=1):      # as inside a solve: the thread count is the solver's own
+        for n in (1, 2):
+            lin = linsolve.make("pardiso", threads=n)
+            lin.factor(K)
+            x[n] = lin.solve(b)
+            with pytest.raises(SolverError, match="fixed"):
+                lin.use_threads(3 - n)
+            lin.free()
+    np.testing.assert_allclose(x[2], x[1], rtol=1e-10, atol=1e-12 * np.abs(x[1]).max())
+
+
 def test_pardiso_survives_a_thread_limit_between_phases():
     """PARDISO crashed (segfault) when a factorisation ran under a BLAS thread limit after
     an analysis without one; the solver pins its thread count."""

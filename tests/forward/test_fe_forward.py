@@ -109,6 +109,27 @@ def test_workers_give_identical_numbers(forward):
             assert np.array_equal(x.d[k], y.d[k])
 
 
+def test_one_protocol_on_two_workers_gives_its_solver_both(forward, monkeypatch):
+    """One protocol and two workers: the protocol is solved with its sparse solver on two
+    threads (recorded in the solve's info), to the same numbers as on one worker up to the
+    rounding of the factorisation's sums (the Newton tolerance is far coarser)."""
+    monkeypatch.delenv("SKINKIT_SOLVE_CACHE", raising=False)    # both solved, neither read back
+    obs = session()
+    a = forward(SPEC, workers=1)
+    b = forward(SPEC, workers=2)
+    names = ["skin.mu", "skin.prestretch.l1"]
+    pa = a.predict(a.parameters(), obs, sensitivities=names)
+    pb = b.predict(b.parameters(), obs, sensitivities=names)
+    b.close()
+    assert pa.info["protocols"]["normal"]["threads"] == 1 and pb.info["protocols"]["normal"]["threads"] == 2
+    for (_, _, x), (_, _, y) in zip(pa.items(), pb.items(), strict=True):
+        scale = float(np.nanmax(np.abs(x.values))) or 1.0
+        np.testing.assert_allclose(y.values, x.values, rtol=1e-7, atol=1e-9 * scale)
+        for k in x.d:
+            dscale = float(np.nanmax(np.abs(x.d[k]))) or 1.0
+            np.testing.assert_allclose(y.d[k], x.d[k], rtol=1e-6, atol=1e-8 * dscale)
+
+
 def test_predictions_on_exactly_the_observed_times_and_points(forward):
     m = forward(SPEC)
     obs = session()
