@@ -17,10 +17,8 @@ differences of whole solves.
 
 Protocols are independent solves: they run in worker processes (``workers``, default one
 per core) or on a Dask cluster (``scheduler``); every solve uses one thread, so the numbers
-do not depend on where or how many solves run at once — except where a prediction has fewer
-protocols than workers (a one-protocol record on two cores): the idle cores then go to each
-protocol's sparse direct solver (PARDISO's threads), whose sums in another order agree with one
-thread's to rounding, not bit for bit.
+do not depend on where or how many solves run at once — but with fewer protocols than workers
+the idle cores go to each one's sparse solver (the same numbers to rounding, not bit for bit).
 
 Progress: a prediction reports the fraction of its solver steps done
 (:func:`skinkit.forward.stages.report`), step by step from the worker processes too, so a caller
@@ -71,9 +69,7 @@ class ProtocolJob:
     # geometry parameter -> design velocity of the nodes (N, 3) and their depths (N,) [m per unit]
     shapes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     shape_points: dict[str, np.ndarray] = field(default_factory=dict)   # -> (P, 3) points' dX/dp
-    # the sparse direct solver's threads: more than one only where a prediction has fewer
-    # protocols than workers (set when solving, after the solve cache's key: same numbers to rounding)
-    threads: int = 1
+    threads: int = 1    # the sparse solver's: more where workers outnumber protocols (set after caching)
 
 
 def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np.ndarray]:
@@ -90,8 +86,7 @@ def _interp_table(times: np.ndarray, values: np.ndarray) -> Callable[[float], np
 
 def solve_protocol(job: ProtocolJob, on_fraction: Callable[[float], None] | None = None) -> dict[str, Any]:
     """Solve one protocol; the outputs at ``[0, *job.times]`` (the first row is the unloaded
-    state) with their derivatives. Runs with one thread, its sparse solver with ``job.threads``
-    (see the module docstring).
+    state) with their derivatives. One thread, its sparse solver ``job.threads`` (module docstring).
     ``on_fraction(f)``: told the fraction of the output steps solved after each one."""
     from threadpoolctl import threadpool_limits
 
@@ -637,9 +632,7 @@ class FEForwardModel(ForwardModel):
             return self._run_dask(jobs)
         wanted = max(1, self.workers if self.workers is not None else (os.cpu_count() or 1))
         workers = min(wanted, len(jobs))
-        if jobs and wanted >= 2 * len(jobs):
-            # fewer protocols than workers (a one-protocol record): the idle cores go to each
-            # protocol's sparse solver
+        if jobs and wanted >= 2 * len(jobs):    # a one-protocol record: idle cores to its solver
             jobs = [replace(j, threads=wanted // len(jobs)) for j in jobs]
         tracker = SolveProgress(jobs)
         if workers == 1:
