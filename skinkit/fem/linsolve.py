@@ -72,11 +72,11 @@ class SuperLUSolver:
     upper = False
     name = "splu"
 
-    def use_threads(self, n: int) -> None:
-        """SuperLU is sequential: nothing to set."""
-
     def __init__(self) -> None:
         self.lu = None
+
+    def use_threads(self, n: int) -> None:
+        """SuperLU is sequential: nothing to set."""
 
     def factor(self, K: sp.csr_matrix) -> None:
         """Factorise the tangent ``K`` (n, n); :class:`SolverError` when it is singular."""
