@@ -631,7 +631,7 @@ class FEForwardModel(ForwardModel):
         if self.scheduler is not None:
             return self._run_dask(jobs)
         wanted = max(1, self.workers if self.workers is not None else (os.cpu_count() or 1))
-        workers = min(wanted, len(jobs))
+        workers = max(1, min(wanted, len(jobs)))     # no job at all: nothing to start
         if jobs and wanted >= 2 * len(jobs):    # a one-protocol record: idle cores to its solver
             jobs = [replace(j, threads=wanted // len(jobs)) for j in jobs]
         tracker = SolveProgress(jobs)

@@ -120,6 +120,7 @@ def test_one_protocol_on_two_workers_gives_its_solver_both(forward, monkeypatch)
     names = ["skin.mu", "skin.prestretch.l1"]
     pa = a.predict(a.parameters(), obs, sensitivities=names)
     pb = b.predict(b.parameters(), obs, sensitivities=names)
+    assert b.predict_many([]) == []      # no protocol at all: nothing solved, no pool
     b.close()
     assert pa.info["protocols"]["normal"]["threads"] == 1 and pb.info["protocols"]["normal"]["threads"] == 2
     for (_, _, x), (_, _, y) in zip(pa.items(), pb.items(), strict=True):
