@@ -198,11 +198,7 @@ class PardisoSolver:
             pass
 
 
-def make(name: str = "auto", threads: int | None = None):
-    """A persistent solver object for ``name`` (see :data:`SOLVERS`); ``threads``: the sparse
-    solver's own thread count (None: the library's default where it is made)."""
+def make(name: str = "auto"):
+    """A persistent solver object for ``name`` (see :data:`SOLVERS`)."""
     real = resolve(name)
-    solver = PardisoSolver() if real == "pardiso" else SuperLUSolver()
-    if threads is not None:
-        solver.use_threads(threads)
-    return solver
+    return PardisoSolver() if real == "pardiso" else SuperLUSolver()

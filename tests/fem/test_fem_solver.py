@@ -182,6 +182,17 @@ def test_linear_solvers_agree(linear):
     np.testing.assert_allclose(u, u_ref, atol=1e-10)
 
 
+def _block_tangent(n: int):
+    """A PARDISO Newton solver on an n x n x n block held at top and bottom, and its tangent at
+    rest (upper triangle)."""
+    m = block_mesh((1, 1, 1), (n, n, n))
+    prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 20.0})])
+    bc = BoundaryConditions(m.n_dof).fix(m.node_sets["bottom"]).fix(m.node_sets["top"])
+    solver = NewtonSolver(prob, bc, SolverOptions(linear="pardiso"))
+    _, Ke = prob.evaluate(np.zeros(m.n_dof))
+    return solver, solver.pattern.matrix(Ke)
+
+
 def test_pardiso_on_two_threads_solves_as_on_one():
     """A protocol solved alone may give PARDISO the idle cores: the same solution to rounding
     (the factorisation's sums in another order), and the count is fixed once analysed (PARDISO
@@ -192,17 +203,13 @@ def test_pardiso_on_two_threads_solves_as_on_one():
     from skinkit.fem.errors import SolverError
     if "pardiso" not in linsolve.available():
         pytest.skip("pypardiso not installed")
-    m = block_mesh((1, 1, 1), (6, 6, 6))
-    prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 20.0})])
-    bc = BoundaryConditions(m.n_dof).fix(m.node_sets["bottom"]).fix(m.node_sets["top"])
-    solver = NewtonSolver(prob, bc, SolverOptions(linear="pardiso"))
-    _, Ke = prob.evaluate(np.zeros(m.n_dof))
-    K = solver.pattern.matrix(Ke)
+    _, K = _block_tangent(6)
     b = np.random.default_rng(0).normal(size=(K.shape[0], 3))
     x = {}
     with threadpool_limits(limits=1):      # as inside a solve: the thread count is the solver's own
         for n in (1, 2):
-            lin = linsolve.make("pardiso", threads=n)
+            lin = linsolve.make("pardiso")
+            lin.use_threads(n)
             lin.factor(K)
             x[n] = lin.solve(b)
             with pytest.raises(SolverError, match="fixed"):
@@ -218,12 +225,7 @@ def test_pardiso_survives_a_thread_limit_between_phases():
     from skinkit.fem.threads import single_threaded_blas
     if "pardiso" not in linsolve.available():
         pytest.skip("pypardiso not installed")
-    m = block_mesh((1, 1, 1), (5, 5, 5))
-    prob = Problem(m, [Material("body", _nh(), {"mu": 1.0, "K": 20.0})])
-    bc = BoundaryConditions(m.n_dof).fix(m.node_sets["bottom"]).fix(m.node_sets["top"])
-    solver = NewtonSolver(prob, bc, SolverOptions(linear="pardiso"))
-    _, Ke = prob.evaluate(np.zeros(m.n_dof))
-    K = solver.pattern.matrix(Ke)
+    solver, K = _block_tangent(5)
     b = np.random.default_rng(0).normal(size=K.shape[0])
     solver.linear.factor(K)
     x1 = solver.linear.solve(b)
